@@ -1,0 +1,28 @@
+//! # dqskin-core
+//!
+//! Dual quaternions, rigid-transform blending and interpolation, and multithreaded skinning
+//! kernels, in pure Rust on [`glam`] and [`rayon`].
+//!
+//! - [`DualQuat`]: algebra, conversions, screw parameters, exp/log/power.
+//! - [`blend`]: ScLERP, DLB and DIB (Kavan et al. 2006).
+//! - [`quat_interp`]: Slerp and Squad (Dam et al. 1998).
+//! - [`hierarchy`]: forward kinematics with dual quaternions (Kenwright 2012).
+//! - [`skin`]: LBS, DQS (exactly Blender's Armature modifier) and their per-vertex blend.
+//! - [`pool`]: the thread pool the kernels run on.
+
+pub mod blend;
+pub mod dual_quat;
+pub mod hierarchy;
+pub mod pool;
+pub mod quat_interp;
+mod scalar;
+pub mod skin;
+#[cfg(test)]
+mod test_support;
+
+pub use blend::{dib, dlb, sclerp, BlendError, DibResult};
+pub use dual_quat::{DualNumber, DualQuat, NotRigid, Screw};
+pub use glam;
+pub use hierarchy::{forward_kinematics, HierarchyError};
+pub use quat_interp::{make_signs_continuous, slerp, Squad};
+pub use skin::{skin, Influence, Influences, Method, Pose, SkinError, SkinOptions};

@@ -1,0 +1,156 @@
+//! Sparse per-vertex bone influences, validated once and kept in a cache-friendly layout.
+
+use super::SkinError;
+
+/// One `(bone, weight)` pair. Interleaved so that the kernels read one stream.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub struct Influence {
+    pub bone: u32,
+    pub weight: f32,
+}
+
+/// Per-vertex influences in CSR form: vertex `v` has the pairs
+/// `entries[offsets[v]..offsets[v+1]]`, **in the order given** (the order matters for dual
+/// quaternion skinning, whose sign choice follows it, as in Blender).
+///
+/// Invariants (checked by [`Influences::from_csr`]): `offsets` starts at 0, never decreases and
+/// ends at the number of entries; every bone index is below `bone_count`; every weight is finite
+/// and non-negative. Weights need not sum to one and may be zero.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Influences {
+    offsets: Vec<u32>,
+    entries: Vec<Influence>,
+    bone_count: usize,
+    max_per_vertex: usize,
+}
+
+impl Influences {
+    /// Validates CSR arrays: `offsets` (length V+1), `bones` and `weights` (one per entry).
+    pub fn from_csr(
+        offsets: &[u32],
+        bones: &[u32],
+        weights: &[f32],
+        bone_count: usize,
+    ) -> Result<Self, SkinError> {
+        let invalid = |what: String| Err(SkinError::InvalidInfluences(what));
+        if offsets.is_empty() {
+            return invalid("offsets must have one entry per vertex plus one (got an empty array)".into());
+        }
+        if bones.len() != weights.len() {
+            return invalid(format!(
+                "bones has {} entries but weights has {}: they must have one entry per influence",
+                bones.len(),
+                weights.len()
+            ));
+        }
+        if bones.len() > u32::MAX as usize {
+            return invalid("more than 2^32-1 influences".into());
+        }
+        if offsets[0] != 0 {
+            return invalid(format!("offsets[0] must be 0, got {}", offsets[0]));
+        }
+        let total = *offsets.last().unwrap() as usize;
+        if total != bones.len() {
+            return invalid(format!(
+                "offsets[-1] is {total} but there are {} influences: it must equal the number of influences",
+                bones.len()
+            ));
+        }
+        let mut max_per_vertex = 0;
+        for (v, w) in offsets.windows(2).enumerate() {
+            if w[1] < w[0] {
+                return invalid(format!(
+                    "offsets must not decrease, but offsets[{}] = {} > offsets[{}] = {}",
+                    v,
+                    w[0],
+                    v + 1,
+                    w[1]
+                ));
+            }
+            max_per_vertex = max_per_vertex.max((w[1] - w[0]) as usize);
+        }
+        if let Some(i) = bones.iter().position(|&b| b as usize >= bone_count) {
+            return invalid(format!(
+                "bones[{i}] = {} is out of range: there are {bone_count} bones",
+                bones[i]
+            ));
+        }
+        if let Some(i) = weights.iter().position(|w| !(*w >= 0.0) || !w.is_finite()) {
+            return invalid(format!(
+                "weights[{i}] = {} is not a finite non-negative number",
+                weights[i]
+            ));
+        }
+        let entries =
+            bones.iter().zip(weights).map(|(&bone, &weight)| Influence { bone, weight }).collect();
+        Ok(Self { offsets: offsets.to_vec(), entries, bone_count, max_per_vertex })
+    }
+
+    /// From one list of `(bone, weight)` pairs per vertex (convenient for tests and examples).
+    pub fn from_lists(lists: &[Vec<(u32, f32)>], bone_count: usize) -> Result<Self, SkinError> {
+        let mut offsets = Vec::with_capacity(lists.len() + 1);
+        let (mut bones, mut weights) = (Vec::new(), Vec::new());
+        offsets.push(0u32);
+        for list in lists {
+            for &(b, w) in list {
+                bones.push(b);
+                weights.push(w);
+            }
+            offsets.push(u32::try_from(bones.len()).map_err(|_| {
+                SkinError::InvalidInfluences("more than 2^32-1 influences".into())
+            })?);
+        }
+        Self::from_csr(&offsets, &bones, &weights, bone_count)
+    }
+
+    /// Number of vertices.
+    #[inline]
+    pub fn vertex_count(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// Number of bones the indices refer to.
+    #[inline]
+    pub fn bone_count(&self) -> usize {
+        self.bone_count
+    }
+
+    /// Total number of `(bone, weight)` pairs.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// The largest number of pairs of any vertex.
+    #[inline]
+    pub fn max_per_vertex(&self) -> usize {
+        self.max_per_vertex
+    }
+
+    /// The pairs of vertex `v`, in the given order.
+    #[inline]
+    pub fn of_vertex(&self, v: usize) -> &[Influence] {
+        &self.entries[self.offsets[v] as usize..self.offsets[v + 1] as usize]
+    }
+
+    #[inline]
+    pub fn offsets(&self) -> &[u32] {
+        &self.offsets
+    }
+
+    #[inline]
+    pub fn entries(&self) -> &[Influence] {
+        &self.entries
+    }
+
+    /// Bytes the kernels read per call for the influences (offsets and pairs).
+    pub fn byte_size(&self) -> usize {
+        self.offsets.len() * 4 + self.entries.len() * core::mem::size_of::<Influence>()
+    }
+}

@@ -1,0 +1,266 @@
+//! Per-bone data computed once per frame from the deform and rest matrices, so that the
+//! per-vertex kernels only load, weigh and add.
+
+use glam::{Mat3, Mat4, Quat, Vec3, Vec4};
+
+use super::SkinError;
+use crate::dual_quat::{is_orthonormal, rotation_from_mat3};
+
+/// A bone's affine deform matrix as three rows `(m_r0, m_r1, m_r2, t_r)`, so `M·co` is three dot
+/// products with `(co, 1)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(16))]
+pub(crate) struct AffineRows {
+    pub rows: [Vec4; 3],
+}
+
+impl AffineRows {
+    fn from_mat4(m: &Mat4) -> Self {
+        Self { rows: [m.row(0), m.row(1), m.row(2)] }
+    }
+
+    #[inline(always)]
+    pub fn transform_point(&self, co: Vec4) -> Vec3 {
+        Vec3::new(self.rows[0].dot(co), self.rows[1].dot(co), self.rows[2].dot(co))
+    }
+}
+
+/// A bone as Blender's Preserve Volume sees it: the unit rotation quaternion `real` (x, y, z, w)
+/// of its rigid part and the dual part `½·(0, t)·real` of its rigid translation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(32))]
+pub(crate) struct DqBone {
+    pub real: Vec4,
+    pub dual: Vec4,
+}
+
+/// How Blender's DQS moves a vertex `co` for a bone with scale or shear: rigidly with the
+/// bone's rotation `R` and a per-vertex translation `t(co) = M·co − R·co`, so that the vertex lands
+/// exactly where the full affine matrix `M` puts it (the "scale path" with the vertex as pivot,
+/// `add_weighted_dq_dq_pivot`). Stored as rows of `(M₃ − R₃ | t_M)`; for rigid bones it is
+/// `(0 | t)`.
+pub(crate) type PivotTranslation = AffineRows;
+
+/// Per-frame bone data for all skinning methods.
+#[derive(Clone, Debug)]
+pub struct Pose {
+    pub(crate) linear: Vec<AffineRows>,
+    pub(crate) dq: Vec<DqBone>,
+    pub(crate) pivot: Vec<PivotTranslation>,
+    scaled: Vec<bool>,
+}
+
+/// Tolerance of Blender's `is_orthonormal_m3` (on column dot products and squared lengths).
+const ORTHONORMAL_TOLERANCE: f32 = 1e-5;
+/// Blender takes the scale path when `|column lengths − 1|² > (1e-4)²`.
+const SCALE_TOLERANCE_SQ: f32 = 1e-8;
+
+impl Pose {
+    /// From per-bone deform matrices (posed matrix times the inverse rest matrix, in armature
+    /// space: Blender's `PoseBone.matrix_channel`) and, for dual quaternion skinning, the rest
+    /// matrices (`Bone.matrix_local`). Without rest matrices only linear skinning is available.
+    ///
+    /// Errors name the first bone whose matrix is not finite, not affine, or (for rest matrices)
+    /// not invertible.
+    pub fn new(deform: &[Mat4], rest: Option<&[Mat4]>) -> Result<Self, SkinError> {
+        for (bone, m) in deform.iter().enumerate() {
+            check_affine("deform", bone, m)?;
+        }
+        let linear = deform.iter().map(AffineRows::from_mat4).collect();
+        let (mut dq, mut pivot, mut scaled) = (Vec::new(), Vec::new(), Vec::new());
+        if let Some(rest) = rest {
+            if rest.len() != deform.len() {
+                return Err(SkinError::LengthMismatch {
+                    what: "rest matrices",
+                    expected: deform.len(),
+                    got: rest.len(),
+                });
+            }
+            for (bone, (m, b)) in deform.iter().zip(rest).enumerate() {
+                check_affine("rest", bone, b)?;
+                if b.determinant().abs() < 1e-12 {
+                    return Err(SkinError::InvalidMatrix {
+                        what: "rest",
+                        bone,
+                        problem: "is not invertible",
+                    });
+                }
+                let (q, is_scaled) = blender_bone_rotation(m, b);
+                let q = q.normalize();
+                let t = m.w_axis.truncate();
+                let dual = Quat::from_xyzw(0.5 * t.x, 0.5 * t.y, 0.5 * t.z, 0.0) * q;
+                dq.push(DqBone { real: Vec4::from(q), dual: Vec4::from(dual) });
+                let delta = Mat3::from_mat4(*m) - Mat3::from_quat(q);
+                let p = Mat4::from_cols(
+                    delta.x_axis.extend(0.0),
+                    delta.y_axis.extend(0.0),
+                    delta.z_axis.extend(0.0),
+                    m.w_axis,
+                );
+                pivot.push(AffineRows::from_mat4(&p));
+                scaled.push(is_scaled);
+            }
+        }
+        Ok(Self { linear, dq, pivot, scaled })
+    }
+
+    /// Number of bones.
+    #[inline]
+    pub fn bone_count(&self) -> usize {
+        self.linear.len()
+    }
+
+    /// Whether rest matrices were given, so dual quaternion skinning is available.
+    #[inline]
+    pub fn has_dual_quaternions(&self) -> bool {
+        self.dq.len() == self.linear.len()
+    }
+
+    /// Whether any bone goes through Blender's scale path (scale, shear or reflection).
+    #[inline]
+    pub fn any_scaled(&self) -> bool {
+        self.scaled.iter().any(|&s| s)
+    }
+
+    /// Per bone: whether it goes through the scale path.
+    #[inline]
+    pub fn scaled_bones(&self) -> &[bool] {
+        &self.scaled
+    }
+
+    /// The rotation DQS uses for a bone (x, y, z, w), if rest matrices were given.
+    pub fn bone_rotation(&self, bone: usize) -> Option<Quat> {
+        self.dq.get(bone).map(|b| Quat::from_vec4(b.real))
+    }
+}
+
+fn check_affine(what: &'static str, bone: usize, m: &Mat4) -> Result<(), SkinError> {
+    if !m.is_finite() {
+        return Err(SkinError::InvalidMatrix { what, bone, problem: "has a NaN or infinite entry" });
+    }
+    if (m.row(3) - Vec4::W).abs().max_element() > 1e-6 {
+        return Err(SkinError::InvalidMatrix {
+            what,
+            bone,
+            problem: "is not affine (its last row must be 0, 0, 0, 1)",
+        });
+    }
+    Ok(())
+}
+
+/// The rotation Blender's `mat4_to_dquat(basemat = rest, mat = deform)` assigns to a bone, and
+/// whether the bone takes the scale path. For a rigid deform matrix this is its own rotation. With
+/// scale, shear or a reflection, Blender splits `deform·rest` into a rotation that keeps its Y axis
+/// (`orthogonalize_m4(·, Y)`) and a remaining scale, and uses `rotation·rest⁻¹`.
+pub(crate) fn blender_bone_rotation(deform: &Mat4, rest: &Mat4) -> (Quat, bool) {
+    let m3 = Mat3::from_mat4(*deform);
+    let base_rs = *deform * *rest;
+    let size = Vec3::new(
+        base_rs.x_axis.truncate().length(),
+        base_rs.y_axis.truncate().length(),
+        base_rs.z_axis.truncate().length(),
+    );
+    let dscale = size - Vec3::ONE;
+    let scaled = !is_orthonormal(&m3, ORTHONORMAL_TOLERANCE)
+        || deform.determinant() < 0.0
+        || dscale.length_squared() > SCALE_TOLERANCE_SQ;
+    if !scaled {
+        return (rotation_from_mat3(&m3), false);
+    }
+    let base_rot = rotation_from_mat3(&orthogonalize_keep_y(&Mat3::from_mat4(base_rs)));
+    let rest_rot = rotation_from_mat3(&Mat3::from_mat4(*rest));
+    // R = baseR·rest⁻¹; its rotation is baseR's rotation times the inverse of rest's.
+    let r = Mat3::from_quat(base_rot) * Mat3::from_quat(rest_rot).transpose();
+    (rotation_from_mat3(&r), true)
+}
+
+/// Blender's `orthogonalize_m4(m, 1)` (axis Y) without the final rescale, which does not change
+/// the rotation extracted from it.
+fn orthogonalize_keep_y(m: &Mat3) -> Mat3 {
+    let norm = |v: Vec3| {
+        let l = v.length();
+        if l != 0.0 {
+            v / l
+        } else {
+            v
+        }
+    };
+    let (mut x, y, mut z) = (m.x_axis, norm(m.y_axis), m.z_axis);
+    if y.dot(x) < 1.0 {
+        z = norm(x.cross(y));
+        x = y.cross(z);
+    } else if x.dot(z) < 1.0 {
+        x = norm(y.cross(z));
+        z = x.cross(y);
+    } else {
+        let v = Vec3::new(y.y, y.z, y.x);
+        x = norm(y.cross(v));
+        z = x.cross(y);
+    }
+    Mat3::from_cols(x, y, z)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rigid_bones_keep_their_own_rotation_and_translation() {
+        let q = Quat::from_euler(glam::EulerRot::XYZ, 0.3, -1.2, 2.0);
+        let m = Mat4::from_rotation_translation(q, Vec3::new(1.0, 2.0, 3.0));
+        let rest = Mat4::from_rotation_translation(Quat::from_rotation_x(0.4), Vec3::Y);
+        let pose = Pose::new(&[m], Some(&[rest])).unwrap();
+        assert!(!pose.any_scaled());
+        let r = pose.bone_rotation(0).unwrap();
+        assert!(r.dot(q).abs() > 1.0 - 1e-6);
+        let dq = crate::DualQuat::from_parts(r, Quat::from_vec4(pose.dq[0].dual));
+        assert!(dq.translation().abs_diff_eq(Vec3::new(1.0, 2.0, 3.0), 1e-5));
+    }
+
+    #[test]
+    fn scaled_bone_pivot_maps_vertices_exactly_like_the_matrix() {
+        let rest = Mat4::from_rotation_translation(Quat::from_rotation_z(0.7), Vec3::new(0.0, 1.0, 0.0));
+        let posed = Mat4::from_scale_rotation_translation(
+            Vec3::new(1.0, 2.5, 0.5),
+            Quat::from_rotation_x(0.9),
+            Vec3::new(0.3, 1.0, -0.2),
+        );
+        let deform = posed * rest.inverse();
+        let pose = Pose::new(&[deform], Some(&[rest])).unwrap();
+        assert!(pose.any_scaled());
+        let q = pose.bone_rotation(0).unwrap();
+        for co in [Vec3::ZERO, Vec3::new(1.0, -2.0, 0.5), Vec3::new(-3.0, 0.2, 4.0)] {
+            let t = pose.pivot[0].transform_point(co.extend(1.0));
+            let moved = q * co + t;
+            assert!(moved.abs_diff_eq(deform.transform_point3(co), 1e-5));
+        }
+    }
+
+    #[test]
+    fn rejects_bad_matrices_naming_the_bone() {
+        let mut bad = Mat4::IDENTITY;
+        bad.x_axis.w = 0.5;
+        let err = Pose::new(&[Mat4::IDENTITY, bad], None).unwrap_err();
+        assert_eq!(
+            err,
+            SkinError::InvalidMatrix {
+                what: "deform",
+                bone: 1,
+                problem: "is not affine (its last row must be 0, 0, 0, 1)"
+            }
+        );
+        let nan = Mat4::from_translation(Vec3::new(f32::NAN, 0.0, 0.0));
+        assert!(matches!(
+            Pose::new(&[nan], None),
+            Err(SkinError::InvalidMatrix { bone: 0, .. })
+        ));
+        assert!(matches!(
+            Pose::new(&[Mat4::IDENTITY], Some(&[Mat4::ZERO])),
+            Err(SkinError::InvalidMatrix { what: "rest", .. })
+        ));
+        assert!(matches!(
+            Pose::new(&[Mat4::IDENTITY], Some(&[])),
+            Err(SkinError::LengthMismatch { .. })
+        ));
+    }
+}

@@ -9,12 +9,14 @@
 //! - [`hierarchy`]: forward kinematics with dual quaternions (Kenwright 2012).
 //! - [`skin`]: LBS, DQS (exactly Blender's Armature modifier) and their per-vertex blend.
 //! - [`pool`]: the thread pool the kernels run on.
+//! - [`rigs`]: procedural test rigs (the twisted cylinder) and mesh measurements.
 
 pub mod blend;
 pub mod dual_quat;
 pub mod hierarchy;
 pub mod pool;
 pub mod quat_interp;
+pub mod rigs;
 mod scalar;
 pub mod skin;
 #[cfg(test)]

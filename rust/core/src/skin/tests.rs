@@ -1,1 +1,519 @@
+//! Kernels against a straightforward scalar reference written from Blender's
+//! `armature_deform.cc` and `math_rotation_c.cc` in f64, with the scale path computed the way
+//! Blender does it (full scale matrices, `add_weighted_dq_dq_pivot`), not the shortcut the
+//! kernels take.
+
+use super::*;
+use crate::rigs::{polygon_area, TwistCylinder};
+use glam::{DMat3, DMat4, DQuat, DVec3, Mat4, Quat, Vec3};
+use proptest::prelude::*;
+
+mod reference {
+    use super::*;
+
+    /// Blender's `DualQuat`: quat and trans as (w, x, y, z), scale matrix and its weight.
+    #[derive(Clone, Copy)]
+    pub struct BDq {
+        pub quat: [f64; 4],
+        pub trans: [f64; 4],
+        pub scale: DMat4,
+        pub scale_weight: f64,
+    }
+
+    fn mat4_to_quat(m: &DMat4) -> [f64; 4] {
+        // Normalize columns, negate on negative determinant, then any correct conversion; w ≥ 0.
+        let mut m3 = DMat3::from_cols(
+            m.x_axis.truncate().normalize_or_zero(),
+            m.y_axis.truncate().normalize_or_zero(),
+            m.z_axis.truncate().normalize_or_zero(),
+        );
+        if m3.determinant() < 0.0 {
+            m3 = -m3;
+        }
+        let q = DQuat::from_mat3(&m3).normalize();
+        let q = if q.w < 0.0 { -q } else { q };
+        [q.w, q.x, q.y, q.z]
+    }
+
+    fn orthogonalize_y(m: &DMat4) -> DMat4 {
+        let size = DVec3::new(m.x_axis.truncate().length(), m.y_axis.truncate().length(), m.z_axis.truncate().length());
+        let y = m.y_axis.truncate().normalize();
+        let x0 = m.x_axis.truncate();
+        let z = x0.cross(y).normalize();
+        let x = y.cross(z);
+        DMat4::from_cols((x * size.x).extend(0.0), (y * size.y).extend(0.0), (z * size.z).extend(0.0), m.w_axis)
+    }
+
+    fn is_orthonormal(m: &DMat3) -> bool {
+        let c = [m.x_axis, m.y_axis, m.z_axis];
+        for i in 0..3 {
+            for j in 0..i {
+                if c[i].dot(c[j]).abs() > 1e-5 {
+                    return false;
+                }
+            }
+            if (c[i].dot(c[i]) - 1.0).abs() > 1e-5 {
+                return false;
+            }
+        }
+        true
+    }
+
+    pub fn mat4_to_dquat(basemat: &DMat4, mat: &DMat4) -> BDq {
+        let base_rs = *mat * *basemat;
+        let size = DVec3::new(base_rs.x_axis.truncate().length(), base_rs.y_axis.truncate().length(), base_rs.z_axis.truncate().length());
+        let dscale = size - DVec3::ONE;
+        let (r, scale, scale_weight);
+        if !is_orthonormal(&DMat3::from_mat4(*mat)) || mat.determinant() < 0.0 || dscale.length_squared() > 1e-8 {
+            let basequat = mat4_to_quat(&orthogonalize_y(&base_rs));
+            let q = DQuat::from_xyzw(basequat[1], basequat[2], basequat[3], basequat[0]);
+            let mut base_r = DMat4::from_quat(q);
+            base_r.w_axis = base_rs.w_axis;
+            let baseinv = basemat.inverse();
+            r = base_r * baseinv;
+            let s = base_r.inverse() * base_rs;
+            scale = *basemat * s * baseinv;
+            scale_weight = 1.0;
+        } else {
+            r = *mat;
+            scale = DMat4::ZERO;
+            scale_weight = 0.0;
+        }
+        let q = mat4_to_quat(&r);
+        let t = r.w_axis.truncate();
+        let trans = [
+            -0.5 * (t.x * q[1] + t.y * q[2] + t.z * q[3]),
+            0.5 * (t.x * q[0] + t.y * q[3] - t.z * q[2]),
+            0.5 * (-t.x * q[3] + t.y * q[0] + t.z * q[1]),
+            0.5 * (t.x * q[2] - t.y * q[1] + t.z * q[0]),
+        ];
+        BDq { quat: q, trans, scale, scale_weight }
+    }
+
+    fn add_weighted(sum: &mut BDq, dq: &BDq, weight: f64) {
+        let dot: f64 = (0..4).map(|k| dq.quat[k] * sum.quat[k]).sum();
+        let w = if dot < 0.0 { -weight } else { weight };
+        for k in 0..4 {
+            sum.quat[k] += w * dq.quat[k];
+            sum.trans[k] += w * dq.trans[k];
+        }
+        if dq.scale_weight != 0.0 {
+            sum.scale = sum.scale + dq.scale * weight;
+            sum.scale_weight += weight;
+        }
+    }
+
+    /// `add_weighted_dq_dq_pivot` with `compute_scale_matrix = false`.
+    fn add_weighted_pivot(sum: &mut BDq, dq: &BDq, pivot: DVec3, weight: f64) {
+        if dq.scale_weight != 0.0 {
+            let mut m = *dq;
+            let dst = dq.scale.transform_point3(pivot) - pivot;
+            let q = m.quat;
+            m.trans[0] -= 0.5 * (q[1] * dst.x + q[2] * dst.y + q[3] * dst.z);
+            m.trans[1] += 0.5 * (q[0] * dst.x + q[2] * dst.z - q[3] * dst.y);
+            m.trans[2] += 0.5 * (q[0] * dst.y + q[3] * dst.x - q[1] * dst.z);
+            m.trans[3] += 0.5 * (q[0] * dst.z + q[1] * dst.y - q[2] * dst.x);
+            m.scale_weight = 0.0;
+            add_weighted(sum, &m, weight);
+        } else {
+            add_weighted(sum, dq, weight);
+        }
+    }
+
+    fn mul_v3m3_dq(co: DVec3, dq: &BDq) -> DVec3 {
+        let [w, x, y, z] = dq.quat;
+        let [t0, t1, t2, t3] = dq.trans;
+        let m = DMat3::from_cols(
+            DVec3::new(w * w + x * x - y * y - z * z, 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)),
+            DVec3::new(2.0 * (x * y - w * z), w * w + y * y - x * x - z * z, 2.0 * (y * z + w * x)),
+            DVec3::new(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), w * w + z * z - x * x - y * y),
+        );
+        let len2 = w * w + x * x + y * y + z * z;
+        let t = DVec3::new(
+            2.0 * (-t0 * x + w * t1 - t2 * z + y * t3),
+            2.0 * (-t0 * y + t1 * z - x * t3 + w * t2),
+            2.0 * (-t0 * z + x * t2 + w * t3 - t1 * y),
+        );
+        (m * co + t) / len2
+    }
+
+    pub struct Inputs<'a> {
+        pub positions: &'a [[f32; 3]],
+        pub lists: &'a [Vec<(u32, f32)>],
+        pub deform: &'a [Mat4],
+        pub rest: &'a [Mat4],
+        pub premat: Mat4,
+        pub postmat: Mat4,
+        pub mask: Option<&'a [f32]>,
+    }
+
+    fn d(m: &Mat4) -> DMat4 {
+        m.as_dmat4()
+    }
+
+    /// Blender's `armature_vert_task_with_dvert` for vertex groups only; `dqs` picks Preserve
+    /// Volume. Returns mesh-space positions.
+    pub fn skin(inputs: &Inputs<'_>, dqs: bool) -> Vec<DVec3> {
+        let dqs_bones: Vec<BDq> = inputs.deform.iter().zip(inputs.rest).map(|(m, b)| mat4_to_dquat(&d(b), &d(m))).collect();
+        inputs
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(v, p)| {
+                let p = Vec3::from_array(*p).as_dvec3();
+                let a = inputs.mask.map_or(1.0, |m| m[v] as f64);
+                if a == 0.0 {
+                    return p;
+                }
+                let mut co = d(&inputs.premat).transform_point3(p);
+                let mut contrib = 0.0;
+                let mut vec = DVec3::ZERO;
+                let mut sum = BDq { quat: [0.0; 4], trans: [0.0; 4], scale: DMat4::ZERO, scale_weight: 0.0 };
+                for &(bone, w) in &inputs.lists[v] {
+                    let w = w as f64;
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let b = bone as usize;
+                    if dqs {
+                        add_weighted_pivot(&mut sum, &dqs_bones[b], co, w);
+                    } else {
+                        vec += (d(&inputs.deform[b]).transform_point3(co) - co) * w;
+                    }
+                    contrib += w;
+                }
+                if contrib > 0.0001 {
+                    if dqs {
+                        let r = mul_v3m3_dq(co, &sum);
+                        co += (r - co) * a;
+                    } else {
+                        co += vec * (a / contrib);
+                    }
+                }
+                d(&inputs.postmat).transform_point3(co)
+            })
+            .collect()
+    }
+
+    pub fn blend(inputs: &Inputs<'_>, alpha: &[f32]) -> Vec<DVec3> {
+        let (l, q) = (skin(inputs, false), skin(inputs, true));
+        l.iter().zip(&q).zip(alpha).map(|((l, q), &a)| *l * (1.0 - a as f64) + *q * a as f64).collect()
+    }
+}
+
+/// A random rig: rest matrices are rigid; deform matrices are rigid, scaled, sheared or mirrored.
+#[derive(Debug, Clone)]
+struct Rig {
+    rest: Vec<Mat4>,
+    deform: Vec<Mat4>,
+}
+
+fn unit_quat() -> impl Strategy<Value = Quat> {
+    proptest::array::uniform4(-1.0f32..1.0).prop_filter_map("non-zero", |a| {
+        let q = Quat::from_array(a);
+        (q.length() > 0.1).then(|| q.normalize())
+    })
+}
+
+fn vec3(extent: f32) -> impl Strategy<Value = Vec3> {
+    proptest::array::uniform3(-extent..extent).prop_map(Vec3::from_array)
+}
+
+#[derive(Debug, Clone, Copy)]
+enum BoneKind {
+    Rigid,
+    Scaled,
+    Sheared,
+    Mirrored,
+    /// The rotation half a turn from the first bone's, so signs must be flipped in the sum.
+    Antipodal,
+}
+
+fn bone_kind() -> impl Strategy<Value = BoneKind> {
+    prop_oneof![
+        4 => Just(BoneKind::Rigid),
+        1 => Just(BoneKind::Scaled),
+        1 => Just(BoneKind::Sheared),
+        1 => Just(BoneKind::Mirrored),
+        2 => Just(BoneKind::Antipodal),
+    ]
+}
+
+fn rig(bones: std::ops::Range<usize>) -> impl Strategy<Value = Rig> {
+    proptest::collection::vec((unit_quat(), vec3(2.0), unit_quat(), vec3(2.0), bone_kind(), vec3(0.6)), bones).prop_map(
+        |specs| {
+            let first = specs[0].2;
+            let mut rest = Vec::new();
+            let mut deform = Vec::new();
+            for (rq, rt, pq, pt, kind, extra) in specs {
+                let b = Mat4::from_rotation_translation(rq, rt);
+                let posed_rot = match kind {
+                    BoneKind::Antipodal => Quat::from_axis_angle(Vec3::new(0.3, 1.0, -0.2).normalize(), 3.0) * first,
+                    _ => pq,
+                };
+                let mut posed = Mat4::from_rotation_translation(posed_rot, pt);
+                match kind {
+                    BoneKind::Scaled => posed = posed * Mat4::from_scale(Vec3::ONE + extra.abs() * 2.0),
+                    BoneKind::Sheared => {
+                        let mut shear = Mat4::IDENTITY;
+                        shear.y_axis.x = extra.x;
+                        shear.z_axis.y = extra.y;
+                        posed = posed * shear;
+                    }
+                    BoneKind::Mirrored => posed = posed * Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0 + extra.z.abs())),
+                    _ => {}
+                }
+                // Blender's matrix_channel: posed (armature space) times inverse rest.
+                deform.push(posed * b.inverse());
+                rest.push(b);
+            }
+            Rig { rest, deform }
+        },
+    )
+}
+
+/// Per-vertex influence lists with 0..=8 entries, zero and unnormalized weights, repeated bones.
+fn lists(vertices: usize, bones: usize) -> impl Strategy<Value = Vec<Vec<(u32, f32)>>> {
+    let entry = (0..bones as u32, prop_oneof![6 => 0.0f32..1.0, 1 => Just(0.0f32), 1 => 1.0f32..3.0]);
+    proptest::collection::vec(proptest::collection::vec(entry, 0..=8), vertices)
+}
+
+fn case() -> impl Strategy<Value = (Rig, Vec<[f32; 3]>, Vec<Vec<(u32, f32)>>, Vec<f32>, Mat4)> {
+    rig(1..9).prop_flat_map(|rig| {
+        let b = rig.rest.len();
+        (
+            Just(rig),
+            proptest::collection::vec(vec3(3.0).prop_map(|v| v.to_array()), 40),
+            lists(40, b),
+            proptest::collection::vec(prop_oneof![Just(0.0f32), Just(1.0f32), 0.0f32..1.0], 40),
+            (unit_quat(), vec3(2.0), 0.5f32..2.0).prop_map(|(q, t, s)| Mat4::from_scale_rotation_translation(Vec3::splat(s), q, t)),
+        )
+    })
+}
+
+fn run(method: Method<'_>, positions: &[[f32; 3]], lists: &[Vec<(u32, f32)>], rig: &Rig, options: &SkinOptions<'_>) -> Vec<[f32; 3]> {
+    let influences = Influences::from_lists(lists, rig.rest.len()).unwrap();
+    let pose = Pose::new(&rig.deform, Some(&rig.rest)).unwrap();
+    let mut out = vec![[f32::NAN; 3]; positions.len()];
+    skin(method, positions, &influences, &pose, options, &mut out).unwrap();
+    out
+}
+
+fn assert_close(got: &[[f32; 3]], want: &[DVec3], tol: f64) -> Result<(), TestCaseError> {
+    for (v, (g, w)) in got.iter().zip(want).enumerate() {
+        let g = Vec3::from_array(*g).as_dvec3();
+        let scale = 1.0 + w.length();
+        prop_assert!((g - *w).length() <= tol * scale, "vertex {v}: got {g}, want {w}");
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    #[test]
+    fn kernels_match_the_reference((rig, positions, lists, mask, premat) in case()) {
+        let postmat = premat.inverse();
+        let inputs = reference::Inputs {
+            positions: &positions, lists: &lists, deform: &rig.deform, rest: &rig.rest,
+            premat, postmat, mask: Some(&mask),
+        };
+        let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(&mask) };
+        // The deformations reach magnitudes of ~50 units; f32 round-off is ~1e-6 of that.
+        assert_close(&run(Method::Linear, &positions, &lists, &rig, &options), &reference::skin(&inputs, false), 2e-5)?;
+        assert_close(&run(Method::DualQuaternion, &positions, &lists, &rig, &options), &reference::skin(&inputs, true), 2e-5)?;
+        let amount: Vec<f32> = mask.iter().rev().copied().collect();
+        let blend = run(Method::Blend { amount: Some(&amount), factor: 0.8 }, &positions, &lists, &rig, &options);
+        let alpha: Vec<f32> = amount.iter().map(|a| a * 0.8).collect();
+        assert_close(&blend, &reference::blend(&inputs, &alpha), 2e-5)?;
+        // Masked-out vertices are copied bit for bit.
+        for (v, m) in mask.iter().enumerate() {
+            if *m == 0.0 {
+                prop_assert_eq!(blend[v], positions[v]);
+            }
+        }
+    }
+
+    #[test]
+    fn kernels_match_the_reference_without_spaces_or_mask((rig, positions, lists, _mask, _premat) in case()) {
+        let inputs = reference::Inputs {
+            positions: &positions, lists: &lists, deform: &rig.deform, rest: &rig.rest,
+            premat: Mat4::IDENTITY, postmat: Mat4::IDENTITY, mask: None,
+        };
+        let options = SkinOptions::default();
+        assert_close(&run(Method::Linear, &positions, &lists, &rig, &options), &reference::skin(&inputs, false), 2e-5)?;
+        assert_close(&run(Method::DualQuaternion, &positions, &lists, &rig, &options), &reference::skin(&inputs, true), 2e-5)?;
+        let lbs = run(Method::Blend { amount: None, factor: 0.0 }, &positions, &lists, &rig, &options);
+        assert_close(&lbs, &reference::skin(&inputs, false), 2e-5)?;
+        let dqs = run(Method::Blend { amount: None, factor: 1.0 }, &positions, &lists, &rig, &options);
+        assert_close(&dqs, &reference::skin(&inputs, true), 2e-5)?;
+    }
+}
+
+#[test]
+fn the_order_of_influences_decides_dqs_signs_as_in_blender() {
+    // Three bones whose rotations are pairwise more than 90° apart in quaternion space: the sign
+    // each gets depends on the running sum, hence on the order.
+    let rest = vec![Mat4::IDENTITY; 3];
+    let deform = vec![
+        Mat4::from_quat(Quat::from_rotation_z(0.0)),
+        Mat4::from_quat(Quat::from_rotation_z(2.4)),
+        Mat4::from_quat(Quat::from_rotation_z(-2.4)),
+    ];
+    let rig = Rig { rest: rest.clone(), deform: deform.clone() };
+    let positions = vec![[1.0, 0.5, 0.0]; 2];
+    let lists = vec![vec![(0, 0.5), (1, 0.3), (2, 0.2)], vec![(0, 0.5), (2, 0.2), (1, 0.3)]];
+    let out = run(Method::DualQuaternion, &positions, &lists, &rig, &SkinOptions::default());
+    let inputs = reference::Inputs {
+        positions: &positions, lists: &lists, deform: &deform, rest: &rest,
+        premat: Mat4::IDENTITY, postmat: Mat4::IDENTITY, mask: None,
+    };
+    let want = reference::skin(&inputs, true);
+    assert_close(&out, &want, 1e-5).unwrap();
+    assert!((want[0] - want[1]).length() > 0.1, "orders should differ: {:?}", want);
+}
+
+#[test]
+fn vertices_with_too_little_weight_stay_put_but_go_through_the_spaces() {
+    let rig = Rig { rest: vec![Mat4::IDENTITY], deform: vec![Mat4::from_translation(Vec3::X)] };
+    let positions = vec![[1.0, 2.0, 3.0]; 3];
+    let lists = vec![vec![], vec![(0, 0.00005), (0, 0.00005)], vec![(0, 0.0)]];
+    for method in [Method::Linear, Method::DualQuaternion, Method::Blend { amount: None, factor: 0.5 }] {
+        let out = run(method, &positions, &lists, &rig, &SkinOptions::default());
+        assert_eq!(out, positions);
+        let pre = Mat4::from_translation(Vec3::new(0.0, 0.0, 10.0));
+        let options = SkinOptions { premat: Some(pre), postmat: Some(Mat4::from_translation(Vec3::Z)), mask: None };
+        let out = run(method, &positions, &lists, &rig, &options);
+        assert!(out.iter().all(|p| *p == [1.0, 2.0, 14.0]));
+    }
+    // Just above the threshold the vertex moves, fully (weights are normalized).
+    let lists = vec![vec![(0, 0.00011)]; 3];
+    let out = run(Method::Linear, &positions, &lists, &rig, &SkinOptions::default());
+    assert!(out.iter().all(|p| (p[0] - 2.0).abs() < 1e-5));
+}
+
+#[test]
+fn unnormalized_weights_are_divided_by_their_sum() {
+    let rig = Rig {
+        rest: vec![Mat4::IDENTITY; 2],
+        deform: vec![Mat4::from_translation(Vec3::X), Mat4::from_translation(Vec3::Y)],
+    };
+    let positions = vec![[0.0; 3]; 2];
+    let lists = vec![vec![(0, 3.0), (1, 1.0)], vec![(0, 0.3), (1, 0.1)]];
+    for method in [Method::Linear, Method::DualQuaternion] {
+        let out = run(method, &positions, &lists, &rig, &SkinOptions::default());
+        for p in out {
+            assert!(Vec3::from_array(p).abs_diff_eq(Vec3::new(0.75, 0.25, 0.0), 1e-6), "{p:?}");
+        }
+    }
+}
+
+fn twisted_ring_area(cyl: &TwistCylinder, method: Method<'_>, angle: f32) -> f64 {
+    let deform = cyl.twist(angle);
+    let pose = Pose::new(&deform, Some(&cyl.rest)).unwrap();
+    let mut out = vec![[0.0; 3]; cyl.positions.len()];
+    skin(method, &cyl.positions, &cyl.influences, &pose, &SkinOptions::default(), &mut out).unwrap();
+    let middle: Vec<_> = cyl.ring(cyl.rings / 2).map(|i| out[i]).collect();
+    polygon_area(&middle)
+}
+
+#[test]
+fn twisting_collapses_lbs_but_not_dqs() {
+    let cyl = TwistCylinder::new(21, 48, 4.0, 0.5, 0.5).unwrap();
+    let rest_area = twisted_ring_area(&cyl, Method::Linear, 0.0);
+    assert!((rest_area - twisted_ring_area(&cyl, Method::DualQuaternion, 0.0)).abs() < 1e-6);
+    for degrees in [90.0f32, 150.0, 180.0] {
+        let angle = degrees.to_radians();
+        let lbs = twisted_ring_area(&cyl, Method::Linear, angle) / rest_area;
+        let dqs = twisted_ring_area(&cyl, Method::DualQuaternion, angle) / rest_area;
+        // The middle ring has weights 0.5/0.5: LBS scales it by cos²(angle/2), DQS rotates it.
+        let expected_lbs = (angle / 2.0).cos().powi(2) as f64;
+        assert!((lbs - expected_lbs).abs() < 1e-4, "{degrees}°: LBS keeps {lbs}");
+        assert!((dqs - 1.0).abs() < 1e-4, "{degrees}°: DQS keeps {dqs}");
+        let half = twisted_ring_area(&cyl, Method::Blend { amount: None, factor: 0.5 }, angle) / rest_area;
+        assert!(half > lbs && half < dqs, "{degrees}°: blend keeps {half}");
+    }
+    assert!(twisted_ring_area(&cyl, Method::Linear, core::f32::consts::PI) / rest_area < 1e-6);
+}
+
+#[test]
+fn bad_inputs_are_rejected_before_anything_is_written() {
+    let rig = Rig { rest: vec![Mat4::IDENTITY; 2], deform: vec![Mat4::IDENTITY; 2] };
+    let influences = Influences::from_lists(&[vec![(0, 1.0)], vec![(1, 1.0)]], 2).unwrap();
+    let pose = Pose::new(&rig.deform, Some(&rig.rest)).unwrap();
+    let linear_only = Pose::new(&rig.deform, None).unwrap();
+    let positions = vec![[0.0; 3]; 2];
+    let mut out = vec![[7.0; 3]; 2];
+    let opts = SkinOptions::default();
+    let err = |r: Result<(), SkinError>| r.unwrap_err();
+    assert_eq!(
+        err(skin(Method::Linear, &positions[..1], &influences, &pose, &opts, &mut out)),
+        SkinError::LengthMismatch { what: "positions", expected: 2, got: 1 }
+    );
+    assert_eq!(
+        err(skin(Method::Linear, &positions, &influences, &pose, &opts, &mut out[..1])),
+        SkinError::LengthMismatch { what: "out", expected: 2, got: 1 }
+    );
+    assert_eq!(err(skin(Method::DualQuaternion, &positions, &influences, &linear_only, &opts, &mut out)), SkinError::MissingRestMatrices);
+    assert!(skin(Method::Linear, &positions, &influences, &linear_only, &opts, &mut out).is_ok());
+    out = vec![[7.0; 3]; 2];
+    let three = Pose::new(&[Mat4::IDENTITY; 3], None).unwrap();
+    assert!(matches!(err(skin(Method::Linear, &positions, &influences, &three, &opts, &mut out)), SkinError::LengthMismatch { .. }));
+    let mask = [0.5, 1.5];
+    let masked = SkinOptions { mask: Some(&mask), ..opts };
+    assert_eq!(
+        err(skin(Method::Linear, &positions, &influences, &pose, &masked, &mut out)),
+        SkinError::OutOfRange { what: "mask", index: Some(1), value: 1.5 }
+    );
+    let amount = [f32::NAN, 0.5];
+    assert!(matches!(
+        err(skin(Method::Blend { amount: Some(&amount), factor: 1.0 }, &positions, &influences, &pose, &opts, &mut out)),
+        SkinError::OutOfRange { what: "blend amount", index: Some(0), .. }
+    ));
+    assert!(matches!(
+        err(skin(Method::Blend { amount: None, factor: 2.0 }, &positions, &influences, &pose, &opts, &mut out)),
+        SkinError::OutOfRange { what: "blend factor", .. }
+    ));
+    let mut bad = Mat4::IDENTITY;
+    bad.w_axis.w = 2.0;
+    let spaces = SkinOptions { premat: Some(bad), ..opts };
+    assert!(matches!(
+        err(skin(Method::Linear, &positions, &influences, &pose, &spaces, &mut out)),
+        SkinError::InvalidSpaceMatrix { what: "premat", .. }
+    ));
+    assert_eq!(out, vec![[7.0; 3]; 2], "out must be untouched on error");
+}
+
+#[test]
+fn influences_are_validated() {
+    let e = |o: &[u32], b: &[u32], w: &[f32]| Influences::from_csr(o, b, w, 4).unwrap_err().to_string();
+    assert!(e(&[], &[], &[]).contains("offsets"));
+    assert!(e(&[1, 1], &[0], &[1.0]).contains("offsets[0] must be 0"));
+    assert!(e(&[0, 2, 1, 2], &[0, 1], &[1.0, 1.0]).contains("must not decrease"));
+    assert!(e(&[0, 1], &[0, 1], &[1.0, 1.0]).contains("offsets[-1]"));
+    assert!(e(&[0, 2], &[0, 1], &[1.0]).contains("weights has 1"));
+    assert!(e(&[0, 2], &[0, 4], &[1.0, 1.0]).contains("bones[1] = 4 is out of range"));
+    assert!(e(&[0, 2], &[0, 1], &[1.0, -0.1]).contains("weights[1]"));
+    assert!(e(&[0, 2], &[0, 1], &[f32::INFINITY, 1.0]).contains("weights[0]"));
+    let ok = Influences::from_csr(&[0, 2, 2, 3], &[3, 1, 0], &[0.5, 0.5, 1.0], 4).unwrap();
+    assert_eq!((ok.vertex_count(), ok.len(), ok.max_per_vertex()), (3, 3, 2));
+    assert!(ok.of_vertex(1).is_empty());
+}
+
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    let cyl = TwistCylinder::new(200, 64, 4.0, 0.5, 0.3).unwrap();
+    let deform = cyl.twist(2.0);
+    let pose = Pose::new(&deform, Some(&cyl.rest)).unwrap();
+    let mut a = vec![[0.0; 3]; cyl.positions.len()];
+    let mut b = a.clone();
+    crate::pool::set_num_threads(1).unwrap();
+    assert_eq!(crate::pool::num_threads(), 1);
+    skin(Method::DualQuaternion, &cyl.positions, &cyl.influences, &pose, &SkinOptions::default(), &mut a).unwrap();
+    crate::pool::set_num_threads(3).unwrap();
+    assert_eq!(crate::pool::num_threads(), 3);
+    skin(Method::DualQuaternion, &cyl.positions, &cyl.influences, &pose, &SkinOptions::default(), &mut b).unwrap();
+    assert_eq!(crate::pool::set_num_threads(0), Err(crate::pool::PoolError::ZeroThreads));
+    assert_eq!(a, b);
+}
 

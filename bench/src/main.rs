@@ -1,1 +1,218 @@
-fn main() {}
+//! Throughput of the skinning kernels in million vertices per second, beside a memory-bandwidth
+//! reference measured in the same run: a pass that reads exactly the bytes a kernel reads
+//! (positions, CSR offsets, influence pairs) and writes exactly the bytes it writes (positions
+//! out), doing nothing else.
+//!
+//! Usage: `dqskin-bench [--quick] [--json FILE]`.
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use dqskin_core::glam::{Mat4, Quat, Vec3};
+use dqskin_core::{pool, skin, Influences, Method, Pose, SkinOptions};
+use rayon::prelude::*;
+
+const BONES: usize = 64;
+
+/// A small deterministic generator (xorshift64*), so runs are comparable.
+struct Rng(u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+    fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.unit()
+    }
+}
+
+struct Scene {
+    positions: Vec<[f32; 3]>,
+    influences: Influences,
+    rigid: Pose,
+    scaled: Pose,
+}
+
+fn scene(vertices: usize, per_vertex: usize) -> Scene {
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ (vertices as u64 * 31 + per_vertex as u64));
+    let positions: Vec<[f32; 3]> =
+        (0..vertices).map(|_| [rng.range(-1.0, 1.0), rng.range(0.0, 2.0), rng.range(-1.0, 1.0)]).collect();
+    let mut offsets = Vec::with_capacity(vertices + 1);
+    let mut bones = Vec::with_capacity(vertices * per_vertex);
+    let mut weights = Vec::with_capacity(vertices * per_vertex);
+    offsets.push(0u32);
+    for v in 0..vertices {
+        // Neighbouring bones, as on a real mesh, with weights that sum to one.
+        let base = (v * BONES / vertices) as u32;
+        let raw: Vec<f32> = (0..per_vertex).map(|_| rng.range(0.05, 1.0)).collect();
+        let sum: f32 = raw.iter().sum();
+        for (k, w) in raw.iter().enumerate() {
+            bones.push((base + k as u32 * 3) % BONES as u32);
+            weights.push(w / sum);
+        }
+        offsets.push(bones.len() as u32);
+    }
+    let influences = Influences::from_csr(&offsets, &bones, &weights, BONES).expect("valid CSR");
+    let rest: Vec<Mat4> = (0..BONES)
+        .map(|b| Mat4::from_translation(Vec3::new(0.0, 2.0 * b as f32 / BONES as f32, 0.0)))
+        .collect();
+    let pose_with = |scale: bool, rng: &mut Rng| -> Pose {
+        let deform: Vec<Mat4> = rest
+            .iter()
+            .map(|r| {
+                let q = Quat::from_euler(
+                    dqskin_core::glam::EulerRot::XYZ,
+                    rng.range(-2.0, 2.0),
+                    rng.range(-2.0, 2.0),
+                    rng.range(-2.0, 2.0),
+                );
+                let s = if scale { Vec3::new(1.0, rng.range(0.5, 1.5), 1.0) } else { Vec3::ONE };
+                let t = Vec3::new(rng.range(-0.5, 0.5), rng.range(-0.5, 0.5), rng.range(-0.5, 0.5));
+                Mat4::from_scale_rotation_translation(s, q, t) * r.inverse()
+            })
+            .collect();
+        Pose::new(&deform, Some(&rest)).expect("valid pose")
+    };
+    let rigid = pose_with(false, &mut rng);
+    let scaled = pose_with(true, &mut rng);
+    Scene { positions, influences, rigid, scaled }
+}
+
+/// Median of `runs` timings of `f`, in seconds, after one warm-up call.
+fn time(runs: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    let mut t: Vec<f64> = (0..runs)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    t[t.len() / 2]
+}
+
+/// Reads the positions and influences and writes the output, as a kernel does, with no math.
+fn bandwidth_reference(s: &Scene, out: &mut [[f32; 3]]) {
+    const CHUNK: usize = 4096;
+    let offsets = s.influences.offsets();
+    let entries = s.influences.entries();
+    let sink = pool::run(|| {
+        out.par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(c, dst)| {
+                let start = c * CHUNK;
+                let end = start + dst.len();
+                dst.copy_from_slice(&s.positions[start..end]);
+                let (a, b) = (offsets[start] as usize, offsets[end] as usize);
+                let mut x = offsets[start..=end].iter().fold(0u32, |x, o| x ^ o);
+                for e in &entries[a..b] {
+                    x ^= e.bone ^ e.weight.to_bits();
+                }
+                x
+            })
+            .reduce(|| 0, |a, b| a ^ b)
+    });
+    black_box(sink);
+}
+
+struct Row {
+    vertices: usize,
+    per_vertex: usize,
+    threads: usize,
+    method: &'static str,
+    pose: &'static str,
+    seconds: f64,
+    reference_seconds: f64,
+    bytes: usize,
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let quick = args.iter().any(|a| a == "--quick");
+    let json = args.iter().position(|a| a == "--json").and_then(|i| args.get(i + 1).cloned());
+    let all = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let sizes: &[usize] = if quick { &[100_000] } else { &[100_000, 1_000_000] };
+    let mut rows = Vec::new();
+    println!(
+        "{:>9} {:>3} {:>3} {:<6} {:<6} {:>9} {:>10} {:>8} {:>10} {:>7}",
+        "vertices", "inf", "thr", "method", "pose", "ms", "Mverts/s", "GB/s", "ref Mv/s", "of ref"
+    );
+    for &vertices in sizes {
+        for per_vertex in [4usize, 8] {
+            let s = scene(vertices, per_vertex);
+            let mut out = vec![[0.0f32; 3]; vertices];
+            let bytes = vertices * 12 * 2 + s.influences.byte_size();
+            for threads in [1, all] {
+                pool::set_num_threads(threads).expect("threads");
+                let runs = if quick { 5 } else if vertices >= 1_000_000 { 15 } else { 40 };
+                let reference = time(runs, || bandwidth_reference(&s, &mut out));
+                let cases: [(&str, Method, &str, &Pose); 4] = [
+                    ("LBS", Method::Linear, "rigid", &s.rigid),
+                    ("DQS", Method::DualQuaternion, "rigid", &s.rigid),
+                    ("DQS", Method::DualQuaternion, "scaled", &s.scaled),
+                    ("Blend", Method::Blend { amount: None, factor: 0.5 }, "rigid", &s.rigid),
+                ];
+                for (name, method, pose_name, pose) in cases {
+                    let opts = SkinOptions::default();
+                    let secs = time(runs, || {
+                        skin(method, &s.positions, &s.influences, pose, &opts, &mut out).expect("skin")
+                    });
+                    let row = Row {
+                        vertices,
+                        per_vertex,
+                        threads,
+                        method: name,
+                        pose: pose_name,
+                        seconds: secs,
+                        reference_seconds: reference,
+                        bytes,
+                    };
+                    println!(
+                        "{:>9} {:>3} {:>3} {:<6} {:<6} {:>9.3} {:>10.1} {:>8.2} {:>10.1} {:>6.0}%",
+                        vertices,
+                        per_vertex,
+                        threads,
+                        name,
+                        pose_name,
+                        secs * 1e3,
+                        vertices as f64 / secs / 1e6,
+                        bytes as f64 / secs / 1e9,
+                        vertices as f64 / reference / 1e6,
+                        100.0 * reference / secs
+                    );
+                    rows.push(row);
+                }
+            }
+        }
+    }
+    if let Some(path) = json {
+        let body: Vec<String> = rows
+            .iter()
+            .map(|r| {
+                format!(
+                    "{{\"vertices\":{},\"influences\":{},\"threads\":{},\"method\":\"{}\",\"pose\":\"{}\",\"seconds\":{:.6e},\"mverts_per_s\":{:.2},\"reference_seconds\":{:.6e},\"fraction_of_reference\":{:.4},\"bytes\":{}}}",
+                    r.vertices,
+                    r.per_vertex,
+                    r.threads,
+                    r.method,
+                    r.pose,
+                    r.seconds,
+                    r.vertices as f64 / r.seconds / 1e6,
+                    r.reference_seconds,
+                    r.reference_seconds / r.seconds,
+                    r.bytes
+                )
+            })
+            .collect();
+        let text = format!("{{\"bones\":{BONES},\"threads_available\":{all},\"rows\":[\n{}\n]}}\n", body.join(",\n"));
+        std::fs::write(&path, text).unwrap_or_else(|e| panic!("cannot write {path}: {e}"));
+        println!("wrote {path}");
+    }
+}

@@ -2,7 +2,20 @@
 
 use super::SkinError;
 
-/// One `(bone, weight)` pair. Interleaved so that the kernels read one stream.
+/// Vertices the kernels process together, one per SIMD lane.
+pub(crate) const LANES: usize = 8;
+
+/// The `k`-th influence of each of [`LANES`] consecutive vertices: one 64-byte cache line.
+/// Vertices with fewer than `k + 1` influences have bone 0 with weight 0 there, which adds
+/// nothing to any sum.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct Slot {
+    pub bones: [u32; LANES],
+    pub weights: [f32; LANES],
+}
+
+/// One `(bone, weight)` pair.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C)]
 pub struct Influence {
@@ -23,6 +36,10 @@ pub struct Influences {
     entries: Vec<Influence>,
     bone_count: usize,
     max_per_vertex: usize,
+    /// The same influences in lane order for the kernels: batch `b` (vertices `b·LANES ..`) has
+    /// slots `batch_starts[b]..batch_starts[b+1]`, as many as its vertex with the most influences.
+    slots: Vec<Slot>,
+    batch_starts: Vec<u32>,
 }
 
 impl Influences {
@@ -82,9 +99,10 @@ impl Influences {
                 weights[i]
             ));
         }
-        let entries =
+        let entries: Vec<Influence> =
             bones.iter().zip(weights).map(|(&bone, &weight)| Influence { bone, weight }).collect();
-        Ok(Self { offsets: offsets.to_vec(), entries, bone_count, max_per_vertex })
+        let (slots, batch_starts) = pack_lanes(offsets, &entries)?;
+        Ok(Self { offsets: offsets.to_vec(), entries, bone_count, max_per_vertex, slots, batch_starts })
     }
 
     /// From one list of `(bone, weight)` pairs per vertex (convenient for tests and examples).
@@ -149,8 +167,43 @@ impl Influences {
         &self.entries
     }
 
-    /// Bytes the kernels read per call for the influences (offsets and pairs).
+    /// Bytes the kernels read per call for the influences (the lane-ordered slots and their
+    /// batch starts).
     pub fn byte_size(&self) -> usize {
-        self.offsets.len() * 4 + self.entries.len() * core::mem::size_of::<Influence>()
+        self.slots.len() * core::mem::size_of::<Slot>() + self.batch_starts.len() * 4
     }
+
+    /// The slots of batch `b` (vertices `b·LANES .. (b+1)·LANES`).
+    #[inline]
+    pub(crate) fn batch(&self, b: usize) -> &[Slot] {
+        &self.slots[self.batch_starts[b] as usize..self.batch_starts[b + 1] as usize]
+    }
+}
+
+/// Transposes CSR influences into lane order, padding each batch to its longest vertex.
+fn pack_lanes(offsets: &[u32], entries: &[Influence]) -> Result<(Vec<Slot>, Vec<u32>), SkinError> {
+    let vertices = offsets.len() - 1;
+    let batches = vertices.div_ceil(LANES);
+    let mut slots = Vec::new();
+    let mut batch_starts = Vec::with_capacity(batches + 1);
+    batch_starts.push(0u32);
+    for b in 0..batches {
+        let first = b * LANES;
+        let last = (first + LANES).min(vertices);
+        let longest = (first..last).map(|v| offsets[v + 1] - offsets[v]).max().unwrap_or(0) as usize;
+        let base = slots.len();
+        slots.resize(base + longest, Slot { bones: [0; LANES], weights: [0.0; LANES] });
+        for v in first..last {
+            let lane = v - first;
+            let list = &entries[offsets[v] as usize..offsets[v + 1] as usize];
+            for (k, e) in list.iter().enumerate() {
+                slots[base + k].bones[lane] = e.bone;
+                slots[base + k].weights[lane] = e.weight;
+            }
+        }
+        batch_starts.push(u32::try_from(slots.len()).map_err(|_| {
+            SkinError::InvalidInfluences("too many influences to pack (more than 2^32 slots)".into())
+        })?);
+    }
+    Ok((slots, batch_starts))
 }

@@ -1,12 +1,17 @@
-//! The per-vertex kernels and their parallel driver. Inputs are validated by [`super::skin`];
-//! nothing here can fail or panic on valid inputs.
+//! The kernels and their parallel driver. Inputs are validated by [`super::skin`]; nothing here
+//! can fail or panic on valid inputs.
+//!
+//! Vertices are processed [`LANES`] at a time from the lane-ordered influence slots: every lane
+//! is an independent vertex, so the serial chain of DQS's running-sum sign choice runs in all
+//! lanes at once (SIMD where the compiler vectorizes the lane loops, instruction-level
+//! parallelism where it does not). On x86-64 a copy compiled for AVX2+FMA is chosen at run time.
 
-use glam::{Affine3A, Mat4, Vec3, Vec3A, Vec4};
+use glam::{Affine3A, Mat4, Vec4};
 use rayon::prelude::*;
 
-use super::influences::{Influence, Influences};
-use super::pose::{AffineRows, DqBone, Pose};
-use super::MIN_TOTAL_WEIGHT;
+use super::influences::{Slot, LANES};
+use super::pose::{AffineRows, DqBone};
+use super::{Influences, Pose, MIN_TOTAL_WEIGHT};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Kind {
@@ -28,17 +33,13 @@ pub(crate) struct Job<'a> {
 }
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
+/// A multiple of [`LANES`], so tasks start on batch boundaries.
 const CHUNK: usize = 4096;
+const _: () = assert!(CHUNK % LANES == 0);
 
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]]) {
-    let scaled = job.pose.any_scaled();
-    let task = |(i, chunk): (usize, &mut [[f32; 3]])| match (job.kind, scaled) {
-        (Kind::Linear, _) => chunk_kernel::<LINEAR, false>(job, i * CHUNK, chunk),
-        (Kind::DualQuaternion, false) => chunk_kernel::<DUAL_QUATERNION, false>(job, i * CHUNK, chunk),
-        (Kind::DualQuaternion, true) => chunk_kernel::<DUAL_QUATERNION, true>(job, i * CHUNK, chunk),
-        (Kind::Blend, false) => chunk_kernel::<BLEND, false>(job, i * CHUNK, chunk),
-        (Kind::Blend, true) => chunk_kernel::<BLEND, true>(job, i * CHUNK, chunk),
-    };
+    let simd = Simd::detect();
+    let task = |(i, chunk): (usize, &mut [[f32; 3]])| simd.chunk(job, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
     } else {
@@ -46,175 +47,267 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]]) {
     }
 }
 
+/// Which compiled copy of the kernels to run.
+#[derive(Clone, Copy)]
+enum Simd {
+    Baseline,
+    #[cfg(target_arch = "x86_64")]
+    Avx2Fma,
+}
+
+impl Simd {
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            return Simd::Avx2Fma;
+        }
+        Simd::Baseline
+    }
+
+    fn chunk(self, job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+        match self {
+            Simd::Baseline => chunk::<false>(job, start, out),
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `detect` checked that the CPU has AVX2 and FMA.
+            Simd::Avx2Fma => unsafe { chunk_avx2_fma(job, start, out) },
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn chunk_avx2_fma(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<true>(job, start, out)
+}
+
+#[inline(always)]
+fn chunk<const FMA: bool>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+    match (job.kind, job.pose.any_scaled()) {
+        (Kind::Linear, _) => batches::<FMA, LINEAR, false>(job, start, out),
+        (Kind::DualQuaternion, false) => batches::<FMA, DUAL_QUATERNION, false>(job, start, out),
+        (Kind::DualQuaternion, true) => batches::<FMA, DUAL_QUATERNION, true>(job, start, out),
+        (Kind::Blend, false) => batches::<FMA, BLEND, false>(job, start, out),
+        (Kind::Blend, true) => batches::<FMA, BLEND, true>(job, start, out),
+    }
+}
+
 const LINEAR: u8 = 0;
 const DUAL_QUATERNION: u8 = 1;
 const BLEND: u8 = 2;
 
-/// Skins vertices `start..start + out.len()`. `KIND` and `SCALED` are compile-time so that each
-/// combination gets its own tight loop.
-fn chunk_kernel<const KIND: u8, const SCALED: bool>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
-    let premat = job.premat.map(|m| Affine3A::from_mat4(m));
-    let postmat = job.postmat.map(|m| Affine3A::from_mat4(m));
-    let linear = &job.pose.linear[..];
-    let dq = &job.pose.dq[..];
-    let pivot = &job.pose.pivot[..];
-    let offsets = job.influences.offsets();
-    let entries = job.influences.entries();
-    for (k, dst) in out.iter_mut().enumerate() {
-        let v = start + k;
-        let p = job.positions[v];
-        let a = job.mask.map_or(1.0, |m| m[v]);
-        if a == 0.0 {
-            *dst = p;
-            continue;
+type Lanes = [f32; LANES];
+const ZERO: Lanes = [0.0; LANES];
+
+/// `a·b + c`, fused where the copy is compiled with FMA (where `mul_add` is one instruction; in
+/// the baseline copy it would be a slow library call).
+#[inline(always)]
+fn madd<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
+    if FMA {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
+    }
+}
+
+/// Positions of one batch, one coordinate array per axis.
+#[derive(Clone, Copy)]
+struct Points {
+    x: Lanes,
+    y: Lanes,
+    z: Lanes,
+}
+
+impl Points {
+    #[inline(always)]
+    fn transform<const FMA: bool>(&self, m: &Affine3A) -> Self {
+        let (c0, c1, c2, t) = (m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation);
+        let mut r = Points { x: ZERO, y: ZERO, z: ZERO };
+        for l in 0..LANES {
+            let (x, y, z) = (self.x[l], self.y[l], self.z[l]);
+            r.x[l] = madd::<FMA>(c0.x, x, madd::<FMA>(c1.x, y, madd::<FMA>(c2.x, z, t.x)));
+            r.y[l] = madd::<FMA>(c0.y, x, madd::<FMA>(c1.y, y, madd::<FMA>(c2.y, z, t.y)));
+            r.z[l] = madd::<FMA>(c0.z, x, madd::<FMA>(c1.z, y, madd::<FMA>(c2.z, z, t.z)));
         }
-        let mut co = Vec3A::from_array(p);
-        if let Some(pre) = &premat {
-            co = pre.transform_point3a(co);
+        r
+    }
+}
+
+/// Skins vertices `start..start + out.len()` batch by batch.
+#[inline(always)]
+fn batches<const FMA: bool, const KIND: u8, const SCALED: bool>(
+    job: &Job<'_>,
+    start: usize,
+    out: &mut [[f32; 3]],
+) {
+    let premat = job.premat.map(Affine3A::from_mat4);
+    let postmat = job.postmat.map(Affine3A::from_mat4);
+    let pose = job.pose;
+    for (k, out) in out.chunks_mut(LANES).enumerate() {
+        let first = start + k * LANES;
+        let n = out.len();
+        let positions = &job.positions[first..first + n];
+        let mut co = Points { x: ZERO, y: ZERO, z: ZERO };
+        let mut strength: Lanes = [0.0; LANES];
+        for l in 0..n {
+            [co.x[l], co.y[l], co.z[l]] = positions[l];
+            strength[l] = job.mask.map_or(1.0, |m| m[first + l]);
         }
-        let infl = &entries[offsets[v] as usize..offsets[v + 1] as usize];
-        co = match KIND {
-            LINEAR => linear_vertex(co, infl, linear, a),
-            DUAL_QUATERNION => dual_quaternion_vertex::<SCALED>(co, infl, dq, pivot, a),
+        if let Some(m) = &premat {
+            co = co.transform::<FMA>(m);
+        }
+        let slots = job.influences.batch(first / LANES);
+        let moved = match KIND {
+            LINEAR => linear::<FMA>(&co, slots, &pose.linear, &strength),
+            DUAL_QUATERNION => {
+                let sum = accumulate_dual_quaternion::<FMA, SCALED>(&co, slots, &pose.dq, &pose.pivot);
+                finish_dual_quaternion::<FMA>(&co, &sum, &strength)
+            }
             _ => {
-                let alpha = job.blend_factor * job.blend_amount.map_or(1.0, |b| b[v]);
-                blend_vertex::<SCALED>(co, infl, linear, dq, pivot, a, alpha)
+                let lbs = linear::<FMA>(&co, slots, &pose.linear, &strength);
+                let sum = accumulate_dual_quaternion::<FMA, SCALED>(&co, slots, &pose.dq, &pose.pivot);
+                let dqs = finish_dual_quaternion::<FMA>(&co, &sum, &strength);
+                let mut alpha: Lanes = [job.blend_factor; LANES];
+                if let Some(amount) = job.blend_amount {
+                    for l in 0..n {
+                        alpha[l] *= amount[first + l];
+                    }
+                }
+                let mut r = lbs;
+                for l in 0..LANES {
+                    r.x[l] = madd::<FMA>(alpha[l], dqs.x[l] - lbs.x[l], lbs.x[l]);
+                    r.y[l] = madd::<FMA>(alpha[l], dqs.y[l] - lbs.y[l], lbs.y[l]);
+                    r.z[l] = madd::<FMA>(alpha[l], dqs.z[l] - lbs.z[l], lbs.z[l]);
+                }
+                r
             }
         };
-        if let Some(post) = &postmat {
-            co = post.transform_point3a(co);
-        }
-        *dst = co.to_array();
-    }
-}
-
-/// Weighted sum of the bones' affine rows and the total weight.
-#[inline(always)]
-fn accumulate_linear(infl: &[Influence], linear: &[AffineRows]) -> ([Vec4; 3], f32) {
-    let mut acc = [Vec4::ZERO; 3];
-    let mut contrib = 0.0f32;
-    for i in infl {
-        // SAFETY-free: indices were validated against the bone count when the influences were built.
-        let m = &linear[i.bone as usize];
-        let w = Vec4::splat(i.weight);
-        acc[0] = m.rows[0].mul_add(w, acc[0]);
-        acc[1] = m.rows[1].mul_add(w, acc[1]);
-        acc[2] = m.rows[2].mul_add(w, acc[2]);
-        contrib += i.weight;
-    }
-    (acc, contrib)
-}
-
-/// LBS: `co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)`.
-#[inline(always)]
-fn linear_vertex(co: Vec3A, infl: &[Influence], linear: &[AffineRows], a: f32) -> Vec3A {
-    let (acc, contrib) = accumulate_linear(infl, linear);
-    if !(contrib > MIN_TOTAL_WEIGHT) {
-        return co;
-    }
-    linear_finish(co, &acc, contrib, a)
-}
-
-#[inline(always)]
-fn linear_finish(co: Vec3A, acc: &[Vec4; 3], contrib: f32, a: f32) -> Vec3A {
-    let h = co.extend(1.0);
-    let moved = Vec3A::new(acc[0].dot(h), acc[1].dot(h), acc[2].dot(h));
-    co + (moved - co * contrib) * (a / contrib)
-}
-
-/// Sums `±wᵢ·q̂ᵢ` with the sign chosen against the running sum (Blender's `add_weighted_dq_dq`).
-#[inline(always)]
-fn accumulate_dual_quaternion<const SCALED: bool>(
-    co: Vec3A,
-    infl: &[Influence],
-    dq: &[DqBone],
-    pivot: &[AffineRows],
-) -> (Vec4, Vec4, f32) {
-    let mut real = Vec4::ZERO;
-    let mut dual = Vec4::ZERO;
-    let mut contrib = 0.0f32;
-    let h = co.extend(1.0);
-    for i in infl {
-        let bone = &dq[i.bone as usize];
-        let d = if SCALED {
-            // Rigid motion that takes `co` exactly where the bone's matrix puts it.
-            let t = pivot[i.bone as usize].transform_point(h);
-            dual_from_translation(t, bone.real)
-        } else {
-            bone.dual
+        let result = match &postmat {
+            Some(m) => moved.transform::<FMA>(m),
+            None => moved,
         };
-        let w = if bone.real.dot(real) < 0.0 { -i.weight } else { i.weight };
-        let ws = Vec4::splat(w);
-        real = bone.real.mul_add(ws, real);
-        dual = d.mul_add(ws, dual);
-        contrib += i.weight;
+        for l in 0..n {
+            // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
+            out[l] = if strength[l] == 0.0 { positions[l] } else { [result.x[l], result.y[l], result.z[l]] };
+        }
     }
-    (real, dual, contrib)
 }
 
-/// `½·(0, t)·q` for `q` stored as (x, y, z, w).
+/// Bone data for the lanes of one slot. Bone indices were validated against the bone count when
+/// the influences were built, and [`super::skin`] checked that the pose has that many bones;
+/// padding lanes use bone 0, which exists whenever there is a slot at all.
 #[inline(always)]
-fn dual_from_translation(t: Vec3, q: Vec4) -> Vec4 {
-    let v = Vec3::new(q.x, q.y, q.z);
-    let vec = t * q.w + t.cross(v);
-    Vec4::new(vec.x, vec.y, vec.z, -t.dot(v)) * 0.5
+fn bone<T>(table: &[T], index: u32) -> &T {
+    debug_assert!((index as usize) < table.len());
+    // SAFETY: see above; the index is in range.
+    unsafe { table.get_unchecked(index as usize) }
 }
 
-/// Applies an unnormalized dual quaternion sum to `co` (Blender's `mul_v3m3_dq`).
+/// LBS: `co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)`; `co` where `contrib ≤ 0.0001`.
+/// Lane by lane with 4-wide rows: LBS has no serial dependency between influences, so this keeps
+/// the accumulators in registers.
 #[inline(always)]
-fn apply_dual_quaternion(co: Vec3A, real: Vec4, dual: Vec4) -> Vec3A {
-    let (x, y, z, w) = (real.x, real.y, real.z, real.w);
-    let (t0, t1, t2, t3) = (dual.w, dual.x, dual.y, dual.z);
-    let len2 = real.length_squared();
-    let inv = if len2 > 0.0 { 1.0 / len2 } else { 0.0 };
-    // Rotation matrix of the unnormalized quaternion, scaled by |q|².
-    let rx = Vec3A::new(w * w + x * x - y * y - z * z, 2.0 * (x * y + w * z), 2.0 * (x * z - w * y));
-    let ry = Vec3A::new(2.0 * (x * y - w * z), w * w + y * y - x * x - z * z, 2.0 * (y * z + w * x));
-    let rz = Vec3A::new(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), w * w + z * z - x * x - y * y);
-    let t = Vec3A::new(
-        2.0 * (-t0 * x + w * t1 - t2 * z + y * t3),
-        2.0 * (-t0 * y + t1 * z - x * t3 + w * t2),
-        2.0 * (-t0 * z + x * t2 + w * t3 - t1 * y),
-    );
-    (rx * co.x + ry * co.y + rz * co.z + t) * inv
+fn linear<const FMA: bool>(co: &Points, slots: &[Slot], linear: &[AffineRows], strength: &Lanes) -> Points {
+    let mut r = *co;
+    for l in 0..LANES {
+        let mut acc = [Vec4::ZERO; 3];
+        let mut contrib = 0.0f32;
+        for slot in slots {
+            let m = bone(linear, slot.bones[l]);
+            let w = slot.weights[l];
+            let ws = Vec4::splat(w);
+            for (a, row) in acc.iter_mut().zip(&m.rows) {
+                *a = if FMA { row.mul_add(ws, *a) } else { *row * ws + *a };
+            }
+            contrib += w;
+        }
+        if contrib > MIN_TOTAL_WEIGHT {
+            let h = Vec4::new(co.x[l], co.y[l], co.z[l], 1.0);
+            let f = strength[l] / contrib;
+            r.x[l] = madd::<FMA>(acc[0].dot(h) - h.x * contrib, f, h.x);
+            r.y[l] = madd::<FMA>(acc[1].dot(h) - h.y * contrib, f, h.y);
+            r.z[l] = madd::<FMA>(acc[2].dot(h) - h.z * contrib, f, h.z);
+        }
+    }
+    r
 }
 
+/// An unnormalized dual quaternion per lane: real (x, y, z, w), dual (x, y, z, w), total weight.
+struct DqSum {
+    real: [Lanes; 4],
+    dual: [Lanes; 4],
+    contrib: Lanes,
+}
+
+/// Sums `±wᵢ·q̂ᵢ` with each sign chosen against the running sum (Blender's
+/// `add_weighted_dq_dq`); for bones with scale the dual part moves `co` exactly where the bone's
+/// matrix puts it (`add_weighted_dq_dq_pivot`).
 #[inline(always)]
-fn dual_quaternion_vertex<const SCALED: bool>(
-    co: Vec3A,
-    infl: &[Influence],
+fn accumulate_dual_quaternion<const FMA: bool, const SCALED: bool>(
+    co: &Points,
+    slots: &[Slot],
     dq: &[DqBone],
     pivot: &[AffineRows],
-    a: f32,
-) -> Vec3A {
-    let (real, dual, contrib) = accumulate_dual_quaternion::<SCALED>(co, infl, dq, pivot);
-    if !(contrib > MIN_TOTAL_WEIGHT) {
-        return co;
+) -> DqSum {
+    let mut s = DqSum { real: [ZERO; 4], dual: [ZERO; 4], contrib: ZERO };
+    for slot in slots {
+        for l in 0..LANES {
+            let b = bone(dq, slot.bones[l]);
+            let q = [b.real.x, b.real.y, b.real.z, b.real.w];
+            let d = if SCALED {
+                let p = bone(pivot, slot.bones[l]);
+                let (x, y, z) = (co.x[l], co.y[l], co.z[l]);
+                let t = |r: usize| {
+                    let row = p.rows[r];
+                    madd::<FMA>(row.x, x, madd::<FMA>(row.y, y, madd::<FMA>(row.z, z, row.w)))
+                };
+                let (tx, ty, tz) = (t(0), t(1), t(2));
+                // ½·(0, t)·q = ½·(w·t + t × v, −t·v)
+                [
+                    0.5 * (tx * q[3] + ty * q[2] - tz * q[1]),
+                    0.5 * (ty * q[3] + tz * q[0] - tx * q[2]),
+                    0.5 * (tz * q[3] + tx * q[1] - ty * q[0]),
+                    -0.5 * (tx * q[0] + ty * q[1] + tz * q[2]),
+                ]
+            } else {
+                [b.dual.x, b.dual.y, b.dual.z, b.dual.w]
+            };
+            let dot = q[0] * s.real[0][l] + q[1] * s.real[1][l] + q[2] * s.real[2][l] + q[3] * s.real[3][l];
+            let w = slot.weights[l];
+            let w = if dot < 0.0 { -w } else { w };
+            for c in 0..4 {
+                s.real[c][l] = madd::<FMA>(q[c], w, s.real[c][l]);
+                s.dual[c][l] = madd::<FMA>(d[c], w, s.dual[c][l]);
+            }
+            s.contrib[l] += slot.weights[l];
+        }
     }
-    let moved = apply_dual_quaternion(co, real, dual);
-    if a == 1.0 {
-        moved
-    } else {
-        co + (moved - co) * a
-    }
+    s
 }
 
+/// Applies the summed dual quaternions (Blender's `mul_v3m3_dq`, dividing by `|q|²` instead of
+/// normalizing), then the strength: `co + a·(r − co)`; `co` where `contrib ≤ 0.0001`.
 #[inline(always)]
-fn blend_vertex<const SCALED: bool>(
-    co: Vec3A,
-    infl: &[Influence],
-    linear: &[AffineRows],
-    dq: &[DqBone],
-    pivot: &[AffineRows],
-    a: f32,
-    alpha: f32,
-) -> Vec3A {
-    let (acc, contrib) = accumulate_linear(infl, linear);
-    if !(contrib > MIN_TOTAL_WEIGHT) {
-        return co;
+fn finish_dual_quaternion<const FMA: bool>(co: &Points, s: &DqSum, strength: &Lanes) -> Points {
+    let mut r = *co;
+    for l in 0..LANES {
+        let (x, y, z, w) = (s.real[0][l], s.real[1][l], s.real[2][l], s.real[3][l]);
+        let (t0, t1, t2, t3) = (s.dual[3][l], s.dual[0][l], s.dual[1][l], s.dual[2][l]);
+        let len2 = w * w + x * x + y * y + z * z;
+        let (px, py, pz) = (co.x[l], co.y[l], co.z[l]);
+        let m00 = w * w + x * x - y * y - z * z;
+        let m11 = w * w + y * y - x * x - z * z;
+        let m22 = w * w + z * z - x * x - y * y;
+        let (xy, xz, yz, wx, wy, wz) = (x * y, x * z, y * z, w * x, w * y, w * z);
+        let nx = m00 * px + 2.0 * (xy - wz) * py + 2.0 * (xz + wy) * pz + 2.0 * (-t0 * x + w * t1 - t2 * z + y * t3);
+        let ny = 2.0 * (xy + wz) * px + m11 * py + 2.0 * (yz - wx) * pz + 2.0 * (-t0 * y + t1 * z - x * t3 + w * t2);
+        let nz = 2.0 * (xz - wy) * px + 2.0 * (yz + wx) * py + m22 * pz + 2.0 * (-t0 * z + x * t2 + w * t3 - t1 * y);
+        if s.contrib[l] > MIN_TOTAL_WEIGHT && len2 > 0.0 {
+            let f = strength[l] / len2;
+            // co + a·(n/|q|² − co)
+            r.x[l] = madd::<FMA>(nx, f, px - strength[l] * px);
+            r.y[l] = madd::<FMA>(ny, f, py - strength[l] * py);
+            r.z[l] = madd::<FMA>(nz, f, pz - strength[l] * pz);
+        }
     }
-    let lbs = linear_finish(co, &acc, contrib, a);
-    let (real, dual, _) = accumulate_dual_quaternion::<SCALED>(co, infl, dq, pivot);
-    let dqs = co + (apply_dual_quaternion(co, real, dual) - co) * a;
-    lbs * (1.0 - alpha) + dqs * alpha
+    r
 }

@@ -19,7 +19,7 @@ impl AffineRows {
         Self { rows: [m.row(0), m.row(1), m.row(2)] }
     }
 
-    #[inline(always)]
+    #[cfg(test)]
     pub fn transform_point(&self, co: Vec4) -> Vec3 {
         Vec3::new(self.rows[0].dot(co), self.rows[1].dot(co), self.rows[2].dot(co))
     }

@@ -1,1 +1,65 @@
+//! The `dqskin._dqskin` extension module: a thin pyo3 layer over `dqskin-core`. It checks
+//! arguments, converts arrays without copying the large ones, releases the GIL while kernels run,
+//! and turns every core error into a `ValueError`/`TypeError` naming the argument. A Rust panic
+//! never reaches Python as `PanicException`: [`guard`] turns it into a `RuntimeError`.
 
+mod arrays;
+mod blending;
+mod dual_quat;
+mod rigs;
+mod skinning;
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use pyo3::exceptions::PyRuntimeError;
+use pyo3::prelude::*;
+
+/// Runs `f`, converting a panic into a `RuntimeError` (a bug in dqskin, never bad input).
+pub(crate) fn guard<T>(f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(r) => r,
+        Err(payload) => {
+            let msg = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(PyRuntimeError::new_err(format!("internal error in dqskin (please report it): {msg}")))
+        }
+    }
+}
+
+/// Sets the number of worker threads the kernels use (at least 1).
+#[pyfunction]
+fn set_num_threads(threads: i64) -> PyResult<()> {
+    guard(|| {
+        let n = usize::try_from(threads)
+            .map_err(|_| pyo3::exceptions::PyValueError::new_err("threads must be at least 1"))?;
+        dqskin_core::pool::set_num_threads(n).map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("threads: {e}")))
+    })
+}
+
+/// The number of worker threads the kernels use.
+#[pyfunction]
+fn get_num_threads() -> PyResult<usize> {
+    guard(|| Ok(dqskin_core::pool::num_threads()))
+}
+
+/// Panics on purpose (tests check that no `PanicException` escapes).
+#[pyfunction]
+fn _panic_for_tests() -> PyResult<()> {
+    guard(|| panic!("deliberate panic"))
+}
+
+#[pymodule]
+fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_function(wrap_pyfunction!(set_num_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(get_num_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(_panic_for_tests, m)?)?;
+    dual_quat::register(m)?;
+    blending::register(m)?;
+    skinning::register(m)?;
+    rigs::register(m)?;
+    Ok(())
+}

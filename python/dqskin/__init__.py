@@ -1,0 +1,60 @@
+"""dqskin: dual-quaternion skinning and rigid-transform blending on numpy arrays.
+
+The math runs in a Rust core (multithreaded, GIL released); this package is its Python face.
+
+Conventions
+-----------
+- float32 everywhere; large arrays (positions, weights, outputs) must be C-contiguous float32
+  numpy arrays and are used without copying.
+- Quaternions are ``(w, x, y, z)``; dual quaternions are ``(8,)`` arrays
+  ``[rw, rx, ry, rz, dw, dx, dy, dz]`` (real part, then dual part).
+- Matrices are row-major 4x4 with the translation in the last column, as numpy and Blender's
+  ``mathutils`` write them.
+
+Skinning matches Blender's Armature modifier: ``method='linear'`` is Preserve Volume off,
+``method='dual_quaternion'`` is Preserve Volume on, and ``method='blend'`` mixes the two per vertex.
+"""
+
+from ._dqskin import (
+    DualQuat,
+    Influences,
+    Screw,
+    TwistCylinder,
+    __version__,
+    dib,
+    dlb,
+    dual_quats_from_matrices,
+    forward_kinematics,
+    get_num_threads,
+    matrices_from_dual_quats,
+    mesh_volume,
+    polygon_area,
+    sclerp,
+    set_num_threads,
+    skin,
+    slerp,
+    squad,
+    squad_control_points,
+)
+
+__all__ = [
+    "DualQuat",
+    "Influences",
+    "Screw",
+    "TwistCylinder",
+    "__version__",
+    "dib",
+    "dlb",
+    "dual_quats_from_matrices",
+    "forward_kinematics",
+    "get_num_threads",
+    "matrices_from_dual_quats",
+    "mesh_volume",
+    "polygon_area",
+    "sclerp",
+    "set_num_threads",
+    "skin",
+    "slerp",
+    "squad",
+    "squad_control_points",
+]

@@ -1,0 +1,193 @@
+"""Type stubs for the compiled core of dqskin (see the package docstring for conventions)."""
+
+from typing import Literal, Sequence, SupportsFloat, Union, final, overload
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+F32Array = npt.NDArray[np.float32]
+IntArray = npt.NDArray[np.integer]
+ArrayLike = Union[npt.ArrayLike, Sequence[float]]
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
+
+def set_num_threads(threads: int) -> None:
+    """Sets the number of worker threads the kernels use (at least 1)."""
+
+def get_num_threads() -> int:
+    """The number of worker threads the kernels use (default: DQSKIN_NUM_THREADS or all cores)."""
+
+@final
+class Screw:
+    """Rotation by ``angle`` about the line (``axis``, ``moment``) plus translation ``pitch`` along it."""
+
+    axis: Vec3
+    moment: Vec3
+    angle: float
+    pitch: float
+    def __init__(self, axis: Vec3, moment: Vec3, angle: float, pitch: float) -> None: ...
+    def point(self) -> Vec3:
+        """The point of the axis closest to the origin."""
+
+@final
+class DualQuat:
+    """A dual quaternion ``real + ε·dual``; unit ones are rigid transforms."""
+
+    def __init__(self, real: ArrayLike | None = None, dual: ArrayLike | None = None) -> None: ...
+    @staticmethod
+    def identity() -> DualQuat: ...
+    @staticmethod
+    def from_rotation_translation(rotation: ArrayLike, translation: ArrayLike | None = None) -> DualQuat: ...
+    @staticmethod
+    def from_translation(translation: ArrayLike) -> DualQuat: ...
+    @staticmethod
+    def from_matrix(matrix: ArrayLike, check: bool = True, tolerance: float = 1e-5) -> DualQuat:
+        """From a rigid 4x4 matrix; ``check`` rejects scale, shear, reflection, non-affine rows."""
+    @staticmethod
+    def from_screw(screw: Screw) -> DualQuat: ...
+    @property
+    def real(self) -> Quat: ...
+    @property
+    def dual(self) -> Quat: ...
+    @property
+    def rotation(self) -> Quat: ...
+    @property
+    def translation(self) -> Vec3: ...
+    def to_array(self) -> F32Array:
+        """``[rw, rx, ry, rz, dw, dx, dy, dz]`` as float32."""
+    def to_matrix(self) -> F32Array:
+        """Row-major 4x4 float32."""
+    def conjugate(self) -> DualQuat: ...
+    def dual_conjugate(self) -> DualQuat: ...
+    def full_conjugate(self) -> DualQuat: ...
+    def norm(self) -> tuple[float, float]:
+        """The dual-number norm ``(real, dual)``."""
+    def is_unit(self, tolerance: float = 1e-5) -> bool: ...
+    def normalized(self) -> DualQuat: ...
+    def inverse(self) -> DualQuat: ...
+    def shortest(self) -> DualQuat: ...
+    def log(self) -> DualQuat: ...
+    def exp(self) -> DualQuat: ...
+    def pow(self, t: float) -> DualQuat: ...
+    def __pow__(self, t: float, modulo: None = None) -> DualQuat: ...
+    def screw(self) -> Screw: ...
+    def transform_point(self, point: ArrayLike) -> Vec3: ...
+    def transform_points(self, points: F32Array) -> F32Array: ...
+    @overload
+    def __mul__(self, other: DualQuat) -> DualQuat: ...
+    @overload
+    def __mul__(self, other: SupportsFloat) -> DualQuat: ...
+    def __rmul__(self, other: float) -> DualQuat: ...
+    def __add__(self, other: DualQuat) -> DualQuat: ...
+    def __sub__(self, other: DualQuat) -> DualQuat: ...
+    def __neg__(self) -> DualQuat: ...
+    def __eq__(self, other: object) -> bool: ...
+
+def dual_quats_from_matrices(matrices: F32Array, check: bool = True, tolerance: float = 1e-5) -> F32Array:
+    """``(N, 4, 4)`` rigid matrices to ``(N, 8)`` unit dual quaternions."""
+
+def matrices_from_dual_quats(dual_quats: F32Array) -> F32Array:
+    """``(N, 8)`` dual quaternions to ``(N, 4, 4)`` rigid matrices."""
+
+@overload
+def sclerp(a: ArrayLike, b: ArrayLike, t: float) -> F32Array: ...
+@overload
+def sclerp(a: ArrayLike, b: ArrayLike, t: ArrayLike) -> F32Array:
+    """Screw linear interpolation (shortest path, constant speed); ``(8,)`` or ``(T, 8)``."""
+
+def dlb(transforms: ArrayLike, weights: ArrayLike) -> F32Array:
+    """Dual quaternion linear blending of ``(N, 8)`` transforms; returns ``(8,)``."""
+
+def dib(
+    transforms: ArrayLike, weights: ArrayLike, precision: float = 1e-6, max_iterations: int = 32
+) -> tuple[F32Array, int, bool]:
+    """Dual quaternion iterative blending; returns ``(blend, iterations, converged)``."""
+
+@overload
+def slerp(q0: ArrayLike, q1: ArrayLike, t: float) -> F32Array: ...
+@overload
+def slerp(q0: ArrayLike, q1: ArrayLike, t: ArrayLike) -> F32Array:
+    """Shortest-arc spherical linear interpolation of ``(w, x, y, z)`` rotations."""
+
+@overload
+def squad(keys: ArrayLike, u: float) -> F32Array: ...
+@overload
+def squad(keys: ArrayLike, u: ArrayLike) -> F32Array:
+    """Shoemake's Squad through ``(K, 4)`` keys at ``u`` in ``[0, K-1]``."""
+
+def squad_control_points(keys: ArrayLike) -> F32Array:
+    """Squad's inner control points, ``(K, 4)``."""
+
+def forward_kinematics(parents: ArrayLike, locals: ArrayLike) -> F32Array:
+    """Global ``(B, 8)`` transforms from local ones; ``parents[i] < 0`` marks a root."""
+
+@final
+class Influences:
+    """Per-vertex bone influences (CSR), validated once and reused every frame."""
+
+    def __init__(self, offsets: IntArray, bones: IntArray, weights: F32Array, bone_count: int) -> None: ...
+    @staticmethod
+    def from_dense(bones: IntArray, weights: F32Array, bone_count: int) -> Influences:
+        """From ``(V, K)`` arrays (as glTF stores joints and weights); zero weights dropped."""
+    @property
+    def vertex_count(self) -> int: ...
+    @property
+    def bone_count(self) -> int: ...
+    @property
+    def max_per_vertex(self) -> int: ...
+    @property
+    def offsets(self) -> npt.NDArray[np.uint32]: ...
+    @property
+    def bones(self) -> npt.NDArray[np.uint32]: ...
+    @property
+    def weights(self) -> F32Array: ...
+    def __len__(self) -> int: ...
+
+def skin(
+    positions: F32Array,
+    influences: Influences,
+    deform: F32Array,
+    rest: F32Array | None = None,
+    *,
+    method: Literal["linear", "dual_quaternion", "blend", "LINEAR", "DUAL_QUATERNION", "BLEND", "lbs", "dqs"] = "dual_quaternion",
+    blend: F32Array | None = None,
+    blend_factor: float = 1.0,
+    premat: ArrayLike | None = None,
+    postmat: ArrayLike | None = None,
+    mask: F32Array | None = None,
+    out: F32Array | None = None,
+) -> F32Array:
+    """Skins ``(V, 3)`` positions exactly as Blender's Armature modifier; returns ``out``."""
+
+def mesh_volume(positions: F32Array, triangles: IntArray) -> float:
+    """Enclosed volume of a closed, outward-oriented triangle mesh."""
+
+def polygon_area(points: F32Array) -> float:
+    """Area of a planar polygon given in order."""
+
+@final
+class TwistCylinder:
+    """A two-bone cylinder along +Y for the candy-wrapper test."""
+
+    def __init__(
+        self, rings: int = 33, segments: int = 48, length: float = 4.0, radius: float = 0.5, blend_zone: float = 0.5
+    ) -> None: ...
+    @property
+    def positions(self) -> F32Array: ...
+    @property
+    def triangles(self) -> npt.NDArray[np.uint32]: ...
+    @property
+    def influences(self) -> Influences: ...
+    @property
+    def rest(self) -> F32Array: ...
+    @property
+    def rings(self) -> int: ...
+    @property
+    def segments(self) -> int: ...
+    def twist(self, angle: float) -> F32Array:
+        """Deform matrices ``(2, 4, 4)`` with the upper bone twisted by ``angle`` radians."""
+    def ring(self, r: int) -> npt.NDArray[np.int64]: ...
+
+def _panic_for_tests() -> None: ...

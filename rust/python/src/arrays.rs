@@ -1,0 +1,184 @@
+//! Argument checking and conversion between numpy arrays and core types. Every error names the
+//! argument and says what is wrong and how to fix it.
+
+use dqskin_core::glam::{Mat4, Quat};
+use dqskin_core::DualQuat;
+use numpy::{
+    dtype, Element, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn,
+    PyReadwriteArrayDyn, PyUntypedArray, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Expected shape: `None` for any length, `Some(n)` for exactly `n`.
+pub type Shape<'a> = &'a [Option<usize>];
+
+fn describe_shape(shape: Shape<'_>, names: &[&str]) -> String {
+    let parts: Vec<String> = shape
+        .iter()
+        .zip(names.iter().chain(std::iter::repeat(&"N")))
+        .map(|(d, n)| d.map_or_else(|| n.to_string(), |v| v.to_string()))
+        .collect();
+    if parts.len() == 1 {
+        format!("({},)", parts[0])
+    } else {
+        format!("({})", parts.join(", "))
+    }
+}
+
+fn check_shape(name: &str, got: &[usize], shape: Shape<'_>, names: &[&str]) -> PyResult<()> {
+    let ok = got.len() == shape.len() && got.iter().zip(shape).all(|(g, s)| s.is_none_or(|s| s == *g));
+    if ok {
+        return Ok(());
+    }
+    Err(PyValueError::new_err(format!(
+        "{name} must have shape {}, got {:?}",
+        describe_shape(shape, names),
+        got
+    )))
+}
+
+fn as_numpy<'a, 'py>(obj: &'a Bound<'py, PyAny>, name: &str, want: &str) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
+    obj.cast::<PyUntypedArray>().map_err(|_| {
+        let ty = obj.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "?".into());
+        PyTypeError::new_err(format!("{name} must be a numpy array of {want}, got {ty}"))
+    })
+}
+
+/// A C-contiguous numpy array of `T` with the given shape, borrowed read-only (no copy).
+pub fn readonly<'py, T: Element>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+    shape: Shape<'_>,
+    names: &[&str],
+) -> PyResult<PyReadonlyArrayDyn<'py, T>> {
+    let want = std::any::type_name::<T>().replace("f32", "float32").replace("u32", "uint32");
+    let arr = as_numpy(obj, name, &want)?;
+    let py = obj.py();
+    if !arr.dtype().is_equiv_to(&dtype::<T>(py)) {
+        return Err(PyTypeError::new_err(format!(
+            "{name} must have dtype {want}, got {} (convert with np.asarray({name}, dtype=np.{want}))",
+            arr.dtype()
+        )));
+    }
+    check_shape(name, arr.shape(), shape, names)?;
+    if !arr.is_c_contiguous() {
+        return Err(PyValueError::new_err(format!(
+            "{name} must be C-contiguous (use np.ascontiguousarray({name}))"
+        )));
+    }
+    let typed = obj.cast::<PyArrayDyn<T>>()?;
+    typed.try_readonly().map_err(|_| {
+        PyValueError::new_err(format!("{name} overlaps an array that is written by this call (out)"))
+    })
+}
+
+/// Like [`readonly`] but writable; `out` must not overlap any input.
+pub fn readwrite<'py, T: Element>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+    shape: Shape<'_>,
+    names: &[&str],
+) -> PyResult<PyReadwriteArrayDyn<'py, T>> {
+    let want = std::any::type_name::<T>().replace("f32", "float32");
+    let arr = as_numpy(obj, name, &want)?;
+    if !arr.dtype().is_equiv_to(&dtype::<T>(obj.py())) {
+        return Err(PyTypeError::new_err(format!("{name} must have dtype {want}, got {}", arr.dtype())));
+    }
+    check_shape(name, arr.shape(), shape, names)?;
+    if !arr.is_c_contiguous() {
+        return Err(PyValueError::new_err(format!("{name} must be C-contiguous")));
+    }
+    let typed = obj.cast::<PyArrayDyn<T>>()?;
+    typed.try_readwrite().map_err(|e| match e {
+        numpy::BorrowError::NotWriteable => PyValueError::new_err(format!("{name} is read-only")),
+        _ => PyValueError::new_err(format!(
+            "{name} must not be (or overlap) one of the input arrays; pass a separate buffer"
+        )),
+    })
+}
+
+/// Integer index arrays in any integer dtype, converted to `u32` with range checks.
+pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<u32>> {
+    let arr = as_numpy(obj, name, "integers")?;
+    if arr.ndim() != 1 {
+        return Err(PyValueError::new_err(format!("{name} must be one-dimensional, got shape {:?}", arr.shape())));
+    }
+    let kind = arr.dtype().kind();
+    if kind != b'i' && kind != b'u' {
+        return Err(PyTypeError::new_err(format!("{name} must have an integer dtype, got {}", arr.dtype())));
+    }
+    let np = obj.py().import("numpy")?;
+    let kwargs = PyDict::new(obj.py());
+    kwargs.set_item("dtype", np.getattr("int64")?)?;
+    let as_i64 = np.call_method("ascontiguousarray", (obj,), Some(&kwargs))?;
+    let a = as_i64.cast::<PyArrayDyn<i64>>()?.try_readonly()?;
+    let slice = a.as_slice()?;
+    slice
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| {
+            u32::try_from(v).map_err(|_| {
+                PyValueError::new_err(format!("{name}[{i}] = {v} is out of range (must be 0 to 2^32-1)"))
+            })
+        })
+        .collect()
+}
+
+/// A small input (a transform, a few weights): anything numpy can turn into float32, copied.
+/// Must be finite.
+pub fn small(obj: &Bound<'_, PyAny>, name: &str, shape: Shape<'_>, names: &[&str]) -> PyResult<(Vec<f32>, Vec<usize>)> {
+    let np = obj.py().import("numpy")?;
+    let kwargs = PyDict::new(obj.py());
+    kwargs.set_item("dtype", np.getattr("float32")?)?;
+    let arr = np.call_method("ascontiguousarray", (obj,), Some(&kwargs)).map_err(|e| {
+        PyTypeError::new_err(format!("{name} must be an array of numbers: {e}"))
+    })?;
+    let arr = arr.cast::<PyArrayDyn<f32>>()?;
+    let ro = arr.try_readonly()?;
+    let dims = ro.shape().to_vec();
+    check_shape(name, &dims, shape, names)?;
+    let data = ro.as_slice()?.to_vec();
+    if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+        return Err(PyValueError::new_err(format!("{name} contains a NaN or infinite value (flat index {i})")));
+    }
+    Ok((data, dims))
+}
+
+/// Whether a float32 array has a NaN or infinity; names the first flat index.
+pub fn check_finite(name: &str, data: &[f32]) -> PyResult<()> {
+    match data.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(PyValueError::new_err(format!(
+            "{name} contains a NaN or infinite value (flat index {i})"
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// Row-major 4×4 (numpy / mathutils order, translation in the last column) to glam.
+#[inline]
+pub fn mat4_from_row_major(m: &[f32]) -> Mat4 {
+    Mat4::from_cols_array(m.try_into().expect("16 floats")).transpose()
+}
+
+#[inline]
+pub fn mat4_to_row_major(m: &Mat4) -> [f32; 16] {
+    m.transpose().to_cols_array()
+}
+
+/// `[w, x, y, z]` (scalar first, as Blender and mathutils write quaternions).
+#[inline]
+pub fn quat_from_wxyz(a: &[f32]) -> Quat {
+    Quat::from_xyzw(a[1], a[2], a[3], a[0])
+}
+
+#[inline]
+pub fn quat_to_wxyz(q: Quat) -> [f32; 4] {
+    [q.w, q.x, q.y, q.z]
+}
+
+#[inline]
+pub fn dq_from_slice(a: &[f32]) -> DualQuat {
+    DualQuat::from_array_wxyz(a.try_into().expect("8 floats"))
+}

@@ -1,0 +1,304 @@
+//! Skinning: the `Influences` class (validated once, reused every frame) and `skin()`.
+
+use dqskin_core::glam::Mat4;
+use dqskin_core::{Influences, Method, Pose, SkinError, SkinOptions};
+use numpy::{PyArray1, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+
+use crate::arrays::{self, mat4_from_row_major};
+use crate::guard;
+
+pub(crate) fn skin_error(e: SkinError) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// Per-vertex bone influences in CSR form, validated once and reused for every frame.
+///
+/// Vertex ``v`` has the pairs ``(bones[i], weights[i])`` for ``i`` in
+/// ``offsets[v]:offsets[v+1]``, in the given order (dual quaternion skinning chooses signs in
+/// this order, as Blender does with a vertex's stored groups). ``offsets`` has ``V+1`` entries
+/// starting at 0; bones are below ``bone_count``; weights are finite and ≥ 0 and need not sum
+/// to one. Index arrays may have any integer dtype; ``weights`` must be float32.
+#[pyclass(name = "Influences", module = "dqskin", frozen)]
+pub struct PyInfluences(pub Influences);
+
+#[pymethods]
+impl PyInfluences {
+    #[new]
+    fn new(offsets: &Bound<'_, PyAny>, bones: &Bound<'_, PyAny>, weights: &Bound<'_, PyAny>, bone_count: i64) -> PyResult<Self> {
+        guard(|| {
+            let bone_count = usize::try_from(bone_count).map_err(|_| PyValueError::new_err("bone_count must be ≥ 0"))?;
+            let offsets = arrays::indices(offsets, "offsets")?;
+            let bones = arrays::indices(bones, "bones")?;
+            let w = arrays::readonly::<f32>(weights, "weights", &[None], &["N"])?;
+            let w = w.as_slice()?;
+            Influences::from_csr(&offsets, &bones, w, bone_count).map(Self).map_err(skin_error)
+        })
+    }
+
+    /// From dense ``(V, K)`` arrays, as glTF stores joints and weights: every vertex lists ``K``
+    /// bones; pairs with zero weight are dropped (they never change the result).
+    #[staticmethod]
+    fn from_dense(bones: &Bound<'_, PyAny>, weights: &Bound<'_, PyAny>, bone_count: i64) -> PyResult<Self> {
+        guard(|| {
+            let bone_count = usize::try_from(bone_count).map_err(|_| PyValueError::new_err("bone_count must be ≥ 0"))?;
+            let w = arrays::readonly::<f32>(weights, "weights", &[None, None], &["V", "K"])?;
+            let (v, k) = (w.shape()[0], w.shape()[1]);
+            let np = bones.py().import("numpy")?;
+            let flat = np.call_method1("ravel", (bones,))?;
+            let b_shape: Vec<usize> = bones.getattr("shape")?.extract().map_err(|_| {
+                PyTypeError::new_err("bones must be a numpy array of integers")
+            })?;
+            if b_shape != [v, k] {
+                return Err(PyValueError::new_err(format!(
+                    "bones must have the same shape as weights ({v}, {k}), got {b_shape:?}"
+                )));
+            }
+            let b = arrays::indices(&flat, "bones")?;
+            let wv = w.as_slice()?;
+            let mut offsets = Vec::with_capacity(v + 1);
+            let (mut ob, mut ow) = (Vec::new(), Vec::new());
+            offsets.push(0u32);
+            for row in 0..v {
+                for c in 0..k {
+                    let i = row * k + c;
+                    if wv[i] != 0.0 {
+                        ob.push(b[i]);
+                        ow.push(wv[i]);
+                    }
+                }
+                offsets.push(u32::try_from(ob.len()).map_err(|_| PyValueError::new_err("too many influences"))?);
+            }
+            Influences::from_csr(&offsets, &ob, &ow, bone_count).map(Self).map_err(skin_error)
+        })
+    }
+
+    /// Number of vertices.
+    #[getter]
+    fn vertex_count(&self) -> usize {
+        self.0.vertex_count()
+    }
+
+    /// Number of bones the indices refer to.
+    #[getter]
+    fn bone_count(&self) -> usize {
+        self.0.bone_count()
+    }
+
+    /// The largest number of influences of any vertex.
+    #[getter]
+    fn max_per_vertex(&self) -> usize {
+        self.0.max_per_vertex()
+    }
+
+    /// Total number of ``(bone, weight)`` pairs.
+    fn __len__(&self) -> usize {
+        self.0.len()
+    }
+
+    /// A copy of the offsets (``uint32``, ``V+1``).
+    #[getter]
+    fn offsets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u32>> {
+        PyArray1::from_slice(py, self.0.offsets())
+    }
+
+    /// A copy of the bone indices (``uint32``).
+    #[getter]
+    fn bones<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u32>> {
+        let v: Vec<u32> = self.0.entries().iter().map(|e| e.bone).collect();
+        PyArray1::from_vec(py, v)
+    }
+
+    /// A copy of the weights (``float32``).
+    #[getter]
+    fn weights<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
+        let v: Vec<f32> = self.0.entries().iter().map(|e| e.weight).collect();
+        PyArray1::from_vec(py, v)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Influences(vertex_count={}, bone_count={}, pairs={}, max_per_vertex={})",
+            self.0.vertex_count(),
+            self.0.bone_count(),
+            self.0.len(),
+            self.0.max_per_vertex()
+        )
+    }
+}
+
+fn matrices(obj: &Bound<'_, PyAny>, name: &str, count: Option<usize>) -> PyResult<Vec<Mat4>> {
+    let a = arrays::readonly::<f32>(obj, name, &[count, Some(4), Some(4)], &["B"])?;
+    let data = a.as_slice()?;
+    arrays::check_finite(name, data)?;
+    Ok(data.chunks_exact(16).map(mat4_from_row_major).collect())
+}
+
+fn space(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Mat4>> {
+    match obj {
+        None => Ok(None),
+        Some(o) if o.is_none() => Ok(None),
+        Some(o) => {
+            let (m, _) = arrays::small(o, name, &[Some(4), Some(4)], &[])?;
+            Ok(Some(mat4_from_row_major(&m)))
+        }
+    }
+}
+
+fn parse_method(method: &str) -> PyResult<u8> {
+    match method.to_ascii_lowercase().as_str() {
+        "linear" | "lbs" => Ok(0),
+        "dual_quaternion" | "dqs" => Ok(1),
+        "blend" => Ok(2),
+        _ => Err(PyValueError::new_err(format!(
+            "method must be 'linear', 'dual_quaternion' or 'blend', got {method:?}"
+        ))),
+    }
+}
+
+/// Skins ``positions`` (``(V, 3)`` float32) and returns the result (``out`` if given).
+///
+/// - ``influences``: an :class:`Influences` for the same ``V`` vertices.
+/// - ``deform``: ``(B, 4, 4)`` float32, each bone's posed matrix times the inverse of its rest
+///   matrix in armature space (Blender's ``PoseBone.matrix_channel``), row-major.
+/// - ``rest``: ``(B, 4, 4)`` float32 rest matrices (``Bone.matrix_local``), required for
+///   ``'dual_quaternion'`` and ``'blend'`` (Blender's scale path depends on them).
+/// - ``method``: ``'linear'`` (Preserve Volume off), ``'dual_quaternion'`` (on) or ``'blend'``:
+///   ``(1−α)·linear + α·dual_quaternion`` with ``α = blend_factor · blend[v]`` (or
+///   ``blend_factor`` alone without ``blend``); all in ``[0, 1]``.
+/// - ``premat``/``postmat``: 4×4 mesh→armature and armature→mesh transforms (identity if None).
+/// - ``mask``: ``(V,)`` float32 per-vertex strength in ``[0, 1]``; 0 leaves a vertex unchanged.
+/// - ``out``: optional ``(V, 3)`` float32 C-contiguous buffer that does not overlap the inputs.
+///
+/// The GIL is released while the kernel runs on dqskin's thread pool.
+#[pyfunction]
+#[pyo3(signature = (positions, influences, deform, rest = None, *, method = "dual_quaternion",
+    blend = None, blend_factor = 1.0, premat = None, postmat = None, mask = None, out = None))]
+#[allow(clippy::too_many_arguments)]
+fn skin<'py>(
+    positions: &Bound<'py, PyAny>,
+    influences: &Bound<'py, PyAny>,
+    deform: &Bound<'py, PyAny>,
+    rest: Option<&Bound<'py, PyAny>>,
+    method: &str,
+    blend: Option<&Bound<'py, PyAny>>,
+    blend_factor: f64,
+    premat: Option<&Bound<'py, PyAny>>,
+    postmat: Option<&Bound<'py, PyAny>>,
+    mask: Option<&Bound<'py, PyAny>>,
+    out: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    guard(|| {
+        let py = positions.py();
+        let kind = parse_method(method)?;
+        let infl = influences.cast::<PyInfluences>().map_err(|_| {
+            PyTypeError::new_err("influences must be a dqskin.Influences (build one from CSR arrays once and reuse it)")
+        })?;
+        let infl = &infl.get().0;
+        let v = infl.vertex_count();
+        let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
+        let deform = matrices(deform, "deform", Some(infl.bone_count()))?;
+        let rest = match rest {
+            Some(r) if !r.is_none() => Some(matrices(r, "rest", Some(deform.len()))?),
+            _ => None,
+        };
+        if kind != 0 && rest.is_none() {
+            return Err(PyValueError::new_err(format!(
+                "rest is required for method={method:?}: the (B, 4, 4) rest matrices (Bone.matrix_local)"
+            )));
+        }
+        let pose = Pose::new(&deform, rest.as_deref()).map_err(skin_error)?;
+        let premat = space(premat, "premat")?;
+        let postmat = space(postmat, "postmat")?;
+        let mask = match mask {
+            Some(m) if !m.is_none() => Some(arrays::readonly::<f32>(m, "mask", &[Some(v)], &["V"])?),
+            _ => None,
+        };
+        let blend = match blend {
+            Some(b) if !b.is_none() => Some(arrays::readonly::<f32>(b, "blend", &[Some(v)], &["V"])?),
+            _ => None,
+        };
+        if kind != 2 && blend.is_some() {
+            return Err(PyValueError::new_err("blend is only used with method='blend'"));
+        }
+        let out_arr = match out {
+            Some(o) if !o.is_none() => o.clone(),
+            _ => numpy::PyArray2::<f32>::zeros(py, [v, 3], false).into_any(),
+        };
+        let mut out_rw = arrays::readwrite::<f32>(&out_arr, "out", &[Some(v), Some(3)], &["V"])?;
+        let pos_slice = as_points(pos.as_slice()?);
+        let mask_slice = match &mask {
+            Some(m) => Some(m.as_slice()?),
+            None => None,
+        };
+        let blend_slice = match &blend {
+            Some(b) => Some(b.as_slice()?),
+            None => None,
+        };
+        let out_slice = as_points_mut(out_rw.as_slice_mut()?);
+        let method = match kind {
+            0 => Method::Linear,
+            1 => Method::DualQuaternion,
+            _ => Method::Blend { amount: blend_slice, factor: blend_factor as f32 },
+        };
+        let options = SkinOptions { premat, postmat, mask: mask_slice };
+        py.detach(|| dqskin_core::skin(method, pos_slice, infl, &pose, &options, out_slice))
+            .map_err(skin_error)?;
+        drop(out_rw);
+        Ok(out_arr)
+    })
+}
+
+fn as_points(flat: &[f32]) -> &[[f32; 3]] {
+    let (chunks, rest) = flat.as_chunks::<3>();
+    debug_assert!(rest.is_empty());
+    chunks
+}
+
+fn as_points_mut(flat: &mut [f32]) -> &mut [[f32; 3]] {
+    let (chunks, rest) = flat.as_chunks_mut::<3>();
+    debug_assert!(rest.is_empty());
+    chunks
+}
+
+/// Enclosed volume of a closed, consistently oriented triangle mesh: ``positions`` ``(V, 3)``
+/// float32, ``triangles`` ``(T, 3)`` integers.
+#[pyfunction]
+fn mesh_volume(positions: &Bound<'_, PyAny>, triangles: &Bound<'_, PyAny>) -> PyResult<f64> {
+    guard(|| {
+        let pos = arrays::readonly::<f32>(positions, "positions", &[None, Some(3)], &["V"])?;
+        let np = triangles.py().import("numpy")?;
+        let shape: Vec<usize> = triangles.getattr("shape")?.extract()?;
+        if shape.len() != 2 || shape[1] != 3 {
+            return Err(PyValueError::new_err(format!("triangles must have shape (T, 3), got {shape:?}")));
+        }
+        let flat = arrays::indices(&np.call_method1("ravel", (triangles,))?, "triangles")?;
+        let n = pos.shape()[0];
+        if let Some(i) = flat.iter().position(|&t| t as usize >= n) {
+            return Err(PyValueError::new_err(format!(
+                "triangles contains vertex index {} (flat index {i}) but there are {n} positions",
+                flat[i]
+            )));
+        }
+        let tris: Vec<[u32; 3]> = flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        Ok(dqskin_core::rigs::mesh_volume(as_points(pos.as_slice()?), &tris))
+    })
+}
+
+/// Area of a planar polygon, ``points`` ``(N, 3)`` float32 in order.
+#[pyfunction]
+fn polygon_area(points: &Bound<'_, PyAny>) -> PyResult<f64> {
+    guard(|| {
+        let p = arrays::readonly::<f32>(points, "points", &[None, Some(3)], &["N"])?;
+        Ok(dqskin_core::rigs::polygon_area(as_points(p.as_slice()?)))
+    })
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyInfluences>()?;
+    m.add_function(wrap_pyfunction!(skin, m)?)?;
+    m.add_function(wrap_pyfunction!(mesh_volume, m)?)?;
+    m.add_function(wrap_pyfunction!(polygon_area, m)?)?;
+    Ok(())
+}

@@ -3,7 +3,7 @@
 //! (positions, CSR offsets, influence pairs) and writes exactly the bytes it writes (positions
 //! out), doing nothing else.
 //!
-//! Usage: `dqskin-bench [--quick] [--json FILE]`.
+//! Usage: `dqskin-bench [--quick] [--json FILE] [--only LBS-rigid|DQS-rigid|DQS-scaled|Blend-rigid]`.
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -84,7 +84,8 @@ fn scene(vertices: usize, per_vertex: usize) -> Scene {
     Scene { positions, influences, rigid, scaled }
 }
 
-/// Median of `runs` timings of `f`, in seconds, after one warm-up call.
+/// Best of `runs` timings of `f`, in seconds, after one warm-up call. The minimum is the least
+/// disturbed by other load on a shared machine, for the kernels and the reference alike.
 fn time(runs: usize, mut f: impl FnMut()) -> f64 {
     f();
     let mut t: Vec<f64> = (0..runs)
@@ -95,7 +96,7 @@ fn time(runs: usize, mut f: impl FnMut()) -> f64 {
         })
         .collect();
     t.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    t[t.len() / 2]
+    t[0]
 }
 
 /// Reads the positions and influences and writes the output, as a kernel does, with no math.
@@ -137,6 +138,7 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let quick = args.iter().any(|a| a == "--quick");
     let json = args.iter().position(|a| a == "--json").and_then(|i| args.get(i + 1).cloned());
+    let only = args.iter().position(|a| a == "--only").and_then(|i| args.get(i + 1).cloned());
     let all = std::thread::available_parallelism().map_or(1, |n| n.get());
     let sizes: &[usize] = if quick { &[100_000] } else { &[100_000, 1_000_000] };
     let mut rows = Vec::new();
@@ -160,6 +162,9 @@ fn main() {
                     ("Blend", Method::Blend { amount: None, factor: 0.5 }, "rigid", &s.rigid),
                 ];
                 for (name, method, pose_name, pose) in cases {
+                    if only.as_ref().is_some_and(|o| *o != format!("{name}-{pose_name}")) {
+                        continue;
+                    }
                     let opts = SkinOptions::default();
                     let secs = time(runs, || {
                         skin(method, &s.positions, &s.influences, pose, &opts, &mut out).expect("skin")

@@ -10,7 +10,7 @@ use glam::{Affine3A, Mat4, Vec4};
 use rayon::prelude::*;
 
 use super::influences::{Slot, LANES};
-use super::pose::{AffineRows, DqBone};
+use super::pose::{AffineRows, DqBone, PivotBone};
 use super::{Influences, Pose, MIN_TOTAL_WEIGHT};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -111,10 +111,10 @@ fn madd<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
 
 /// Positions of one batch, one coordinate array per axis.
 #[derive(Clone, Copy)]
-struct Points {
-    x: Lanes,
-    y: Lanes,
-    z: Lanes,
+pub(super) struct Points {
+    pub x: Lanes,
+    pub y: Lanes,
+    pub z: Lanes,
 }
 
 impl Points {
@@ -147,10 +147,12 @@ fn batches<const FMA: bool, const KIND: u8, const SCALED: bool>(
         let n = out.len();
         let positions = &job.positions[first..first + n];
         let mut co = Points { x: ZERO, y: ZERO, z: ZERO };
-        let mut strength: Lanes = [0.0; LANES];
         for l in 0..n {
             [co.x[l], co.y[l], co.z[l]] = positions[l];
-            strength[l] = job.mask.map_or(1.0, |m| m[first + l]);
+        }
+        let mut strength: Lanes = [1.0; LANES];
+        if let Some(mask) = job.mask {
+            strength[..n].copy_from_slice(&mask[first..first + n]);
         }
         if let Some(m) = &premat {
             co = co.transform::<FMA>(m);
@@ -220,22 +222,20 @@ fn linear<const FMA: bool>(co: &Points, slots: &[Slot], linear: &[AffineRows], s
             }
             contrib += w;
         }
-        if contrib > MIN_TOTAL_WEIGHT {
-            let h = Vec4::new(co.x[l], co.y[l], co.z[l], 1.0);
-            let f = strength[l] / contrib;
-            r.x[l] = madd::<FMA>(acc[0].dot(h) - h.x * contrib, f, h.x);
-            r.y[l] = madd::<FMA>(acc[1].dot(h) - h.y * contrib, f, h.y);
-            r.z[l] = madd::<FMA>(acc[2].dot(h) - h.z * contrib, f, h.z);
-        }
+        let h = Vec4::new(co.x[l], co.y[l], co.z[l], 1.0);
+        let f = if contrib > MIN_TOTAL_WEIGHT { strength[l] / contrib } else { 0.0 };
+        r.x[l] = madd::<FMA>(acc[0].dot(h) - h.x * contrib, f, h.x);
+        r.y[l] = madd::<FMA>(acc[1].dot(h) - h.y * contrib, f, h.y);
+        r.z[l] = madd::<FMA>(acc[2].dot(h) - h.z * contrib, f, h.z);
     }
     r
 }
 
 /// An unnormalized dual quaternion per lane: real (x, y, z, w), dual (x, y, z, w), total weight.
-struct DqSum {
-    real: [Lanes; 4],
-    dual: [Lanes; 4],
-    contrib: Lanes,
+pub(super) struct DqSum {
+    pub real: [Lanes; 4],
+    pub dual: [Lanes; 4],
+    pub contrib: Lanes,
 }
 
 /// Sums `±wᵢ·q̂ᵢ` with each sign chosen against the running sum (Blender's
@@ -246,30 +246,43 @@ fn accumulate_dual_quaternion<const FMA: bool, const SCALED: bool>(
     co: &Points,
     slots: &[Slot],
     dq: &[DqBone],
-    pivot: &[AffineRows],
+    pivot: &[PivotBone],
 ) -> DqSum {
+    #[cfg(target_arch = "x86_64")]
+    if FMA {
+        // SAFETY: `FMA` is only true in the copy that runs after AVX2 and FMA were detected;
+        // bone indices were validated against the pose's bone count.
+        return unsafe {
+            if SCALED {
+                super::avx2::accumulate_scaled(co, slots, pivot)
+            } else {
+                super::avx2::accumulate_rigid(slots, dq)
+            }
+        };
+    }
     let mut s = DqSum { real: [ZERO; 4], dual: [ZERO; 4], contrib: ZERO };
     for slot in slots {
         for l in 0..LANES {
-            let b = bone(dq, slot.bones[l]);
-            let q = [b.real.x, b.real.y, b.real.z, b.real.w];
-            let d = if SCALED {
+            let (q, d) = if SCALED {
                 let p = bone(pivot, slot.bones[l]);
+                let q = [p.real.x, p.real.y, p.real.z, p.real.w];
                 let (x, y, z) = (co.x[l], co.y[l], co.z[l]);
                 let t = |r: usize| {
-                    let row = p.rows[r];
+                    let row = p.translation.rows[r];
                     madd::<FMA>(row.x, x, madd::<FMA>(row.y, y, madd::<FMA>(row.z, z, row.w)))
                 };
                 let (tx, ty, tz) = (t(0), t(1), t(2));
                 // ½·(0, t)·q = ½·(w·t + t × v, −t·v)
-                [
+                let d = [
                     0.5 * (tx * q[3] + ty * q[2] - tz * q[1]),
                     0.5 * (ty * q[3] + tz * q[0] - tx * q[2]),
                     0.5 * (tz * q[3] + tx * q[1] - ty * q[0]),
                     -0.5 * (tx * q[0] + ty * q[1] + tz * q[2]),
-                ]
+                ];
+                (q, d)
             } else {
-                [b.dual.x, b.dual.y, b.dual.z, b.dual.w]
+                let b = bone(dq, slot.bones[l]);
+                ([b.real.x, b.real.y, b.real.z, b.real.w], [b.dual.x, b.dual.y, b.dual.z, b.dual.w])
             };
             let dot = q[0] * s.real[0][l] + q[1] * s.real[1][l] + q[2] * s.real[2][l] + q[3] * s.real[3][l];
             let w = slot.weights[l];
@@ -285,7 +298,8 @@ fn accumulate_dual_quaternion<const FMA: bool, const SCALED: bool>(
 }
 
 /// Applies the summed dual quaternions (Blender's `mul_v3m3_dq`, dividing by `|q|²` instead of
-/// normalizing), then the strength: `co + a·(r − co)`; `co` where `contrib ≤ 0.0001`.
+/// normalizing), then the strength: `co + a·(r − co) = r·a + co·(1 − a)`; `co` where
+/// `contrib ≤ 0.0001`. Written with selects, not branches, so the lane loop vectorizes.
 #[inline(always)]
 fn finish_dual_quaternion<const FMA: bool>(co: &Points, s: &DqSum, strength: &Lanes) -> Points {
     let mut r = *co;
@@ -301,13 +315,13 @@ fn finish_dual_quaternion<const FMA: bool>(co: &Points, s: &DqSum, strength: &La
         let nx = m00 * px + 2.0 * (xy - wz) * py + 2.0 * (xz + wy) * pz + 2.0 * (-t0 * x + w * t1 - t2 * z + y * t3);
         let ny = 2.0 * (xy + wz) * px + m11 * py + 2.0 * (yz - wx) * pz + 2.0 * (-t0 * y + t1 * z - x * t3 + w * t2);
         let nz = 2.0 * (xz - wy) * px + 2.0 * (yz + wx) * py + m22 * pz + 2.0 * (-t0 * z + x * t2 + w * t3 - t1 * y);
-        if s.contrib[l] > MIN_TOTAL_WEIGHT && len2 > 0.0 {
-            let f = strength[l] / len2;
-            // co + a·(n/|q|² − co)
-            r.x[l] = madd::<FMA>(nx, f, px - strength[l] * px);
-            r.y[l] = madd::<FMA>(ny, f, py - strength[l] * py);
-            r.z[l] = madd::<FMA>(nz, f, pz - strength[l] * pz);
-        }
+        let valid = s.contrib[l] > MIN_TOTAL_WEIGHT && len2 > 0.0;
+        let a = strength[l];
+        let f = if valid { a / len2 } else { 0.0 };
+        let keep = if valid { 1.0 - a } else { 1.0 };
+        r.x[l] = madd::<FMA>(nx, f, px * keep);
+        r.y[l] = madd::<FMA>(ny, f, py * keep);
+        r.z[l] = madd::<FMA>(nz, f, pz * keep);
     }
     r
 }

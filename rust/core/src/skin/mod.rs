@@ -14,6 +14,8 @@
 //!    Blend: `(1−α)·LBS + α·DQS`;
 //! 5. `p' = postmat·co`.
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 mod influences;
 mod kernels;
 mod pose;

@@ -35,18 +35,23 @@ pub(crate) struct DqBone {
 }
 
 /// How Blender's DQS moves a vertex `co` for a bone with scale or shear: rigidly with the
-/// bone's rotation `R` and a per-vertex translation `t(co) = M·co − R·co`, so that the vertex lands
-/// exactly where the full affine matrix `M` puts it (the "scale path" with the vertex as pivot,
-/// `add_weighted_dq_dq_pivot`). Stored as rows of `(M₃ − R₃ | t_M)`; for rigid bones it is
-/// `(0 | t)`.
-pub(crate) type PivotTranslation = AffineRows;
+/// bone's rotation `real` and a per-vertex translation `t(co) = M·co − R·co`, so that the vertex
+/// lands exactly where the full affine matrix `M` puts it (the "scale path" with the vertex as
+/// pivot, `add_weighted_dq_dq_pivot`). `translation` holds the rows of `(M₃ − R₃ | t_M)`; for
+/// rigid bones it is `(0 | t)`. One 64-byte line per bone.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct PivotBone {
+    pub translation: AffineRows,
+    pub real: Vec4,
+}
 
 /// Per-frame bone data for all skinning methods.
 #[derive(Clone, Debug)]
 pub struct Pose {
     pub(crate) linear: Vec<AffineRows>,
     pub(crate) dq: Vec<DqBone>,
-    pub(crate) pivot: Vec<PivotTranslation>,
+    pub(crate) pivot: Vec<PivotBone>,
     scaled: Vec<bool>,
 }
 
@@ -97,7 +102,7 @@ impl Pose {
                     delta.z_axis.extend(0.0),
                     m.w_axis,
                 );
-                pivot.push(AffineRows::from_mat4(&p));
+                pivot.push(PivotBone { translation: AffineRows::from_mat4(&p), real: Vec4::from(q) });
                 scaled.push(is_scaled);
             }
         }
@@ -230,7 +235,7 @@ mod tests {
         assert!(pose.any_scaled());
         let q = pose.bone_rotation(0).unwrap();
         for co in [Vec3::ZERO, Vec3::new(1.0, -2.0, 0.5), Vec3::new(-3.0, 0.2, 4.0)] {
-            let t = pose.pivot[0].transform_point(co.extend(1.0));
+            let t = pose.pivot[0].translation.transform_point(co.extend(1.0));
             let moved = q * co + t;
             assert!(moved.abs_diff_eq(deform.transform_point3(co), 1e-5));
         }

@@ -1,0 +1,160 @@
+//! AVX2+FMA versions of the dual quaternion accumulation, the hot loop of DQS.
+//!
+//! For each slot, the eight lanes' bone records (8 floats each) are loaded as eight rows and
+//! transposed with shuffles into eight component vectors, which is much cheaper than gathering
+//! each component; the running-sum sign choice then runs on all eight lanes at once.
+//! The arithmetic is the same as the portable code in `kernels.rs`.
+
+use core::arch::x86_64::*;
+
+use super::influences::{Slot, LANES};
+use super::kernels::{DqSum, Points};
+use super::pose::{DqBone, PivotBone};
+
+/// Transposes eight rows of eight floats into eight columns.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+fn transpose8(r: [__m256; 8]) -> [__m256; 8] {
+    let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+    let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+    let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+    let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+    let t4 = _mm256_unpacklo_ps(r[4], r[5]);
+    let t5 = _mm256_unpackhi_ps(r[4], r[5]);
+    let t6 = _mm256_unpacklo_ps(r[6], r[7]);
+    let t7 = _mm256_unpackhi_ps(r[6], r[7]);
+    let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+    let u1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+    let u2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+    let u3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+    let u4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+    let u5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+    let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+    let u7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+    [
+        _mm256_permute2f128_ps::<0x20>(u0, u4),
+        _mm256_permute2f128_ps::<0x20>(u1, u5),
+        _mm256_permute2f128_ps::<0x20>(u2, u6),
+        _mm256_permute2f128_ps::<0x20>(u3, u7),
+        _mm256_permute2f128_ps::<0x31>(u0, u4),
+        _mm256_permute2f128_ps::<0x31>(u1, u5),
+        _mm256_permute2f128_ps::<0x31>(u2, u6),
+        _mm256_permute2f128_ps::<0x31>(u3, u7),
+    ]
+}
+
+/// Loads 8 floats at float offset `offset` of each lane's bone record and transposes them.
+///
+/// # Safety
+/// Every `bones[l]` must index `table`, and `offset + 8` floats must lie inside a record.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn load_columns<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [__m256; 8] {
+    let base = table.as_ptr() as *const f32;
+    let stride = core::mem::size_of::<T>() / 4;
+    let row = |l: usize| {
+        debug_assert!((bones[l] as usize) < table.len());
+        // SAFETY: the caller guarantees the index and the offset are in range.
+        unsafe { _mm256_loadu_ps(base.add(bones[l] as usize * stride + offset)) }
+    };
+    transpose8([row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7)])
+}
+
+/// Adds `±w·(q, d)` to the sums, the sign chosen by `q·sum < 0` per lane.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+fn add_signed(real: &mut [__m256; 4], dual: &mut [__m256; 4], q: &[__m256], d: &[__m256], w: __m256) {
+    let dot = _mm256_fmadd_ps(
+        q[3],
+        real[3],
+        _mm256_fmadd_ps(q[2], real[2], _mm256_fmadd_ps(q[1], real[1], _mm256_mul_ps(q[0], real[0]))),
+    );
+    let negative = _mm256_cmp_ps::<_CMP_LT_OQ>(dot, _mm256_setzero_ps());
+    let ws = _mm256_xor_ps(w, _mm256_and_ps(negative, _mm256_set1_ps(-0.0)));
+    for c in 0..4 {
+        real[c] = _mm256_fmadd_ps(q[c], ws, real[c]);
+        dual[c] = _mm256_fmadd_ps(d[c], ws, dual[c]);
+    }
+}
+
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+fn store(real: [__m256; 4], dual: [__m256; 4], contrib: __m256) -> DqSum {
+    let mut s = DqSum { real: [[0.0; LANES]; 4], dual: [[0.0; LANES]; 4], contrib: [0.0; LANES] };
+    for c in 0..4 {
+        // SAFETY: each destination is an array of 8 floats.
+        unsafe {
+            _mm256_storeu_ps(s.real[c].as_mut_ptr(), real[c]);
+            _mm256_storeu_ps(s.dual[c].as_mut_ptr(), dual[c]);
+        }
+    }
+    unsafe { _mm256_storeu_ps(s.contrib.as_mut_ptr(), contrib) };
+    s
+}
+
+/// DQS sums for rigid bones.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA, and every bone index in `slots` must index `dq`.
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn accumulate_rigid(slots: &[Slot], dq: &[DqBone]) -> DqSum {
+    let mut real = [_mm256_setzero_ps(); 4];
+    let mut dual = [_mm256_setzero_ps(); 4];
+    let mut contrib = _mm256_setzero_ps();
+    for slot in slots {
+        // SAFETY: indices are in range (validated); a DqBone is 8 floats.
+        let c = unsafe { load_columns(dq, &slot.bones, 0) };
+        let w = unsafe { _mm256_loadu_ps(slot.weights.as_ptr()) };
+        add_signed(&mut real, &mut dual, &c[0..4], &c[4..8], w);
+        contrib = _mm256_add_ps(contrib, w);
+    }
+    store(real, dual, contrib)
+}
+
+/// DQS sums when some bone has scale: each bone moves `co` rigidly to where its matrix puts it.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA, and every bone index in `slots` must index `pivot`.
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn accumulate_scaled(co: &Points, slots: &[Slot], pivot: &[PivotBone]) -> DqSum {
+    let mut real = [_mm256_setzero_ps(); 4];
+    let mut dual = [_mm256_setzero_ps(); 4];
+    let mut contrib = _mm256_setzero_ps();
+    let (x, y, z) = unsafe {
+        (_mm256_loadu_ps(co.x.as_ptr()), _mm256_loadu_ps(co.y.as_ptr()), _mm256_loadu_ps(co.z.as_ptr()))
+    };
+    let half = _mm256_set1_ps(0.5);
+    for slot in slots {
+        // SAFETY: indices are in range (validated); a PivotBone is 16 floats: rows 0–1, then
+        // row 2 and the rotation.
+        let a = unsafe { load_columns(pivot, &slot.bones, 0) };
+        let b = unsafe { load_columns(pivot, &slot.bones, 8) };
+        let row = |m0: __m256, m1: __m256, m2: __m256, t: __m256| {
+            _mm256_fmadd_ps(m0, x, _mm256_fmadd_ps(m1, y, _mm256_fmadd_ps(m2, z, t)))
+        };
+        let tx = row(a[0], a[1], a[2], a[3]);
+        let ty = row(a[4], a[5], a[6], a[7]);
+        let tz = row(b[0], b[1], b[2], b[3]);
+        let q = [b[4], b[5], b[6], b[7]];
+        // ½·(0, t)·q = ½·(w·t + t × v, −t·v), q = (v, w)
+        let cross_plus = |p: __m256, r: __m256, s: __m256, u: __m256, tw: __m256| {
+            _mm256_mul_ps(half, _mm256_fmsub_ps(p, r, _mm256_fmsub_ps(s, u, _mm256_mul_ps(tw, q[3]))))
+        };
+        let d = [
+            // 0.5·(tx·w + ty·vz − tz·vy)
+            cross_plus(ty, q[2], tz, q[1], tx),
+            // 0.5·(ty·w + tz·vx − tx·vz)
+            cross_plus(tz, q[0], tx, q[2], ty),
+            // 0.5·(tz·w + tx·vy − ty·vx)
+            cross_plus(tx, q[1], ty, q[0], tz),
+            _mm256_mul_ps(
+                _mm256_set1_ps(-0.5),
+                _mm256_fmadd_ps(tx, q[0], _mm256_fmadd_ps(ty, q[1], _mm256_mul_ps(tz, q[2]))),
+            ),
+        ];
+        let w = unsafe { _mm256_loadu_ps(slot.weights.as_ptr()) };
+        add_signed(&mut real, &mut dual, &q, &d, w);
+        contrib = _mm256_add_ps(contrib, w);
+    }
+    store(real, dual, contrib)
+}

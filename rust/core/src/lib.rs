@@ -11,6 +11,11 @@
 //! - [`pool`]: the thread pool the kernels run on.
 //! - [`rigs`]: procedural test rigs (the twisted cylinder) and mesh measurements.
 
+// `!(x >= 0.0)` is deliberate throughout: unlike `x < 0.0` it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// The kernels index several per-lane arrays with one lane index; iterators would obscure that.
+#![allow(clippy::needless_range_loop)]
+
 pub mod blend;
 pub mod dual_quat;
 pub mod hierarchy;

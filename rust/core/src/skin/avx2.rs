@@ -1,13 +1,17 @@
 //! AVX2+FMA versions of the dual quaternion accumulation, the hot loop of DQS.
 //!
-//! For each slot, the eight lanes' bone records (8 floats each) are loaded as eight rows and
-//! transposed with shuffles into eight component vectors, which is much cheaper than gathering
-//! each component; the running-sum sign choice then runs on all eight lanes at once.
-//! The arithmetic is the same as the portable code in `kernels.rs`.
+//! A slot's lanes are handled in two halves of eight. For each half, the eight lanes' bone
+//! records (8 floats each) are loaded as eight rows and transposed with shuffles into eight
+//! component vectors, which is much cheaper than gathering each component; the running-sum sign
+//! choice then runs on eight lanes at once. The arithmetic is the same as the portable code in
+//! `kernels.rs`.
 
 use core::arch::x86_64::*;
 
 use super::influences::{Slot, LANES};
+
+const HALF: usize = LANES / 2;
+const _: () = assert!(HALF == 8);
 use super::kernels::{DqSum, Points};
 use super::pose::{DqBone, PivotBone};
 
@@ -49,7 +53,7 @@ fn transpose8(r: [__m256; 8]) -> [__m256; 8] {
 /// Every `bones[l]` must index `table`, and `offset + 8` floats must lie inside a record.
 #[inline]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn load_columns<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [__m256; 8] {
+unsafe fn load_columns<T>(table: &[T], bones: &[u32], offset: usize) -> [__m256; 8] {
     let base = table.as_ptr() as *const f32;
     let stride = core::mem::size_of::<T>() / 4;
     let row = |l: usize| {
@@ -64,10 +68,10 @@ unsafe fn load_columns<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 fn add_signed(real: &mut [__m256; 4], dual: &mut [__m256; 4], q: &[__m256], d: &[__m256], w: __m256) {
-    let dot = _mm256_fmadd_ps(
-        q[3],
-        real[3],
-        _mm256_fmadd_ps(q[2], real[2], _mm256_fmadd_ps(q[1], real[1], _mm256_mul_ps(q[0], real[0]))),
+    // Two independent halves: the sign choice is the serial chain, so keep it short.
+    let dot = _mm256_add_ps(
+        _mm256_fmadd_ps(q[1], real[1], _mm256_mul_ps(q[0], real[0])),
+        _mm256_fmadd_ps(q[3], real[3], _mm256_mul_ps(q[2], real[2])),
     );
     let negative = _mm256_cmp_ps::<_CMP_LT_OQ>(dot, _mm256_setzero_ps());
     let ws = _mm256_xor_ps(w, _mm256_and_ps(negative, _mm256_set1_ps(-0.0)));
@@ -77,19 +81,23 @@ fn add_signed(real: &mut [__m256; 4], dual: &mut [__m256; 4], q: &[__m256], d: &
     }
 }
 
+/// Writes one half's sums into lanes `8·half ..` of `s`.
 #[inline]
 #[target_feature(enable = "avx2,fma")]
-fn store(real: [__m256; 4], dual: [__m256; 4], contrib: __m256) -> DqSum {
-    let mut s = DqSum { real: [[0.0; LANES]; 4], dual: [[0.0; LANES]; 4], contrib: [0.0; LANES] };
+fn store(s: &mut DqSum, half: usize, real: [__m256; 4], dual: [__m256; 4], contrib: __m256) {
+    let at = half * HALF;
     for c in 0..4 {
-        // SAFETY: each destination is an array of 8 floats.
+        // SAFETY: each destination has 8 floats from `at` (LANES = 2·HALF).
         unsafe {
-            _mm256_storeu_ps(s.real[c].as_mut_ptr(), real[c]);
-            _mm256_storeu_ps(s.dual[c].as_mut_ptr(), dual[c]);
+            _mm256_storeu_ps(s.real[c][at..].as_mut_ptr(), real[c]);
+            _mm256_storeu_ps(s.dual[c][at..].as_mut_ptr(), dual[c]);
         }
     }
-    unsafe { _mm256_storeu_ps(s.contrib.as_mut_ptr(), contrib) };
-    s
+    unsafe { _mm256_storeu_ps(s.contrib[at..].as_mut_ptr(), contrib) };
+}
+
+fn empty_sum() -> DqSum {
+    DqSum { real: [[0.0; LANES]; 4], dual: [[0.0; LANES]; 4], contrib: [0.0; LANES] }
 }
 
 /// DQS sums for rigid bones.
@@ -98,17 +106,22 @@ fn store(real: [__m256; 4], dual: [__m256; 4], contrib: __m256) -> DqSum {
 /// The CPU must support AVX2 and FMA, and every bone index in `slots` must index `dq`.
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn accumulate_rigid(slots: &[Slot], dq: &[DqBone]) -> DqSum {
-    let mut real = [_mm256_setzero_ps(); 4];
-    let mut dual = [_mm256_setzero_ps(); 4];
-    let mut contrib = _mm256_setzero_ps();
-    for slot in slots {
-        // SAFETY: indices are in range (validated); a DqBone is 8 floats.
-        let c = unsafe { load_columns(dq, &slot.bones, 0) };
-        let w = unsafe { _mm256_loadu_ps(slot.weights.as_ptr()) };
-        add_signed(&mut real, &mut dual, &c[0..4], &c[4..8], w);
-        contrib = _mm256_add_ps(contrib, w);
+    let mut sum = empty_sum();
+    for half in 0..2 {
+        let lanes = half * HALF..(half + 1) * HALF;
+        let mut real = [_mm256_setzero_ps(); 4];
+        let mut dual = [_mm256_setzero_ps(); 4];
+        let mut contrib = _mm256_setzero_ps();
+        for slot in slots {
+            // SAFETY: indices are in range (validated); a DqBone is 8 floats.
+            let c = unsafe { load_columns(dq, &slot.bones[lanes.clone()], 0) };
+            let w = unsafe { _mm256_loadu_ps(slot.weights[lanes.clone()].as_ptr()) };
+            add_signed(&mut real, &mut dual, &c[0..4], &c[4..8], w);
+            contrib = _mm256_add_ps(contrib, w);
+        }
+        store(&mut sum, half, real, dual, contrib);
     }
-    store(real, dual, contrib)
+    sum
 }
 
 /// DQS sums when some bone has scale: each bone moves `co` rigidly to where its matrix puts it.
@@ -117,18 +130,43 @@ pub(super) unsafe fn accumulate_rigid(slots: &[Slot], dq: &[DqBone]) -> DqSum {
 /// The CPU must support AVX2 and FMA, and every bone index in `slots` must index `pivot`.
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn accumulate_scaled(co: &Points, slots: &[Slot], pivot: &[PivotBone]) -> DqSum {
+    let mut sum = empty_sum();
+    for h in 0..2 {
+        let lanes = h * HALF..(h + 1) * HALF;
+        let (x, y, z) = unsafe {
+            (
+                _mm256_loadu_ps(co.x[lanes.clone()].as_ptr()),
+                _mm256_loadu_ps(co.y[lanes.clone()].as_ptr()),
+                _mm256_loadu_ps(co.z[lanes.clone()].as_ptr()),
+            )
+        };
+        let (real, dual, contrib) = unsafe { scaled_half(x, y, z, slots, pivot, lanes) };
+        store(&mut sum, h, real, dual, contrib);
+    }
+    sum
+}
+
+/// One half of [`accumulate_scaled`].
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn scaled_half(
+    x: __m256,
+    y: __m256,
+    z: __m256,
+    slots: &[Slot],
+    pivot: &[PivotBone],
+    lanes: core::ops::Range<usize>,
+) -> ([__m256; 4], [__m256; 4], __m256) {
     let mut real = [_mm256_setzero_ps(); 4];
     let mut dual = [_mm256_setzero_ps(); 4];
     let mut contrib = _mm256_setzero_ps();
-    let (x, y, z) = unsafe {
-        (_mm256_loadu_ps(co.x.as_ptr()), _mm256_loadu_ps(co.y.as_ptr()), _mm256_loadu_ps(co.z.as_ptr()))
-    };
     let half = _mm256_set1_ps(0.5);
     for slot in slots {
+        let bones = &slot.bones[lanes.clone()];
         // SAFETY: indices are in range (validated); a PivotBone is 16 floats: rows 0–1, then
         // row 2 and the rotation.
-        let a = unsafe { load_columns(pivot, &slot.bones, 0) };
-        let b = unsafe { load_columns(pivot, &slot.bones, 8) };
+        let a = unsafe { load_columns(pivot, bones, 0) };
+        let b = unsafe { load_columns(pivot, bones, 8) };
         let row = |m0: __m256, m1: __m256, m2: __m256, t: __m256| {
             _mm256_fmadd_ps(m0, x, _mm256_fmadd_ps(m1, y, _mm256_fmadd_ps(m2, z, t)))
         };
@@ -152,9 +190,9 @@ pub(super) unsafe fn accumulate_scaled(co: &Points, slots: &[Slot], pivot: &[Piv
                 _mm256_fmadd_ps(tx, q[0], _mm256_fmadd_ps(ty, q[1], _mm256_mul_ps(tz, q[2]))),
             ),
         ];
-        let w = unsafe { _mm256_loadu_ps(slot.weights.as_ptr()) };
+        let w = unsafe { _mm256_loadu_ps(slot.weights[lanes.clone()].as_ptr()) };
         add_signed(&mut real, &mut dual, &q, &d, w);
         contrib = _mm256_add_ps(contrib, w);
     }
-    store(real, dual, contrib)
+    (real, dual, contrib)
 }

@@ -3,9 +3,10 @@
 use super::SkinError;
 
 /// Vertices the kernels process together, one per SIMD lane.
-pub(crate) const LANES: usize = 8;
+pub(crate) const LANES: usize = 16;
+const _: () = assert!(core::mem::size_of::<Slot>() == LANES * 8);
 
-/// The `k`-th influence of each of [`LANES`] consecutive vertices: one 64-byte cache line.
+/// The `k`-th influence of each of [`LANES`] consecutive vertices: two 64-byte cache lines.
 /// Vertices with fewer than `k + 1` influences have bone 0 with weight 0 there, which adds
 /// nothing to any sum.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -171,6 +172,17 @@ impl Influences {
     /// batch starts).
     pub fn byte_size(&self) -> usize {
         self.slots.len() * core::mem::size_of::<Slot>() + self.batch_starts.len() * 4
+    }
+
+    /// The lane-ordered layout the kernels read, as 32-bit words: `(batch starts, slots)`.
+    /// For benchmarks that need to touch exactly the kernels' bytes.
+    #[doc(hidden)]
+    pub fn kernel_words(&self) -> (&[u32], &[u32]) {
+        let words = core::mem::size_of::<Slot>() / 4;
+        // SAFETY: `Slot` is `repr(C)` with only u32 and f32 fields and no padding
+        // (LANES·8 bytes, a multiple of its 64-byte alignment), so it is a sequence of words.
+        let slots = unsafe { core::slice::from_raw_parts(self.slots.as_ptr() as *const u32, self.slots.len() * words) };
+        (&self.batch_starts, slots)
     }
 
     /// The slots of batch `b` (vertices `b·LANES .. (b+1)·LANES`).

@@ -4,7 +4,8 @@
 //! Vertices are processed [`LANES`] at a time from the lane-ordered influence slots: every lane
 //! is an independent vertex, so the serial chain of DQS's running-sum sign choice runs in all
 //! lanes at once (SIMD where the compiler vectorizes the lane loops, instruction-level
-//! parallelism where it does not). On x86-64 a copy compiled for AVX2+FMA is chosen at run time.
+//! parallelism where it does not). On x86-64, copies compiled for AVX2+FMA and for AVX-512 are
+//! chosen at run time by what the CPU has (see [`Simd::detect`]).
 
 use glam::{Affine3A, Mat4, Vec4};
 use rayon::prelude::*;
@@ -37,8 +38,7 @@ pub(crate) struct Job<'a> {
 const CHUNK: usize = 4096;
 const _: () = assert!(CHUNK % LANES == 0);
 
-pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]]) {
-    let simd = Simd::detect();
+pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     let task = |(i, chunk): (usize, &mut [[f32; 3]])| simd.chunk(job, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
@@ -47,47 +47,88 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]]) {
     }
 }
 
+/// Instruction sets the kernels are compiled for; the best one the CPU has is chosen at run time.
+const ISA_BASELINE: u8 = 0;
+const ISA_AVX2: u8 = 1;
+const ISA_AVX512: u8 = 2;
+
 /// Which compiled copy of the kernels to run.
-#[derive(Clone, Copy)]
-enum Simd {
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Simd {
     Baseline,
     #[cfg(target_arch = "x86_64")]
     Avx2Fma,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
 }
 
 impl Simd {
-    fn detect() -> Self {
+    /// The copies this CPU can run, best last.
+    pub(crate) fn available() -> Vec<Simd> {
+        let mut all = vec![Simd::Baseline];
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-            return Simd::Avx2Fma;
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx2") && has!("fma") {
+                all.push(Simd::Avx2Fma);
+                if has!("avx512f") {
+                    all.push(Simd::Avx512);
+                }
+            }
         }
-        Simd::Baseline
+        all
+    }
+
+    /// The best available copy, or the one `DQSKIN_SIMD` (`baseline`, `avx2`, `avx512`) asks for
+    /// if the CPU has it (for debugging and comparisons).
+    pub(crate) fn detect() -> Self {
+        let available = Self::available();
+        let requested = std::env::var("DQSKIN_SIMD").ok().and_then(|v| match v.trim() {
+            "baseline" => Some(Simd::Baseline),
+            #[cfg(target_arch = "x86_64")]
+            "avx2" => Some(Simd::Avx2Fma),
+            #[cfg(target_arch = "x86_64")]
+            "avx512" => Some(Simd::Avx512),
+            _ => None,
+        });
+        match requested {
+            Some(r) if available.contains(&r) => r,
+            _ => *available.last().expect("baseline is always available"),
+        }
     }
 
     fn chunk(self, job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
         match self {
-            Simd::Baseline => chunk::<false>(job, start, out),
+            Simd::Baseline => chunk::<ISA_BASELINE>(job, start, out),
+            // SAFETY: `detect` checked that the CPU has these instruction sets.
             #[cfg(target_arch = "x86_64")]
-            // SAFETY: `detect` checked that the CPU has AVX2 and FMA.
-            Simd::Avx2Fma => unsafe { chunk_avx2_fma(job, start, out) },
+            Simd::Avx2Fma => unsafe { chunk_avx2(job, start, out) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { chunk_avx512(job, start, out) },
         }
     }
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn chunk_avx2_fma(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
-    chunk::<true>(job, start, out)
+unsafe fn chunk_avx2(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<ISA_AVX2>(job, start, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn chunk_avx512(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<ISA_AVX512>(job, start, out)
 }
 
 #[inline(always)]
-fn chunk<const FMA: bool>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+fn chunk<const ISA: u8>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
     match (job.kind, job.pose.any_scaled()) {
-        (Kind::Linear, _) => batches::<FMA, LINEAR, false>(job, start, out),
-        (Kind::DualQuaternion, false) => batches::<FMA, DUAL_QUATERNION, false>(job, start, out),
-        (Kind::DualQuaternion, true) => batches::<FMA, DUAL_QUATERNION, true>(job, start, out),
-        (Kind::Blend, false) => batches::<FMA, BLEND, false>(job, start, out),
-        (Kind::Blend, true) => batches::<FMA, BLEND, true>(job, start, out),
+        (Kind::Linear, _) => batches::<ISA, LINEAR, false>(job, start, out),
+        (Kind::DualQuaternion, false) => batches::<ISA, DUAL_QUATERNION, false>(job, start, out),
+        (Kind::DualQuaternion, true) => batches::<ISA, DUAL_QUATERNION, true>(job, start, out),
+        (Kind::Blend, false) => batches::<ISA, BLEND, false>(job, start, out),
+        (Kind::Blend, true) => batches::<ISA, BLEND, true>(job, start, out),
     }
 }
 
@@ -98,11 +139,11 @@ const BLEND: u8 = 2;
 type Lanes = [f32; LANES];
 const ZERO: Lanes = [0.0; LANES];
 
-/// `a·b + c`, fused where the copy is compiled with FMA (where `mul_add` is one instruction; in
+/// `a·b + c`, fused in the copy compiled for AVX2+FMA (where `mul_add` is one instruction; in
 /// the baseline copy it would be a slow library call).
 #[inline(always)]
-fn madd<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
-    if FMA {
+fn madd<const ISA: u8>(a: f32, b: f32, c: f32) -> f32 {
+    if ISA >= ISA_AVX2 {
         a.mul_add(b, c)
     } else {
         a * b + c
@@ -119,22 +160,32 @@ pub(super) struct Points {
 
 impl Points {
     #[inline(always)]
-    fn transform<const FMA: bool>(&self, m: &Affine3A) -> Self {
+    fn transform<const ISA: u8>(&self, m: &Affine3A) -> Self {
         let (c0, c1, c2, t) = (m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation);
         let mut r = Points { x: ZERO, y: ZERO, z: ZERO };
         for l in 0..LANES {
             let (x, y, z) = (self.x[l], self.y[l], self.z[l]);
-            r.x[l] = madd::<FMA>(c0.x, x, madd::<FMA>(c1.x, y, madd::<FMA>(c2.x, z, t.x)));
-            r.y[l] = madd::<FMA>(c0.y, x, madd::<FMA>(c1.y, y, madd::<FMA>(c2.y, z, t.y)));
-            r.z[l] = madd::<FMA>(c0.z, x, madd::<FMA>(c1.z, y, madd::<FMA>(c2.z, z, t.z)));
+            r.x[l] = madd::<ISA>(c0.x, x, madd::<ISA>(c1.x, y, madd::<ISA>(c2.x, z, t.x)));
+            r.y[l] = madd::<ISA>(c0.y, x, madd::<ISA>(c1.y, y, madd::<ISA>(c2.y, z, t.y)));
+            r.z[l] = madd::<ISA>(c0.z, x, madd::<ISA>(c1.z, y, madd::<ISA>(c2.z, z, t.z)));
         }
         r
     }
 }
 
+/// One batch of up to [`LANES`] vertices, loaded and moved into armature space.
+struct Batch<'a> {
+    first: usize,
+    n: usize,
+    original: Points,
+    co: Points,
+    strength: Lanes,
+    slots: &'a [Slot],
+}
+
 /// Skins vertices `start..start + out.len()` batch by batch.
 #[inline(always)]
-fn batches<const FMA: bool, const KIND: u8, const SCALED: bool>(
+fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
     job: &Job<'_>,
     start: usize,
     out: &mut [[f32; 3]],
@@ -145,52 +196,99 @@ fn batches<const FMA: bool, const KIND: u8, const SCALED: bool>(
     for (k, out) in out.chunks_mut(LANES).enumerate() {
         let first = start + k * LANES;
         let n = out.len();
-        let positions = &job.positions[first..first + n];
-        let mut co = Points { x: ZERO, y: ZERO, z: ZERO };
-        for l in 0..n {
-            [co.x[l], co.y[l], co.z[l]] = positions[l];
-        }
+        let original = load_points::<ISA>(&job.positions[first..first + n]);
         let mut strength: Lanes = [1.0; LANES];
         if let Some(mask) = job.mask {
             strength[..n].copy_from_slice(&mask[first..first + n]);
         }
-        if let Some(m) = &premat {
-            co = co.transform::<FMA>(m);
-        }
-        let slots = job.influences.batch(first / LANES);
-        let moved = match KIND {
-            LINEAR => linear::<FMA>(&co, slots, &pose.linear, &strength),
-            DUAL_QUATERNION => {
-                let sum = accumulate_dual_quaternion::<FMA, SCALED>(&co, slots, &pose.dq, &pose.pivot);
-                finish_dual_quaternion::<FMA>(&co, &sum, &strength)
-            }
-            _ => {
-                let lbs = linear::<FMA>(&co, slots, &pose.linear, &strength);
-                let sum = accumulate_dual_quaternion::<FMA, SCALED>(&co, slots, &pose.dq, &pose.pivot);
-                let dqs = finish_dual_quaternion::<FMA>(&co, &sum, &strength);
-                let mut alpha: Lanes = [job.blend_factor; LANES];
-                if let Some(amount) = job.blend_amount {
-                    for l in 0..n {
-                        alpha[l] *= amount[first + l];
-                    }
-                }
-                let mut r = lbs;
-                for l in 0..LANES {
-                    r.x[l] = madd::<FMA>(alpha[l], dqs.x[l] - lbs.x[l], lbs.x[l]);
-                    r.y[l] = madd::<FMA>(alpha[l], dqs.y[l] - lbs.y[l], lbs.y[l]);
-                    r.z[l] = madd::<FMA>(alpha[l], dqs.z[l] - lbs.z[l], lbs.z[l]);
-                }
-                r
-            }
+        let co = match &premat {
+            Some(m) => original.transform::<ISA>(m),
+            None => original,
         };
-        let result = match &postmat {
-            Some(m) => moved.transform::<FMA>(m),
-            None => moved,
-        };
-        for l in 0..n {
-            // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
-            out[l] = if strength[l] == 0.0 { positions[l] } else { [result.x[l], result.y[l], result.z[l]] };
+        let batch = Batch { first, n, original, co, strength, slots: job.influences.batch(first / LANES) };
+        let sum = (KIND != LINEAR)
+            .then(|| accumulate_dual_quaternion::<ISA, SCALED>(&batch.co, batch.slots, &pose.dq, &pose.pivot));
+        finish_batch::<ISA, KIND>(job, &batch, sum.as_ref(), postmat.as_ref(), out);
+    }
+}
+
+/// Finishes a loaded batch (LBS, DQS from its sums, or their blend), applies `postmat` and the
+/// mask, and writes it.
+#[inline(always)]
+fn finish_batch<const ISA: u8, const KIND: u8>(
+    job: &Job<'_>,
+    batch: &Batch<'_>,
+    sum: Option<&DqSum>,
+    postmat: Option<&Affine3A>,
+    out: &mut [[f32; 3]],
+) {
+    let pose = job.pose;
+    let (co, strength) = (&batch.co, &batch.strength);
+    let moved = match (KIND, sum) {
+        (DUAL_QUATERNION, Some(sum)) => finish_dual_quaternion::<ISA>(co, sum, strength),
+        (BLEND, Some(sum)) => {
+            let lbs = linear::<ISA>(co, batch.slots, &pose.linear, strength);
+            let dqs = finish_dual_quaternion::<ISA>(co, sum, strength);
+            let mut alpha: Lanes = [job.blend_factor; LANES];
+            if let Some(amount) = job.blend_amount {
+                for l in 0..batch.n {
+                    alpha[l] *= amount[batch.first + l];
+                }
+            }
+            let mut r = lbs;
+            for l in 0..LANES {
+                r.x[l] = madd::<ISA>(alpha[l], dqs.x[l] - lbs.x[l], lbs.x[l]);
+                r.y[l] = madd::<ISA>(alpha[l], dqs.y[l] - lbs.y[l], lbs.y[l]);
+                r.z[l] = madd::<ISA>(alpha[l], dqs.z[l] - lbs.z[l], lbs.z[l]);
+            }
+            r
         }
+        _ => linear::<ISA>(co, batch.slots, &pose.linear, strength),
+    };
+    let mut result = match postmat {
+        Some(m) => moved.transform::<ISA>(m),
+        None => moved,
+    };
+    // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
+    for l in 0..LANES {
+        if strength[l] == 0.0 {
+            result.x[l] = batch.original.x[l];
+            result.y[l] = batch.original.y[l];
+            result.z[l] = batch.original.z[l];
+        }
+    }
+    store_points::<ISA>(&result, out);
+}
+
+/// Coordinates of up to [`LANES`] points (missing lanes zero).
+#[inline(always)]
+fn load_points<const ISA: u8>(points: &[[f32; 3]]) -> Points {
+    #[cfg(target_arch = "x86_64")]
+    if ISA == ISA_AVX512 {
+        if let Ok(full) = points.try_into() {
+            // SAFETY: this copy only runs where AVX-512F was detected.
+            return unsafe { super::avx512::load_points(full) };
+        }
+    }
+    let mut p = Points { x: ZERO, y: ZERO, z: ZERO };
+    for (l, v) in points.iter().enumerate() {
+        [p.x[l], p.y[l], p.z[l]] = *v;
+    }
+    p
+}
+
+/// Writes the first `out.len()` lanes.
+#[inline(always)]
+fn store_points<const ISA: u8>(p: &Points, out: &mut [[f32; 3]]) {
+    #[cfg(target_arch = "x86_64")]
+    if ISA == ISA_AVX512 {
+        if let Ok(full) = out.try_into() {
+            // SAFETY: this copy only runs where AVX-512F was detected.
+            return unsafe { super::avx512::store_points(p, full) };
+        }
+    }
+    for (l, v) in out.iter_mut().enumerate() {
+        *v = [p.x[l], p.y[l], p.z[l]];
     }
 }
 
@@ -208,7 +306,7 @@ fn bone<T>(table: &[T], index: u32) -> &T {
 /// Lane by lane with 4-wide rows: LBS has no serial dependency between influences, so this keeps
 /// the accumulators in registers.
 #[inline(always)]
-fn linear<const FMA: bool>(co: &Points, slots: &[Slot], linear: &[AffineRows], strength: &Lanes) -> Points {
+fn linear<const ISA: u8>(co: &Points, slots: &[Slot], linear: &[AffineRows], strength: &Lanes) -> Points {
     let mut r = *co;
     for l in 0..LANES {
         let mut acc = [Vec4::ZERO; 3];
@@ -218,15 +316,15 @@ fn linear<const FMA: bool>(co: &Points, slots: &[Slot], linear: &[AffineRows], s
             let w = slot.weights[l];
             let ws = Vec4::splat(w);
             for (a, row) in acc.iter_mut().zip(&m.rows) {
-                *a = if FMA { row.mul_add(ws, *a) } else { *row * ws + *a };
+                *a = if ISA >= ISA_AVX2 { row.mul_add(ws, *a) } else { *row * ws + *a };
             }
             contrib += w;
         }
         let h = Vec4::new(co.x[l], co.y[l], co.z[l], 1.0);
         let f = if contrib > MIN_TOTAL_WEIGHT { strength[l] / contrib } else { 0.0 };
-        r.x[l] = madd::<FMA>(acc[0].dot(h) - h.x * contrib, f, h.x);
-        r.y[l] = madd::<FMA>(acc[1].dot(h) - h.y * contrib, f, h.y);
-        r.z[l] = madd::<FMA>(acc[2].dot(h) - h.z * contrib, f, h.z);
+        r.x[l] = madd::<ISA>(acc[0].dot(h) - h.x * contrib, f, h.x);
+        r.y[l] = madd::<ISA>(acc[1].dot(h) - h.y * contrib, f, h.y);
+        r.z[l] = madd::<ISA>(acc[2].dot(h) - h.z * contrib, f, h.z);
     }
     r
 }
@@ -242,23 +340,21 @@ pub(super) struct DqSum {
 /// `add_weighted_dq_dq`); for bones with scale the dual part moves `co` exactly where the bone's
 /// matrix puts it (`add_weighted_dq_dq_pivot`).
 #[inline(always)]
-fn accumulate_dual_quaternion<const FMA: bool, const SCALED: bool>(
+fn accumulate_dual_quaternion<const ISA: u8, const SCALED: bool>(
     co: &Points,
     slots: &[Slot],
     dq: &[DqBone],
     pivot: &[PivotBone],
 ) -> DqSum {
+    // SAFETY: `ISA` names the instruction set the running copy was chosen for after detecting
+    // it; bone indices were validated against the pose's bone count.
     #[cfg(target_arch = "x86_64")]
-    if FMA {
-        // SAFETY: `FMA` is only true in the copy that runs after AVX2 and FMA were detected;
-        // bone indices were validated against the pose's bone count.
-        return unsafe {
-            if SCALED {
-                super::avx2::accumulate_scaled(co, slots, pivot)
-            } else {
-                super::avx2::accumulate_rigid(slots, dq)
-            }
-        };
+    match (ISA, SCALED) {
+        (ISA_AVX512, false) => return unsafe { super::avx512::accumulate_rigid(slots, dq) },
+        (ISA_AVX512, true) => return unsafe { super::avx512::accumulate_scaled(co, slots, pivot) },
+        (ISA_AVX2, false) => return unsafe { super::avx2::accumulate_rigid(slots, dq) },
+        (ISA_AVX2, true) => return unsafe { super::avx2::accumulate_scaled(co, slots, pivot) },
+        _ => {}
     }
     let mut s = DqSum { real: [ZERO; 4], dual: [ZERO; 4], contrib: ZERO };
     for slot in slots {
@@ -269,7 +365,7 @@ fn accumulate_dual_quaternion<const FMA: bool, const SCALED: bool>(
                 let (x, y, z) = (co.x[l], co.y[l], co.z[l]);
                 let t = |r: usize| {
                     let row = p.translation.rows[r];
-                    madd::<FMA>(row.x, x, madd::<FMA>(row.y, y, madd::<FMA>(row.z, z, row.w)))
+                    madd::<ISA>(row.x, x, madd::<ISA>(row.y, y, madd::<ISA>(row.z, z, row.w)))
                 };
                 let (tx, ty, tz) = (t(0), t(1), t(2));
                 // ½·(0, t)·q = ½·(w·t + t × v, −t·v)
@@ -288,8 +384,8 @@ fn accumulate_dual_quaternion<const FMA: bool, const SCALED: bool>(
             let w = slot.weights[l];
             let w = if dot < 0.0 { -w } else { w };
             for c in 0..4 {
-                s.real[c][l] = madd::<FMA>(q[c], w, s.real[c][l]);
-                s.dual[c][l] = madd::<FMA>(d[c], w, s.dual[c][l]);
+                s.real[c][l] = madd::<ISA>(q[c], w, s.real[c][l]);
+                s.dual[c][l] = madd::<ISA>(d[c], w, s.dual[c][l]);
             }
             s.contrib[l] += slot.weights[l];
         }
@@ -301,7 +397,7 @@ fn accumulate_dual_quaternion<const FMA: bool, const SCALED: bool>(
 /// normalizing), then the strength: `co + a·(r − co) = r·a + co·(1 − a)`; `co` where
 /// `contrib ≤ 0.0001`. Written with selects, not branches, so the lane loop vectorizes.
 #[inline(always)]
-fn finish_dual_quaternion<const FMA: bool>(co: &Points, s: &DqSum, strength: &Lanes) -> Points {
+fn finish_dual_quaternion<const ISA: u8>(co: &Points, s: &DqSum, strength: &Lanes) -> Points {
     let mut r = *co;
     for l in 0..LANES {
         let (x, y, z, w) = (s.real[0][l], s.real[1][l], s.real[2][l], s.real[3][l]);
@@ -319,9 +415,9 @@ fn finish_dual_quaternion<const FMA: bool>(co: &Points, s: &DqSum, strength: &La
         let a = strength[l];
         let f = if valid { a / len2 } else { 0.0 };
         let keep = if valid { 1.0 - a } else { 1.0 };
-        r.x[l] = madd::<FMA>(nx, f, px * keep);
-        r.y[l] = madd::<FMA>(ny, f, py * keep);
-        r.z[l] = madd::<FMA>(nz, f, pz * keep);
+        r.x[l] = madd::<ISA>(nx, f, px * keep);
+        r.y[l] = madd::<ISA>(ny, f, py * keep);
+        r.z[l] = madd::<ISA>(nz, f, pz * keep);
     }
     r
 }

@@ -16,6 +16,8 @@
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 mod influences;
 mod kernels;
 mod pose;
@@ -107,6 +109,19 @@ pub fn skin(
     options: &SkinOptions<'_>,
     out: &mut [[f32; 3]],
 ) -> Result<(), SkinError> {
+    skin_with(kernels::Simd::detect(), method, positions, influences, pose, options, out)
+}
+
+/// [`skin`] on a given compiled copy of the kernels (tests run every copy the CPU has).
+fn skin_with(
+    simd: kernels::Simd,
+    method: Method<'_>,
+    positions: &[[f32; 3]],
+    influences: &Influences,
+    pose: &Pose,
+    options: &SkinOptions<'_>,
+    out: &mut [[f32; 3]],
+) -> Result<(), SkinError> {
     let n = influences.vertex_count();
     check_len("positions", n, positions.len())?;
     check_len("out", n, out.len())?;
@@ -159,7 +174,7 @@ pub fn skin(
         blend_amount: blend.and_then(|b| b.0),
         blend_factor: blend.map_or(0.0, |b| b.1),
     };
-    crate::pool::run(|| kernels::run(&job, out));
+    crate::pool::run(|| kernels::run(&job, out, simd));
     Ok(())
 }
 

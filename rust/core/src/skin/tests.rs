@@ -291,12 +291,33 @@ fn case() -> impl Strategy<Value = (Rig, Vec<[f32; 3]>, Vec<Vec<(u32, f32)>>, Ve
     })
 }
 
+/// Skins with every compiled copy of the kernels this CPU can run; they must agree to round-off
+/// (FMA contraction differs between copies) and the last one's result is returned.
 fn run(method: Method<'_>, positions: &[[f32; 3]], lists: &[Vec<(u32, f32)>], rig: &Rig, options: &SkinOptions<'_>) -> Vec<[f32; 3]> {
     let influences = Influences::from_lists(lists, rig.rest.len()).unwrap();
     let pose = Pose::new(&rig.deform, Some(&rig.rest)).unwrap();
-    let mut out = vec![[f32::NAN; 3]; positions.len()];
-    skin(method, positions, &influences, &pose, options, &mut out).unwrap();
-    out
+    let mut results = Vec::new();
+    for simd in kernels::Simd::available() {
+        let mut out = vec![[f32::NAN; 3]; positions.len()];
+        skin_with(simd, method, positions, &influences, &pose, options, &mut out).unwrap();
+        results.push(out);
+    }
+    let last = results.pop().unwrap();
+    for other in &results {
+        for (a, b) in other.iter().zip(&last) {
+            let (a, b) = (Vec3::from_array(*a), Vec3::from_array(*b));
+            assert!((a - b).length() <= 1e-5 * (1.0 + b.length()), "compiled copies disagree: {a} vs {b}");
+        }
+    }
+    last
+}
+
+#[test]
+fn every_compiled_copy_is_exercised_here() {
+    // On x86-64 CI machines the SIMD copies exist; say which ones the reference tests cover.
+    let available = kernels::Simd::available();
+    assert_eq!(available[0], kernels::Simd::Baseline);
+    eprintln!("kernel copies tested: {available:?}");
 }
 
 fn assert_close(got: &[[f32; 3]], want: &[DVec3], tol: f64) -> Result<(), TestCaseError> {

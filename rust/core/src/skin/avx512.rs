@@ -1,0 +1,247 @@
+//! AVX-512 versions of the dual quaternion accumulation: all sixteen lanes of a slot at once.
+//!
+//! Lane `l` and lane `l + 8` share a 512-bit row (their two bone records side by side); the
+//! same in-lane shuffles as the AVX2 transpose then work on both halves together, and a
+//! two-source permute finishes it. Arithmetic as in `kernels.rs`.
+
+use core::arch::x86_64::*;
+
+use super::influences::{Slot, LANES};
+use super::kernels::{DqSum, Points};
+use super::pose::{DqBone, PivotBone};
+
+const _: () = assert!(LANES == 16);
+
+/// `[a | b]` from two 256-bit halves.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn join(a: __m256, b: __m256) -> __m512 {
+    _mm512_castpd_ps(_mm512_insertf64x4::<1>(_mm512_castps_pd(_mm512_castps256_ps512(a)), _mm256_castps_pd(b)))
+}
+
+/// Loads 8 floats at float offset `offset` of each lane's bone record and transposes them into
+/// eight 16-lane component vectors.
+///
+/// # Safety
+/// Every bone index must index `table`, and `offset + 8` floats must lie inside a record.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn load_columns<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [__m512; 8] {
+    let base = table.as_ptr() as *const f32;
+    let stride = core::mem::size_of::<T>() / 4;
+    let row = |l: usize| {
+        debug_assert!((bones[l] as usize) < table.len());
+        // SAFETY: the caller guarantees the index and the offset are in range.
+        unsafe { _mm256_loadu_ps(base.add(bones[l] as usize * stride + offset)) }
+    };
+    let r: [__m512; 8] = core::array::from_fn(|i| join(row(i), row(i + 8)));
+    let t0 = _mm512_unpacklo_ps(r[0], r[1]);
+    let t1 = _mm512_unpackhi_ps(r[0], r[1]);
+    let t2 = _mm512_unpacklo_ps(r[2], r[3]);
+    let t3 = _mm512_unpackhi_ps(r[2], r[3]);
+    let t4 = _mm512_unpacklo_ps(r[4], r[5]);
+    let t5 = _mm512_unpackhi_ps(r[4], r[5]);
+    let t6 = _mm512_unpacklo_ps(r[6], r[7]);
+    let t7 = _mm512_unpackhi_ps(r[6], r[7]);
+    let u0 = _mm512_shuffle_ps::<0x44>(t0, t2);
+    let u1 = _mm512_shuffle_ps::<0xEE>(t0, t2);
+    let u2 = _mm512_shuffle_ps::<0x44>(t1, t3);
+    let u3 = _mm512_shuffle_ps::<0xEE>(t1, t3);
+    let u4 = _mm512_shuffle_ps::<0x44>(t4, t6);
+    let u5 = _mm512_shuffle_ps::<0xEE>(t4, t6);
+    let u6 = _mm512_shuffle_ps::<0x44>(t5, t7);
+    let u7 = _mm512_shuffle_ps::<0xEE>(t5, t7);
+    // 128-bit blocks: low components from blocks 0 and 2, high ones from blocks 1 and 3.
+    let lo = _mm512_setr_epi32(0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27);
+    let hi = _mm512_setr_epi32(4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14, 15, 28, 29, 30, 31);
+    [
+        _mm512_permutex2var_ps(u0, lo, u4),
+        _mm512_permutex2var_ps(u1, lo, u5),
+        _mm512_permutex2var_ps(u2, lo, u6),
+        _mm512_permutex2var_ps(u3, lo, u7),
+        _mm512_permutex2var_ps(u0, hi, u4),
+        _mm512_permutex2var_ps(u1, hi, u5),
+        _mm512_permutex2var_ps(u2, hi, u6),
+        _mm512_permutex2var_ps(u3, hi, u7),
+    ]
+}
+
+/// Adds `±w·(q, d)` to the sums, the sign chosen by `q·sum < 0` per lane.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn add_signed(real: &mut [__m512; 4], dual: &mut [__m512; 4], q: &[__m512], d: &[__m512], w: __m512) {
+    // Two independent halves: the sign choice is the serial chain, so keep it short.
+    let dot = _mm512_add_ps(
+        _mm512_fmadd_ps(q[1], real[1], _mm512_mul_ps(q[0], real[0])),
+        _mm512_fmadd_ps(q[3], real[3], _mm512_mul_ps(q[2], real[2])),
+    );
+    let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
+    let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
+    for c in 0..4 {
+        real[c] = _mm512_fmadd_ps(q[c], ws, real[c]);
+        dual[c] = _mm512_fmadd_ps(d[c], ws, dual[c]);
+    }
+}
+
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn store(real: [__m512; 4], dual: [__m512; 4], contrib: __m512) -> DqSum {
+    let mut s = DqSum { real: [[0.0; LANES]; 4], dual: [[0.0; LANES]; 4], contrib: [0.0; LANES] };
+    // SAFETY: each destination is an array of 16 floats.
+    unsafe {
+        for c in 0..4 {
+            _mm512_storeu_ps(s.real[c].as_mut_ptr(), real[c]);
+            _mm512_storeu_ps(s.dual[c].as_mut_ptr(), dual[c]);
+        }
+        _mm512_storeu_ps(s.contrib.as_mut_ptr(), contrib);
+    }
+    s
+}
+
+/// DQS sums for rigid bones.
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA, and every bone index in `slots` must index `dq`.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(super) unsafe fn accumulate_rigid(slots: &[Slot], dq: &[DqBone]) -> DqSum {
+    let mut real = [_mm512_setzero_ps(); 4];
+    let mut dual = [_mm512_setzero_ps(); 4];
+    let mut contrib = _mm512_setzero_ps();
+    for slot in slots {
+        // SAFETY: indices are in range (validated); a DqBone is 8 floats.
+        let c = unsafe { load_columns(dq, &slot.bones, 0) };
+        let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
+        add_signed(&mut real, &mut dual, &c[0..4], &c[4..8], w);
+        contrib = _mm512_add_ps(contrib, w);
+    }
+    store(real, dual, contrib)
+}
+
+/// DQS sums when some bone has scale: each bone moves `co` rigidly to where its matrix puts it.
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA, and every bone index in `slots` must index
+/// `pivot`.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(super) unsafe fn accumulate_scaled(co: &Points, slots: &[Slot], pivot: &[PivotBone]) -> DqSum {
+    let mut real = [_mm512_setzero_ps(); 4];
+    let mut dual = [_mm512_setzero_ps(); 4];
+    let mut contrib = _mm512_setzero_ps();
+    // SAFETY: each coordinate array has 16 floats.
+    let (x, y, z) =
+        unsafe { (_mm512_loadu_ps(co.x.as_ptr()), _mm512_loadu_ps(co.y.as_ptr()), _mm512_loadu_ps(co.z.as_ptr())) };
+    let half = _mm512_set1_ps(0.5);
+    for slot in slots {
+        // SAFETY: indices are in range (validated); a PivotBone is 16 floats: rows 0–1, then
+        // row 2 and the rotation.
+        let a = unsafe { load_columns(pivot, &slot.bones, 0) };
+        let b = unsafe { load_columns(pivot, &slot.bones, 8) };
+        let row = |m0: __m512, m1: __m512, m2: __m512, t: __m512| {
+            _mm512_fmadd_ps(m0, x, _mm512_fmadd_ps(m1, y, _mm512_fmadd_ps(m2, z, t)))
+        };
+        let tx = row(a[0], a[1], a[2], a[3]);
+        let ty = row(a[4], a[5], a[6], a[7]);
+        let tz = row(b[0], b[1], b[2], b[3]);
+        let q = [b[4], b[5], b[6], b[7]];
+        // ½·(0, t)·q = ½·(w·t + t × v, −t·v), q = (v, w); see avx2.rs for the term order.
+        let cross_plus = |p: __m512, r: __m512, s: __m512, u: __m512, tw: __m512| {
+            _mm512_mul_ps(half, _mm512_fmsub_ps(p, r, _mm512_fmsub_ps(s, u, _mm512_mul_ps(tw, q[3]))))
+        };
+        let d = [
+            cross_plus(ty, q[2], tz, q[1], tx),
+            cross_plus(tz, q[0], tx, q[2], ty),
+            cross_plus(tx, q[1], ty, q[0], tz),
+            _mm512_mul_ps(
+                _mm512_set1_ps(-0.5),
+                _mm512_fmadd_ps(tx, q[0], _mm512_fmadd_ps(ty, q[1], _mm512_mul_ps(tz, q[2]))),
+            ),
+        ];
+        let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
+        add_signed(&mut real, &mut dual, &q, &d, w);
+        contrib = _mm512_add_ps(contrib, w);
+    }
+    store(real, dual, contrib)
+}
+
+/// Index vectors that gather every third float of 48 (`a` = floats 0–15, `b` = 16–31,
+/// `c` = 32–47): first from `a` and `b`, then the rest from `c`.
+const fn deinterleave_indices(axis: i32) -> ([i32; 16], [i32; 16]) {
+    let mut first = [0i32; 16];
+    let mut second = [0i32; 16];
+    let mut l = 0;
+    while l < 16 {
+        let f = 3 * l as i32 + axis; // position among the 48 floats
+        first[l] = if f < 32 { f } else { 0 };
+        second[l] = if f < 32 { l as i32 } else { f - 32 + 16 };
+        l += 1;
+    }
+    (first, second)
+}
+
+const DEINTERLEAVE: [([i32; 16], [i32; 16]); 3] =
+    [deinterleave_indices(0), deinterleave_indices(1), deinterleave_indices(2)];
+
+/// Index vectors that put lane values back as `x0 y0 z0 x1 …`: float `f` of the output comes
+/// from lane `f / 3` of axis `f % 3`; three 16-float outputs from three 16-lane axis vectors.
+const fn interleave_indices(part: usize) -> ([i32; 16], [i32; 16]) {
+    // Step 1 picks from (x, y); step 2 from (step1, z).
+    let mut first = [0i32; 16];
+    let mut second = [0i32; 16];
+    let mut k = 0;
+    while k < 16 {
+        let f = part * 16 + k;
+        let lane = (f / 3) as i32;
+        let axis = f % 3;
+        first[k] = if axis == 0 { lane } else if axis == 1 { lane + 16 } else { 0 };
+        second[k] = if axis == 2 { lane + 16 } else { k as i32 };
+        k += 1;
+    }
+    (first, second)
+}
+
+const INTERLEAVE: [([i32; 16], [i32; 16]); 3] =
+    [interleave_indices(0), interleave_indices(1), interleave_indices(2)];
+
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn idx(v: &[i32; 16]) -> __m512i {
+    // SAFETY: 16 i32 are 64 bytes.
+    unsafe { _mm512_loadu_si512(v.as_ptr() as *const __m512i) }
+}
+
+/// Splits 16 points `x y z x y z …` into coordinate vectors.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[target_feature(enable = "avx512f")]
+pub(super) unsafe fn load_points(points: &[[f32; 3]; LANES]) -> Points {
+    let p = points.as_ptr() as *const f32;
+    // SAFETY: 16 points are 48 floats.
+    let (a, b, c) = unsafe { (_mm512_loadu_ps(p), _mm512_loadu_ps(p.add(16)), _mm512_loadu_ps(p.add(32))) };
+    let mut out = Points { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
+    for (axis, dst) in [&mut out.x, &mut out.y, &mut out.z].into_iter().enumerate() {
+        let (first, second) = &DEINTERLEAVE[axis];
+        let ab = _mm512_permutex2var_ps(a, idx(first), b);
+        let v = _mm512_permutex2var_ps(ab, idx(second), c);
+        // SAFETY: each axis array has 16 floats.
+        unsafe { _mm512_storeu_ps(dst.as_mut_ptr(), v) };
+    }
+    out
+}
+
+/// Writes coordinate vectors back as 16 points `x y z x y z …`.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[target_feature(enable = "avx512f")]
+pub(super) unsafe fn store_points(p: &Points, out: &mut [[f32; 3]; LANES]) {
+    // SAFETY: each axis array has 16 floats; 16 points are 48 floats.
+    unsafe {
+        let (x, y, z) = (_mm512_loadu_ps(p.x.as_ptr()), _mm512_loadu_ps(p.y.as_ptr()), _mm512_loadu_ps(p.z.as_ptr()));
+        let dst = out.as_mut_ptr() as *mut f32;
+        for (part, (first, second)) in INTERLEAVE.iter().enumerate() {
+            let xy = _mm512_permutex2var_ps(x, idx(first), y);
+            _mm512_storeu_ps(dst.add(16 * part), _mm512_permutex2var_ps(xy, idx(second), z));
+        }
+    }
+}

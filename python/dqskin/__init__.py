@@ -36,6 +36,7 @@ from ._dqskin import (
     squad,
     squad_control_points,
 )
+from ._dqskin import _panic_for_tests  # noqa: F401  (tests check panics become RuntimeError)
 
 __all__ = [
     "DualQuat",

@@ -175,7 +175,7 @@ impl PyDualQuat {
     /// The rigid transform as a row-major 4×4 float32 matrix.
     fn to_matrix<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let m = mat4_to_row_major(&self.0.to_mat4());
-        Ok(PyArray1::from_slice(py, &m).reshape([4, 4])?)
+        PyArray1::from_slice(py, &m).reshape([4, 4])
     }
 
     /// Quaternion conjugate of both parts (the inverse, for a unit dual quaternion).
@@ -266,7 +266,7 @@ impl PyDualQuat {
                     .flat_map(|c| q.transform_point3(Vec3::new(c[0], c[1], c[2])).to_array())
                     .collect()
             });
-            Ok(PyArray1::from_vec(py, out).reshape([src.len() / 3, 3])?)
+            PyArray1::from_vec(py, out).reshape([src.len() / 3, 3])
         })
     }
 
@@ -325,7 +325,7 @@ fn dual_quats_from_matrices<'py>(matrices: &Bound<'py, PyAny>, check: bool, tole
             };
             out.extend_from_slice(&dq.to_array_wxyz());
         }
-        Ok(PyArray1::from_vec(py, out).reshape([n, 8])?)
+        PyArray1::from_vec(py, out).reshape([n, 8])
     })
 }
 
@@ -346,7 +346,7 @@ fn matrices_from_dual_quats<'py>(dual_quats: &Bound<'py, PyAny>) -> PyResult<Bou
             })?;
             out.extend_from_slice(&mat4_to_row_major(&dq.to_mat4()));
         }
-        Ok(PyArray1::from_vec(py, out).reshape([n, 4, 4])?)
+        PyArray1::from_vec(py, out).reshape([n, 4, 4])
     })
 }
 

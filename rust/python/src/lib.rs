@@ -3,6 +3,11 @@
 //! and turns every core error into a `ValueError`/`TypeError` naming the argument. A Rust panic
 //! never reaches Python as `PanicException`: [`guard`] turns it into a `RuntimeError`.
 
+// `!(x >= 0.0)` is deliberate: unlike `x < 0.0` it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// pyo3 methods take `&self`.
+#![allow(clippy::wrong_self_convention)]
+
 mod arrays;
 mod blending;
 mod dual_quat;

@@ -98,12 +98,24 @@ fn store(real: [__m512; 4], dual: [__m512; 4], contrib: __m512) -> DqSum {
     s
 }
 
+/// The sums in registers: real (x, y, z, w), dual (x, y, z, w), total weight.
+type Sums = ([__m512; 4], [__m512; 4], __m512);
+
 /// DQS sums for rigid bones.
 ///
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA, and every bone index in `slots` must index `dq`.
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub(super) unsafe fn accumulate_rigid(slots: &[Slot], dq: &[DqBone]) -> DqSum {
+    let (real, dual, contrib) = unsafe { rigid_sums(slots, dq) };
+    store(real, dual, contrib)
+}
+
+/// # Safety
+/// As [`accumulate_rigid`].
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn rigid_sums(slots: &[Slot], dq: &[DqBone]) -> Sums {
     let mut real = [_mm512_setzero_ps(); 4];
     let mut dual = [_mm512_setzero_ps(); 4];
     let mut contrib = _mm512_setzero_ps();
@@ -114,7 +126,7 @@ pub(super) unsafe fn accumulate_rigid(slots: &[Slot], dq: &[DqBone]) -> DqSum {
         add_signed(&mut real, &mut dual, &c[0..4], &c[4..8], w);
         contrib = _mm512_add_ps(contrib, w);
     }
-    store(real, dual, contrib)
+    (real, dual, contrib)
 }
 
 /// DQS sums when some bone has scale: each bone moves `co` rigidly to where its matrix puts it.
@@ -124,12 +136,20 @@ pub(super) unsafe fn accumulate_rigid(slots: &[Slot], dq: &[DqBone]) -> DqSum {
 /// `pivot`.
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub(super) unsafe fn accumulate_scaled(co: &Points, slots: &[Slot], pivot: &[PivotBone]) -> DqSum {
+    // SAFETY: each coordinate array has 16 floats.
+    let p = unsafe { [_mm512_loadu_ps(co.x.as_ptr()), _mm512_loadu_ps(co.y.as_ptr()), _mm512_loadu_ps(co.z.as_ptr())] };
+    let (real, dual, contrib) = unsafe { scaled_sums(p, slots, pivot) };
+    store(real, dual, contrib)
+}
+
+/// # Safety
+/// As [`accumulate_scaled`].
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn scaled_sums([x, y, z]: [__m512; 3], slots: &[Slot], pivot: &[PivotBone]) -> Sums {
     let mut real = [_mm512_setzero_ps(); 4];
     let mut dual = [_mm512_setzero_ps(); 4];
     let mut contrib = _mm512_setzero_ps();
-    // SAFETY: each coordinate array has 16 floats.
-    let (x, y, z) =
-        unsafe { (_mm512_loadu_ps(co.x.as_ptr()), _mm512_loadu_ps(co.y.as_ptr()), _mm512_loadu_ps(co.z.as_ptr())) };
     let half = _mm512_set1_ps(0.5);
     for slot in slots {
         // SAFETY: indices are in range (validated); a PivotBone is 16 floats: rows 0–1, then
@@ -160,7 +180,7 @@ pub(super) unsafe fn accumulate_scaled(co: &Points, slots: &[Slot], pivot: &[Piv
         add_signed(&mut real, &mut dual, &q, &d, w);
         contrib = _mm512_add_ps(contrib, w);
     }
-    store(real, dual, contrib)
+    (real, dual, contrib)
 }
 
 /// Index vectors that gather every third float of 48 (`a` = floats 0–15, `b` = 16–31,
@@ -243,5 +263,116 @@ pub(super) unsafe fn store_points(p: &Points, out: &mut [[f32; 3]; LANES]) {
             let xy = _mm512_permutex2var_ps(x, idx(first), y);
             _mm512_storeu_ps(dst.add(16 * part), _mm512_permutex2var_ps(xy, idx(second), z));
         }
+    }
+}
+
+/// A 3×4 affine transform with each entry broadcast to all lanes.
+struct Affine {
+    m: [[__m512; 4]; 3],
+}
+
+impl Affine {
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn new(a: &glam::Affine3A) -> Self {
+        let c = [a.matrix3.x_axis, a.matrix3.y_axis, a.matrix3.z_axis, a.translation];
+        Affine { m: core::array::from_fn(|r| core::array::from_fn(|k| _mm512_set1_ps(c[k][r]))) }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn apply(&self, p: [__m512; 3]) -> [__m512; 3] {
+        core::array::from_fn(|r| {
+            let m = &self.m[r];
+            _mm512_fmadd_ps(m[0], p[0], _mm512_fmadd_ps(m[1], p[1], _mm512_fmadd_ps(m[2], p[2], m[3])))
+        })
+    }
+}
+
+/// Everything DQS does to one full batch of 16 vertices, in registers: load, `premat`, sums,
+/// Blender's `mul_v3m3_dq`, strength, `postmat`, mask, store. Same arithmetic as the portable
+/// path in `kernels.rs`.
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `dq` and
+/// `pivot`.
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+pub(super) unsafe fn dual_quaternion_batch(
+    positions: &[[f32; 3]; LANES],
+    out: &mut [[f32; 3]; LANES],
+    slots: &[Slot],
+    dq: &[DqBone],
+    pivot: &[PivotBone],
+    scaled: bool,
+    premat: Option<&glam::Affine3A>,
+    postmat: Option<&glam::Affine3A>,
+    strength: Option<&[f32; LANES]>,
+) {
+    // SAFETY (all unaligned loads and stores below): the arrays have exactly 16 lanes.
+    let original = unsafe { load_points(positions) };
+    let o = unsafe {
+        [_mm512_loadu_ps(original.x.as_ptr()), _mm512_loadu_ps(original.y.as_ptr()), _mm512_loadu_ps(original.z.as_ptr())]
+    };
+    let p = match premat {
+        Some(m) => Affine::new(m).apply(o),
+        None => o,
+    };
+    // SAFETY: as this function's own contract.
+    let ([x, y, z, w], [d0, d1, d2, d3], contrib) =
+        unsafe { if scaled { scaled_sums(p, slots, pivot) } else { rigid_sums(slots, dq) } };
+    // Blender's order: t0 = dual w, t1..t3 = dual x, y, z.
+    let (t0, t1, t2, t3) = (d3, d0, d1, d2);
+    let mul = |a, b| _mm512_mul_ps(a, b);
+    let add = |a, b| _mm512_add_ps(a, b);
+    let sub = |a, b| _mm512_sub_ps(a, b);
+    let two = _mm512_set1_ps(2.0);
+    let (ww, xx, yy, zz) = (mul(w, w), mul(x, x), mul(y, y), mul(z, z));
+    let len2 = add(add(ww, xx), add(yy, zz));
+    let m00 = sub(add(ww, xx), add(yy, zz));
+    let m11 = sub(add(ww, yy), add(xx, zz));
+    let m22 = sub(add(ww, zz), add(xx, yy));
+    let (xy, xz, yz) = (mul(x, y), mul(x, z), mul(y, z));
+    let (wx, wy, wz) = (mul(w, x), mul(w, y), mul(w, z));
+    // 2·(−t0·x + w·t1 − t2·z + y·t3) and its two siblings.
+    let tx = mul(two, add(sub(mul(w, t1), mul(t0, x)), sub(mul(y, t3), mul(t2, z))));
+    let ty = mul(two, add(sub(mul(t1, z), mul(t0, y)), sub(mul(w, t2), mul(x, t3))));
+    let tz = mul(two, add(sub(mul(x, t2), mul(t0, z)), sub(mul(w, t3), mul(t1, y))));
+    let (px, py, pz) = (p[0], p[1], p[2]);
+    let row = |a: __m512, b: __m512, c: __m512, t: __m512| {
+        _mm512_fmadd_ps(a, px, _mm512_fmadd_ps(b, py, _mm512_fmadd_ps(c, pz, t)))
+    };
+    let nx = row(m00, mul(two, sub(xy, wz)), mul(two, add(xz, wy)), tx);
+    let ny = row(mul(two, add(xy, wz)), m11, mul(two, sub(yz, wx)), ty);
+    let nz = row(mul(two, sub(xz, wy)), mul(two, add(yz, wx)), m22, tz);
+    let zero = _mm512_setzero_ps();
+    let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::MIN_TOTAL_WEIGHT))
+        & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
+    let a = match strength {
+        Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
+        None => _mm512_set1_ps(1.0),
+    };
+    let f = _mm512_maskz_div_ps(valid, a, len2);
+    let keep = _mm512_mask_sub_ps(_mm512_set1_ps(1.0), valid, _mm512_set1_ps(1.0), a);
+    let moved = [
+        _mm512_fmadd_ps(nx, f, mul(px, keep)),
+        _mm512_fmadd_ps(ny, f, mul(py, keep)),
+        _mm512_fmadd_ps(nz, f, mul(pz, keep)),
+    ];
+    let mut r = match postmat {
+        Some(m) => Affine::new(m).apply(moved),
+        None => moved,
+    };
+    // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
+    let untouched = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(a, zero);
+    for k in 0..3 {
+        r[k] = _mm512_mask_mov_ps(r[k], untouched, o[k]);
+    }
+    let mut result = Points { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
+    unsafe {
+        _mm512_storeu_ps(result.x.as_mut_ptr(), r[0]);
+        _mm512_storeu_ps(result.y.as_mut_ptr(), r[1]);
+        _mm512_storeu_ps(result.z.as_mut_ptr(), r[2]);
+        store_points(&result, out);
     }
 }

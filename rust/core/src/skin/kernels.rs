@@ -36,7 +36,7 @@ pub(crate) struct Job<'a> {
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
 /// A multiple of [`LANES`], so tasks start on batch boundaries.
 const CHUNK: usize = 4096;
-const _: () = assert!(CHUNK % LANES == 0);
+const _: () = assert!(CHUNK.is_multiple_of(LANES));
 
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     let task = |(i, chunk): (usize, &mut [[f32; 3]])| simd.chunk(job, i * CHUNK, chunk);
@@ -196,6 +196,21 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
     for (k, out) in out.chunks_mut(LANES).enumerate() {
         let first = start + k * LANES;
         let n = out.len();
+        #[cfg(target_arch = "x86_64")]
+        if ISA == ISA_AVX512 && KIND == DUAL_QUATERNION && n == LANES {
+            let mask = job.mask.map(|m| m[first..first + LANES].try_into().expect("a full batch"));
+            let positions = job.positions[first..first + LANES].try_into().expect("a full batch");
+            let out = out.try_into().expect("a full batch");
+            let slots = job.influences.batch(first / LANES);
+            // SAFETY: this copy only runs where AVX-512F, AVX2 and FMA were detected; bone indices
+            // were validated against the pose's bone count.
+            unsafe {
+                super::avx512::dual_quaternion_batch(
+                    positions, out, slots, &pose.dq, &pose.pivot, SCALED, premat.as_ref(), postmat.as_ref(), mask,
+                )
+            };
+            continue;
+        }
         let original = load_points::<ISA>(&job.positions[first..first + n]);
         let mut strength: Lanes = [1.0; LANES];
         if let Some(mask) = job.mask {

@@ -141,13 +141,18 @@ fn skin_with(
             check_space_matrix(what, &m)?;
         }
     }
-    let blend = match method {
-        Method::Linear => None,
-        Method::DualQuaternion | Method::Blend { .. } if !pose.has_dual_quaternions() => {
-            return Err(SkinError::MissingRestMatrices)
+    let needs_rest = |kind| {
+        if pose.has_dual_quaternions() {
+            Ok(kind)
+        } else {
+            Err(SkinError::MissingRestMatrices)
         }
-        Method::DualQuaternion => None,
+    };
+    let (kind, blend_amount, blend_factor) = match method {
+        Method::Linear => (kernels::Kind::Linear, None, 0.0),
+        Method::DualQuaternion => (needs_rest(kernels::Kind::DualQuaternion)?, None, 0.0),
         Method::Blend { amount, factor } => {
+            let kind = needs_rest(kernels::Kind::Blend)?;
             if !(0.0..=1.0).contains(&factor) {
                 return Err(SkinError::OutOfRange { what: "blend factor", index: None, value: factor });
             }
@@ -155,13 +160,8 @@ fn skin_with(
                 check_len("blend amount", n, amount.len())?;
                 check_unit_interval("blend amount", amount)?;
             }
-            Some((amount, factor))
+            (kind, amount, factor)
         }
-    };
-    let kind = match method {
-        Method::Linear => kernels::Kind::Linear,
-        Method::DualQuaternion => kernels::Kind::DualQuaternion,
-        Method::Blend { .. } => kernels::Kind::Blend,
     };
     let job = kernels::Job {
         kind,
@@ -171,8 +171,8 @@ fn skin_with(
         premat: options.premat,
         postmat: options.postmat,
         mask: options.mask,
-        blend_amount: blend.and_then(|b| b.0),
-        blend_factor: blend.map_or(0.0, |b| b.1),
+        blend_amount,
+        blend_factor,
     };
     crate::pool::run(|| kernels::run(&job, out, simd));
     Ok(())
@@ -193,16 +193,10 @@ fn check_unit_interval(what: &'static str, values: &[f32]) -> Result<(), SkinErr
 }
 
 fn check_space_matrix(what: &'static str, m: &Mat4) -> Result<(), SkinError> {
-    if !m.is_finite() {
-        return Err(SkinError::InvalidSpaceMatrix { what, problem: "has a NaN or infinite entry" });
+    match pose::affine_problem(m) {
+        Some(problem) => Err(SkinError::InvalidSpaceMatrix { what, problem }),
+        None => Ok(()),
     }
-    if (m.row(3) - glam::Vec4::W).abs().max_element() > 1e-6 {
-        return Err(SkinError::InvalidSpaceMatrix {
-            what,
-            problem: "is not affine (its last row must be 0, 0, 0, 1)",
-        });
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -140,17 +140,21 @@ impl Pose {
 }
 
 fn check_affine(what: &'static str, bone: usize, m: &Mat4) -> Result<(), SkinError> {
+    match affine_problem(m) {
+        Some(problem) => Err(SkinError::InvalidMatrix { what, bone, problem }),
+        None => Ok(()),
+    }
+}
+
+/// What makes `m` unusable as an affine transform, if anything.
+pub(super) fn affine_problem(m: &Mat4) -> Option<&'static str> {
     if !m.is_finite() {
-        return Err(SkinError::InvalidMatrix { what, bone, problem: "has a NaN or infinite entry" });
+        Some("has a NaN or infinite entry")
+    } else if (m.row(3) - Vec4::W).abs().max_element() > 1e-6 {
+        Some("is not affine (its last row must be 0, 0, 0, 1)")
+    } else {
+        None
     }
-    if (m.row(3) - Vec4::W).abs().max_element() > 1e-6 {
-        return Err(SkinError::InvalidMatrix {
-            what,
-            bone,
-            problem: "is not affine (its last row must be 0, 0, 0, 1)",
-        });
-    }
-    Ok(())
 }
 
 /// The rotation Blender's `mat4_to_dquat(basemat = rest, mat = deform)` assigns to a bone, and

@@ -8,7 +8,8 @@ use core::arch::x86_64::*;
 
 use super::influences::{Slot, LANES};
 use super::kernels::{DqSum, Points};
-use super::pose::{DqBone, PivotBone};
+use super::kernels::{DUAL_QUATERNION, LINEAR};
+use super::pose::{DqBone, LinearBone, PivotBone};
 
 const _: () = assert!(LANES == 16);
 
@@ -289,77 +290,135 @@ impl Affine {
     }
 }
 
-/// Everything DQS does to one full batch of 16 vertices, in registers: load, `premat`, sums,
-/// Blender's `mul_v3m3_dq`, strength, `postmat`, mask, store. Same arithmetic as the portable
-/// path in `kernels.rs`.
+/// LBS sums in registers: the weighted rows `Σ wᵢ·Mᵢ` (row-major 3×4) and the total weight.
 ///
 /// # Safety
-/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `dq` and
-/// `pivot`.
+/// As [`accumulate_rigid`], for `linear`.
+#[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-#[allow(clippy::too_many_arguments)]
-pub(super) unsafe fn dual_quaternion_batch(
+unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], __m512) {
+    let mut acc = [_mm512_setzero_ps(); 12];
+    let mut contrib = _mm512_setzero_ps();
+    for slot in slots {
+        // SAFETY: indices are in range (validated); a LinearBone is 16 floats (rows, padding).
+        let a = unsafe { load_columns(linear, &slot.bones, 0) };
+        let b = unsafe { load_columns(linear, &slot.bones, 8) };
+        let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
+        for k in 0..8 {
+            acc[k] = _mm512_fmadd_ps(a[k], w, acc[k]);
+        }
+        for k in 0..4 {
+            acc[8 + k] = _mm512_fmadd_ps(b[k], w, acc[8 + k]);
+        }
+        contrib = _mm512_add_ps(contrib, w);
+    }
+    (acc, contrib)
+}
+
+/// Inputs of [`batch`] that are the same for every batch of a call.
+pub(super) struct BatchJob<'a> {
+    pub linear: &'a [LinearBone],
+    pub dq: &'a [DqBone],
+    pub pivot: &'a [PivotBone],
+    pub scaled: bool,
+    pub premat: Option<&'a glam::Affine3A>,
+    pub postmat: Option<&'a glam::Affine3A>,
+    pub blend_factor: f32,
+}
+
+/// Everything skinning does to one full batch of 16 vertices, in registers: load, `premat`,
+/// LBS and/or DQS (Blender's `mul_v3m3_dq`), blend, strength, `postmat`, mask, store. The same
+/// arithmetic as the portable path in `kernels.rs`.
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index the
+/// bone tables.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(super) unsafe fn batch<const KIND: u8>(
+    job: &BatchJob<'_>,
     positions: &[[f32; 3]; LANES],
     out: &mut [[f32; 3]; LANES],
     slots: &[Slot],
-    dq: &[DqBone],
-    pivot: &[PivotBone],
-    scaled: bool,
-    premat: Option<&glam::Affine3A>,
-    postmat: Option<&glam::Affine3A>,
     strength: Option<&[f32; LANES]>,
+    blend_amount: Option<&[f32; LANES]>,
 ) {
     // SAFETY (all unaligned loads and stores below): the arrays have exactly 16 lanes.
     let original = unsafe { load_points(positions) };
     let o = unsafe {
         [_mm512_loadu_ps(original.x.as_ptr()), _mm512_loadu_ps(original.y.as_ptr()), _mm512_loadu_ps(original.z.as_ptr())]
     };
-    let p = match premat {
+    let p = match job.premat {
         Some(m) => Affine::new(m).apply(o),
         None => o,
     };
-    // SAFETY: as this function's own contract.
-    let ([x, y, z, w], [d0, d1, d2, d3], contrib) =
-        unsafe { if scaled { scaled_sums(p, slots, pivot) } else { rigid_sums(slots, dq) } };
-    // Blender's order: t0 = dual w, t1..t3 = dual x, y, z.
-    let (t0, t1, t2, t3) = (d3, d0, d1, d2);
-    let mul = |a, b| _mm512_mul_ps(a, b);
-    let add = |a, b| _mm512_add_ps(a, b);
-    let sub = |a, b| _mm512_sub_ps(a, b);
-    let two = _mm512_set1_ps(2.0);
-    let (ww, xx, yy, zz) = (mul(w, w), mul(x, x), mul(y, y), mul(z, z));
-    let len2 = add(add(ww, xx), add(yy, zz));
-    let m00 = sub(add(ww, xx), add(yy, zz));
-    let m11 = sub(add(ww, yy), add(xx, zz));
-    let m22 = sub(add(ww, zz), add(xx, yy));
-    let (xy, xz, yz) = (mul(x, y), mul(x, z), mul(y, z));
-    let (wx, wy, wz) = (mul(w, x), mul(w, y), mul(w, z));
-    // 2·(−t0·x + w·t1 − t2·z + y·t3) and its two siblings.
-    let tx = mul(two, add(sub(mul(w, t1), mul(t0, x)), sub(mul(y, t3), mul(t2, z))));
-    let ty = mul(two, add(sub(mul(t1, z), mul(t0, y)), sub(mul(w, t2), mul(x, t3))));
-    let tz = mul(two, add(sub(mul(x, t2), mul(t0, z)), sub(mul(w, t3), mul(t1, y))));
-    let (px, py, pz) = (p[0], p[1], p[2]);
-    let row = |a: __m512, b: __m512, c: __m512, t: __m512| {
-        _mm512_fmadd_ps(a, px, _mm512_fmadd_ps(b, py, _mm512_fmadd_ps(c, pz, t)))
-    };
-    let nx = row(m00, mul(two, sub(xy, wz)), mul(two, add(xz, wy)), tx);
-    let ny = row(mul(two, add(xy, wz)), m11, mul(two, sub(yz, wx)), ty);
-    let nz = row(mul(two, sub(xz, wy)), mul(two, add(yz, wx)), m22, tz);
     let zero = _mm512_setzero_ps();
-    let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::MIN_TOTAL_WEIGHT))
-        & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
+    let one = _mm512_set1_ps(1.0);
     let a = match strength {
         Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
-        None => _mm512_set1_ps(1.0),
+        None => one,
     };
-    let f = _mm512_maskz_div_ps(valid, a, len2);
-    let keep = _mm512_mask_sub_ps(_mm512_set1_ps(1.0), valid, _mm512_set1_ps(1.0), a);
-    let moved = [
-        _mm512_fmadd_ps(nx, f, mul(px, keep)),
-        _mm512_fmadd_ps(ny, f, mul(py, keep)),
-        _mm512_fmadd_ps(nz, f, mul(pz, keep)),
-    ];
-    let mut r = match postmat {
+    let threshold = _mm512_set1_ps(super::MIN_TOTAL_WEIGHT);
+    let lbs = (KIND != DUAL_QUATERNION).then(|| {
+        // SAFETY: as this function's own contract.
+        let (acc, contrib) = unsafe { linear_sums(slots, job.linear) };
+        let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, threshold);
+        let f = _mm512_maskz_div_ps(valid, a, contrib);
+        // co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)
+        let axis = |r: usize| {
+            let m = &acc[4 * r..4 * r + 4];
+            let moved = _mm512_fmadd_ps(m[0], p[0], _mm512_fmadd_ps(m[1], p[1], _mm512_fmadd_ps(m[2], p[2], m[3])));
+            _mm512_fmadd_ps(_mm512_fnmadd_ps(p[r], contrib, moved), f, p[r])
+        };
+        [axis(0), axis(1), axis(2)]
+    });
+    let dqs = (KIND != LINEAR).then(|| {
+        // SAFETY: as this function's own contract.
+        let ([x, y, z, w], [d0, d1, d2, d3], contrib) =
+            unsafe { if job.scaled { scaled_sums(p, slots, job.pivot) } else { rigid_sums(slots, job.dq) } };
+        // Blender's order: t0 = dual w, t1..t3 = dual x, y, z.
+        let (t0, t1, t2, t3) = (d3, d0, d1, d2);
+        let mul = |a, b| _mm512_mul_ps(a, b);
+        let add = |a, b| _mm512_add_ps(a, b);
+        let sub = |a, b| _mm512_sub_ps(a, b);
+        let two = _mm512_set1_ps(2.0);
+        let (ww, xx, yy, zz) = (mul(w, w), mul(x, x), mul(y, y), mul(z, z));
+        let len2 = add(add(ww, xx), add(yy, zz));
+        let m00 = sub(add(ww, xx), add(yy, zz));
+        let m11 = sub(add(ww, yy), add(xx, zz));
+        let m22 = sub(add(ww, zz), add(xx, yy));
+        let (xy, xz, yz) = (mul(x, y), mul(x, z), mul(y, z));
+        let (wx, wy, wz) = (mul(w, x), mul(w, y), mul(w, z));
+        // 2·(−t0·x + w·t1 − t2·z + y·t3) and its two siblings.
+        let tx = mul(two, add(sub(mul(w, t1), mul(t0, x)), sub(mul(y, t3), mul(t2, z))));
+        let ty = mul(two, add(sub(mul(t1, z), mul(t0, y)), sub(mul(w, t2), mul(x, t3))));
+        let tz = mul(two, add(sub(mul(x, t2), mul(t0, z)), sub(mul(w, t3), mul(t1, y))));
+        let row = |a: __m512, b: __m512, c: __m512, t: __m512| {
+            _mm512_fmadd_ps(a, p[0], _mm512_fmadd_ps(b, p[1], _mm512_fmadd_ps(c, p[2], t)))
+        };
+        let n = [
+            row(m00, mul(two, sub(xy, wz)), mul(two, add(xz, wy)), tx),
+            row(mul(two, add(xy, wz)), m11, mul(two, sub(yz, wx)), ty),
+            row(mul(two, sub(xz, wy)), mul(two, add(yz, wx)), m22, tz),
+        ];
+        let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, threshold) & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
+        let f = _mm512_maskz_div_ps(valid, a, len2);
+        let keep = _mm512_mask_sub_ps(one, valid, one, a);
+        // co + a·(n/|q|² − co) = n·(a/|q|²) + co·(1 − a)
+        core::array::from_fn::<__m512, 3, _>(|k| _mm512_fmadd_ps(n[k], f, mul(p[k], keep)))
+    });
+    let moved = match (lbs, dqs) {
+        (Some(l), Some(d)) => {
+            let mut alpha = _mm512_set1_ps(job.blend_factor);
+            if let Some(amount) = blend_amount {
+                alpha = _mm512_mul_ps(alpha, unsafe { _mm512_loadu_ps(amount.as_ptr()) });
+            }
+            core::array::from_fn(|k| _mm512_fmadd_ps(alpha, _mm512_sub_ps(d[k], l[k]), l[k]))
+        }
+        (Some(l), None) => l,
+        (None, Some(d)) => d,
+        (None, None) => p,
+    };
+    let mut r = match job.postmat {
         Some(m) => Affine::new(m).apply(moved),
         None => moved,
     };

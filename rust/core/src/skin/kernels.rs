@@ -11,7 +11,7 @@ use glam::{Affine3A, Mat4, Vec4};
 use rayon::prelude::*;
 
 use super::influences::{Slot, LANES};
-use super::pose::{AffineRows, DqBone, PivotBone};
+use super::pose::{DqBone, LinearBone, PivotBone};
 use super::{Influences, Pose, MIN_TOTAL_WEIGHT};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -132,9 +132,9 @@ fn chunk<const ISA: u8>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
     }
 }
 
-const LINEAR: u8 = 0;
-const DUAL_QUATERNION: u8 = 1;
-const BLEND: u8 = 2;
+pub(super) const LINEAR: u8 = 0;
+pub(super) const DUAL_QUATERNION: u8 = 1;
+pub(super) const BLEND: u8 = 2;
 
 type Lanes = [f32; LANES];
 const ZERO: Lanes = [0.0; LANES];
@@ -185,31 +185,47 @@ struct Batch<'a> {
 
 /// Skins vertices `start..start + out.len()` batch by batch.
 #[inline(always)]
-fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
-    job: &Job<'_>,
+fn batches<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
+    job: &Job<'a>,
     start: usize,
     out: &mut [[f32; 3]],
 ) {
     let premat = job.premat.map(Affine3A::from_mat4);
     let postmat = job.postmat.map(Affine3A::from_mat4);
     let pose = job.pose;
+    #[cfg(target_arch = "x86_64")]
+    let simd_job = (ISA == ISA_AVX512).then(|| super::avx512::BatchJob {
+        linear: &pose.linear,
+        dq: &pose.dq,
+        pivot: &pose.pivot,
+        scaled: SCALED,
+        premat: premat.as_ref(),
+        postmat: postmat.as_ref(),
+        blend_factor: job.blend_factor,
+    });
     for (k, out) in out.chunks_mut(LANES).enumerate() {
         let first = start + k * LANES;
         let n = out.len();
         #[cfg(target_arch = "x86_64")]
-        if ISA == ISA_AVX512 && KIND == DUAL_QUATERNION && n == LANES {
-            let mask = job.mask.map(|m| m[first..first + LANES].try_into().expect("a full batch"));
-            let positions = job.positions[first..first + LANES].try_into().expect("a full batch");
-            let out = out.try_into().expect("a full batch");
-            let slots = job.influences.batch(first / LANES);
-            // SAFETY: this copy only runs where AVX-512F, AVX2 and FMA were detected; bone indices
-            // were validated against the pose's bone count.
-            unsafe {
-                super::avx512::dual_quaternion_batch(
-                    positions, out, slots, &pose.dq, &pose.pivot, SCALED, premat.as_ref(), postmat.as_ref(), mask,
-                )
-            };
-            continue;
+        if let (ISA_AVX512, Some(simd_job)) = (ISA, &simd_job) {
+            if n == LANES {
+                let full = |a: &'a [f32]| -> &'a [f32; LANES] { a[first..first + LANES].try_into().expect("a full batch") };
+                let positions = job.positions[first..first + LANES].try_into().expect("a full batch");
+                let slots = job.influences.batch(first / LANES);
+                // SAFETY: this copy only runs where AVX-512F, AVX2 and FMA were detected; bone
+                // indices were validated against the pose's bone count.
+                unsafe {
+                    super::avx512::batch::<KIND>(
+                        simd_job,
+                        positions,
+                        out.try_into().expect("a full batch"),
+                        slots,
+                        job.mask.map(full),
+                        job.blend_amount.map(full),
+                    )
+                };
+                continue;
+            }
         }
         let original = load_points::<ISA>(&job.positions[first..first + n]);
         let mut strength: Lanes = [1.0; LANES];
@@ -321,7 +337,7 @@ fn bone<T>(table: &[T], index: u32) -> &T {
 /// Lane by lane with 4-wide rows: LBS has no serial dependency between influences, so this keeps
 /// the accumulators in registers.
 #[inline(always)]
-fn linear<const ISA: u8>(co: &Points, slots: &[Slot], linear: &[AffineRows], strength: &Lanes) -> Points {
+fn linear<const ISA: u8>(co: &Points, slots: &[Slot], linear: &[LinearBone], strength: &Lanes) -> Points {
     let mut r = *co;
     for l in 0..LANES {
         let mut acc = [Vec4::ZERO; 3];
@@ -330,7 +346,7 @@ fn linear<const ISA: u8>(co: &Points, slots: &[Slot], linear: &[AffineRows], str
             let m = bone(linear, slot.bones[l]);
             let w = slot.weights[l];
             let ws = Vec4::splat(w);
-            for (a, row) in acc.iter_mut().zip(&m.rows) {
+            for (a, row) in acc.iter_mut().zip(&m.matrix.rows) {
                 *a = if ISA >= ISA_AVX2 { row.mul_add(ws, *a) } else { *row * ws + *a };
             }
             contrib += w;

@@ -25,6 +25,14 @@ impl AffineRows {
     }
 }
 
+/// A bone's deform matrix for LBS, padded to one 64-byte line so that SIMD code can load any
+/// 8-float window of it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct LinearBone {
+    pub matrix: AffineRows,
+}
+
 /// A bone as Blender's Preserve Volume sees it: the unit rotation quaternion `real` (x, y, z, w)
 /// of its rigid part and the dual part `½·(0, t)·real` of its rigid translation.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,7 +57,7 @@ pub(crate) struct PivotBone {
 /// Per-frame bone data for all skinning methods.
 #[derive(Clone, Debug)]
 pub struct Pose {
-    pub(crate) linear: Vec<AffineRows>,
+    pub(crate) linear: Vec<LinearBone>,
     pub(crate) dq: Vec<DqBone>,
     pub(crate) pivot: Vec<PivotBone>,
     scaled: Vec<bool>,
@@ -71,7 +79,7 @@ impl Pose {
         for (bone, m) in deform.iter().enumerate() {
             check_affine("deform", bone, m)?;
         }
-        let linear = deform.iter().map(AffineRows::from_mat4).collect();
+        let linear = deform.iter().map(|m| LinearBone { matrix: AffineRows::from_mat4(m) }).collect();
         let (mut dq, mut pivot, mut scaled) = (Vec::new(), Vec::new(), Vec::new());
         if let Some(rest) = rest {
             if rest.len() != deform.len() {

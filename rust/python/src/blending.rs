@@ -4,7 +4,7 @@
 
 use dqskin_core::glam::Quat;
 use dqskin_core::{BlendError, DualQuat, HierarchyError, Squad};
-use numpy::{PyArray1, PyArrayMethods};
+use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -33,6 +33,14 @@ enum Params {
 }
 
 fn params(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Params> {
+    // Only a plain number or a 0-d array is one parameter: numpy would also let a one-element
+    // array pass as a float, but that must give a (1, width) result.
+    let is_array = obj.cast::<numpy::PyUntypedArray>().is_ok_and(|a| a.ndim() > 0);
+    let is_sequence = obj.cast::<pyo3::types::PySequence>().is_ok();
+    if is_array || is_sequence {
+        let (v, _) = arrays::small(obj, name, &[None], &["T"])?;
+        return Ok(Params::Many(v));
+    }
     if let Ok(t) = obj.extract::<f64>() {
         if !t.is_finite() {
             return Err(PyValueError::new_err(format!("{name} must be finite")));
@@ -106,12 +114,14 @@ fn dib<'py>(
     transforms: &Bound<'py, PyAny>,
     weights: &Bound<'py, PyAny>,
     precision: f32,
-    max_iterations: u32,
+    max_iterations: i64,
 ) -> PyResult<(Bound<'py, PyArray1<f32>>, u32, bool)> {
     guard(|| {
         if !(precision >= 0.0) || !precision.is_finite() {
             return Err(PyValueError::new_err("precision must be a finite number ≥ 0"));
         }
+        let max_iterations = u32::try_from(max_iterations)
+            .map_err(|_| PyValueError::new_err("max_iterations must be between 0 and 2^32-1"))?;
         let qs = dq_list(transforms, "transforms")?;
         let (w, _) = arrays::small(weights, "weights", &[None], &["N"])?;
         let r = dqskin_core::dib(&qs, &w, precision, max_iterations).map_err(blend_error)?;

@@ -7,6 +7,9 @@ use proptest::prelude::*;
 
 /// The DIB precision used in these tests.
 const PRECISION: f32 = 1e-5;
+/// f32 round-off of a tangent-space mean of a few transforms within 5 units (log/exp of unit
+/// dual quaternions are accurate to a few ulps of their magnitude, ~5·1.2e-7 each).
+const ROUND_OFF: f32 = 5e-6;
 
 fn weights(n: usize) -> impl Strategy<Value = Vec<f32>> {
     vec(0.05f32..1.0, n)
@@ -90,10 +93,13 @@ proptest! {
         let w = &seed[..qs.len()];
         let r = dib(&qs, w, PRECISION, 50).unwrap();
         prop_assert!(r.converged, "residual {} after {} iterations", r.residual, r.iterations);
+        // Recomputed independently (f32 weights, our own normalization), the tangent-space mean
+        // at the result is zero to the precision, plus f32 round-off in the logarithms.
         let total: f32 = w.iter().sum();
         let units: Vec<_> = qs.iter().map(|q| q.normalize_or_identity()).collect();
         let normalized: Vec<_> = w.iter().map(|x| x / total).collect();
-        prop_assert!(tangent_mean(&r.blend, &units, &normalized).tangent_length() < PRECISION);
+        let mean = tangent_mean(&r.blend, &units, &normalized).tangent_length();
+        prop_assert!(mean < PRECISION + ROUND_OFF, "tangent mean {mean}");
     }
 
     #[test]

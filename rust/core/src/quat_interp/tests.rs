@@ -12,8 +12,11 @@ fn angular_velocity(a: Quat, b: Quat, dt: f32) -> Vec3 {
     Vec3::new(l.x, l.y, l.z) * (2.0 / dt)
 }
 
+/// Rotation angle from `a` to `b`, from the relative quaternion with atan2 (acos of the dot
+/// product loses precision in f32 for small angles).
 fn angle_between(a: Quat, b: Quat) -> f32 {
-    2.0 * a.dot(b).abs().min(1.0).acos()
+    let r = a.conjugate() * b;
+    2.0 * Vec3::new(r.x, r.y, r.z).length().atan2(r.w.abs())
 }
 
 proptest! {

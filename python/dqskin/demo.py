@@ -25,6 +25,7 @@ def run(angles_deg: list[float], rings: int, segments: int) -> list[dict]:
     cyl = dqskin.TwistCylinder(rings=rings, segments=segments)
     rest_positions = cyl.positions
     triangles = cyl.triangles
+    influences, rest = cyl.influences, cyl.rest
     middle = cyl.ring(cyl.rings // 2)
     rest_volume = dqskin.mesh_volume(rest_positions, triangles)
     rest_area = dqskin.polygon_area(rest_positions[middle])
@@ -34,7 +35,7 @@ def run(angles_deg: list[float], rings: int, segments: int) -> list[dict]:
         deform = cyl.twist(math.radians(angle))
         row = {"twist_deg": angle}
         for name, extra in METHODS:
-            dqskin.skin(rest_positions, cyl.influences, deform, cyl.rest, method=name, out=out, **extra)
+            dqskin.skin(rest_positions, influences, deform, rest, method=name, out=out, **extra)
             row[name] = {
                 "volume": dqskin.mesh_volume(out, triangles) / rest_volume,
                 "middle_area": dqskin.polygon_area(out[middle]) / rest_area,
@@ -48,16 +49,16 @@ def timing(vertices: int) -> dict[str, float]:
     segments = 256
     rings = max(2, vertices // segments)
     cyl = dqskin.TwistCylinder(rings=rings, segments=segments)
-    positions = cyl.positions
+    positions, influences, rest = cyl.positions, cyl.influences, cyl.rest
     deform = cyl.twist(math.radians(120))
     out = np.empty_like(positions)
     result = {"vertices": float(len(positions))}
     for name, extra in METHODS:
-        dqskin.skin(positions, cyl.influences, deform, cyl.rest, method=name, out=out, **extra)
+        dqskin.skin(positions, influences, deform, rest, method=name, out=out, **extra)
         runs = []
         for _ in range(7):
             start = time.perf_counter()
-            dqskin.skin(positions, cyl.influences, deform, cyl.rest, method=name, out=out, **extra)
+            dqskin.skin(positions, influences, deform, rest, method=name, out=out, **extra)
             runs.append(time.perf_counter() - start)
         result[name] = sorted(runs)[len(runs) // 2]
     return result

@@ -46,17 +46,17 @@ fn as_numpy<'a, 'py>(obj: &'a Bound<'py, PyAny>, name: &str, want: &str) -> PyRe
     })
 }
 
-/// A C-contiguous numpy array of `T` with the given shape, borrowed read-only (no copy).
-pub fn readonly<'py, T: Element>(
-    obj: &Bound<'py, PyAny>,
+/// `obj` as a numpy array of `T` with the given shape, C-contiguous, or an error that says
+/// which of these it is not.
+fn checked<'a, 'py, T: Element>(
+    obj: &'a Bound<'py, PyAny>,
     name: &str,
     shape: Shape<'_>,
     names: &[&str],
-) -> PyResult<PyReadonlyArrayDyn<'py, T>> {
+) -> PyResult<&'a Bound<'py, PyArrayDyn<T>>> {
     let want = std::any::type_name::<T>().replace("f32", "float32").replace("u32", "uint32");
     let arr = as_numpy(obj, name, &want)?;
-    let py = obj.py();
-    if !arr.dtype().is_equiv_to(&dtype::<T>(py)) {
+    if !arr.dtype().is_equiv_to(&dtype::<T>(obj.py())) {
         return Err(PyTypeError::new_err(format!(
             "{name} must have dtype {want}, got {} (convert with np.asarray({name}, dtype=np.{want}))",
             arr.dtype()
@@ -68,8 +68,17 @@ pub fn readonly<'py, T: Element>(
             "{name} must be C-contiguous (use np.ascontiguousarray({name}))"
         )));
     }
-    let typed = obj.cast::<PyArrayDyn<T>>()?;
-    typed.try_readonly().map_err(|_| {
+    Ok(obj.cast::<PyArrayDyn<T>>()?)
+}
+
+/// A C-contiguous numpy array of `T` with the given shape, borrowed read-only (no copy).
+pub fn readonly<'py, T: Element>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+    shape: Shape<'_>,
+    names: &[&str],
+) -> PyResult<PyReadonlyArrayDyn<'py, T>> {
+    checked::<T>(obj, name, shape, names)?.try_readonly().map_err(|_| {
         PyValueError::new_err(format!("{name} overlaps an array that is written by this call (out)"))
     })
 }
@@ -81,17 +90,7 @@ pub fn readwrite<'py, T: Element>(
     shape: Shape<'_>,
     names: &[&str],
 ) -> PyResult<PyReadwriteArrayDyn<'py, T>> {
-    let want = std::any::type_name::<T>().replace("f32", "float32");
-    let arr = as_numpy(obj, name, &want)?;
-    if !arr.dtype().is_equiv_to(&dtype::<T>(obj.py())) {
-        return Err(PyTypeError::new_err(format!("{name} must have dtype {want}, got {}", arr.dtype())));
-    }
-    check_shape(name, arr.shape(), shape, names)?;
-    if !arr.is_c_contiguous() {
-        return Err(PyValueError::new_err(format!("{name} must be C-contiguous")));
-    }
-    let typed = obj.cast::<PyArrayDyn<T>>()?;
-    typed.try_readwrite().map_err(|e| match e {
+    checked::<T>(obj, name, shape, names)?.try_readwrite().map_err(|e| match e {
         numpy::BorrowError::NotWriteable => PyValueError::new_err(format!("{name} is read-only")),
         _ => PyValueError::new_err(format!(
             "{name} must not be (or overlap) one of the input arrays; pass a separate buffer"

@@ -6,9 +6,9 @@ PY := $(VENV)/bin/python
 STAMPS := .stamps
 RUST_SOURCES := $(shell find rust bench -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: setup build test test-rust test-python demo bench clean
+.PHONY: setup build addon test test-rust test-python demo bench clean
 
-setup: $(STAMPS)/deps $(STAMPS)/module
+setup: $(STAMPS)/deps $(STAMPS)/module $(STAMPS)/addon
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -21,6 +21,19 @@ $(STAMPS)/deps: requirements-dev.txt | $(PY)
 $(STAMPS)/module: $(STAMPS)/deps $(RUST_SOURCES) python/dqskin/__init__.py
 	VIRTUAL_ENV=$(abspath $(VENV)) $(VENV)/bin/maturin develop --release --quiet
 	@mkdir -p $(STAMPS) && touch $@
+
+# The Blender extension: the installable zip in dist/ (validated by Blender's own tool), then
+# installed and enabled in the repo's Blender user folder, .blender_user/, which the Blender
+# tests use through BLENDER_USER_RESOURCES, as users' scripts do.
+ADDON_SOURCES := $(shell find addon -type f -not -path '*/__pycache__/*')
+$(STAMPS)/addon: $(STAMPS)/module $(ADDON_SOURCES)
+	rm -rf target/wheels
+	VIRTUAL_ENV=$(abspath $(VENV)) $(VENV)/bin/maturin build --release --quiet --out target/wheels
+	$(PY) addon/build.py target/wheels/dqskin-*.whl --out dist
+	$(PY) addon/install.py $$(ls dist/dq_skin-*.zip) .blender_user
+	@mkdir -p $(STAMPS) && touch $@
+
+addon: $(STAMPS)/addon
 
 build: setup
 

@@ -1,0 +1,91 @@
+"""Builds the installable DQ Skin extension zip into dist/ and validates it with Blender's own tool.
+
+The compiled `dqskin` package (from the maturin wheel given on the command line) is bundled as a
+sub-package, `dq_skin.dqskin`, so it cannot collide with anything in Blender's shared wheel
+folder. Usage: python addon/build.py WHEEL [--out dist]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+SOURCE = ROOT / "addon" / "dq_skin"
+# What of the wheel's `dqskin/` package goes into the extension.
+BUNDLED = ("__init__.py", "_dqskin.pyi", "py.typed")
+
+
+def blender_ext() -> Path:
+    """Blender's extension command line tool, shipped in the bpy wheel."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("bpy")
+    if spec is None or spec.origin is None:
+        raise SystemExit("the bpy wheel is not installed (run make setup)")
+    base = Path(spec.origin).parent
+    found = sorted(base.glob("*/scripts/addons_core/bl_pkg/cli/blender_ext.py"))
+    if not found:
+        raise SystemExit("blender_ext.py not found in the bpy wheel")
+    return found[-1]
+
+
+def platform_of(wheel: Path) -> str:
+    tag = wheel.name.rsplit("-", 1)[-1].removesuffix(".whl")
+    if "linux" in tag and "x86_64" in tag:
+        return "linux-x64"
+    if "macosx" in tag:
+        return "macos-arm64" if "arm64" in tag else "macos-x64"
+    if "win_amd64" in tag:
+        return "windows-x64"
+    raise SystemExit(f"cannot tell the Blender platform of {wheel.name}")
+
+
+def stage(wheel: Path, into: Path) -> None:
+    shutil.copytree(SOURCE, into, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    native = into / "dqskin"
+    native.mkdir()
+    with zipfile.ZipFile(wheel) as z:
+        for name in z.namelist():
+            parts = name.split("/")
+            if len(parts) == 2 and parts[0] == "dqskin" and (parts[1] in BUNDLED or parts[1].startswith("_dqskin.")):
+                (native / parts[1]).write_bytes(z.read(name))
+    if not any(native.glob("_dqskin.*.so")) and not any(native.glob("_dqskin*.pyd")):
+        raise SystemExit(f"{wheel} has no compiled dqskin module")
+    manifest = into / "blender_manifest.toml"
+    text = manifest.read_text()
+    lines = [f'platforms = ["{platform_of(wheel)}"]' if line.startswith("platforms") else line for line in text.splitlines()]
+    manifest.write_text("\n".join(lines) + "\n")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("wheel", type=Path)
+    parser.add_argument("--out", type=Path, default=ROOT / "dist")
+    args = parser.parse_args()
+    tool = blender_ext()
+    args.out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        staged = Path(tmp) / "dq_skin"
+        stage(args.wheel, staged)
+        for old in args.out.glob("dq_skin-*.zip"):
+            old.unlink()
+        subprocess.run(
+            [sys.executable, str(tool), "build", "--source-dir", str(staged), "--output-dir", str(args.out)],
+            check=True,
+        )
+    zips = sorted(args.out.glob("dq_skin-*.zip"))
+    if len(zips) != 1:
+        raise SystemExit(f"expected one extension zip in {args.out}, found {zips}")
+    subprocess.run([sys.executable, str(tool), "validate", str(zips[0])], check=True)
+    print(zips[0])
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

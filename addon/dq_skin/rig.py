@@ -1,0 +1,148 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Reads what Blender's Armature modifier uses from Blender data, as arrays for `dqskin`.
+
+Mirrors `armature_deform.cc`: vertex groups are mapped to pose bones by name, and groups with no
+bone or whose bone does not deform are dropped; a vertex's remaining groups keep their stored
+order (dual quaternion skinning chooses signs in that order); bone matrices are
+`PoseBone.matrix_channel` (posed times inverse rest, armature space) and `Bone.matrix_local`;
+`postmat = inverse(object world) · armature world` and `premat = inverse(postmat)`, computed the
+way Blender does (a double inverse).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import dqskin
+
+
+@dataclass
+class Binding:
+    """What does not change from frame to frame: the influences and the bones they refer to."""
+
+    influences: dqskin.Influences
+    bone_names: list[str]
+    """Deforming pose bones, in the order their indices in `influences` refer to."""
+    bone_indices: np.ndarray
+    """Index of each of those bones in `armature.pose.bones`."""
+    mask: np.ndarray | None
+    """Per-vertex strength from the modifier's vertex group (inverted if asked), or None."""
+    vertex_count: int
+
+
+def deforming_bones(armature) -> list:
+    """Pose bones whose bone has Deform on, in `pose.bones` order."""
+    return [pb for pb in armature.pose.bones if pb.bone.use_deform]
+
+
+def bind(mesh_object, armature, mask_group: str = "", invert_mask: bool = False) -> Binding:
+    """Influences of `mesh_object`'s vertex groups on `armature`'s deforming bones."""
+    mesh = mesh_object.data
+    pose_bones = armature.pose.bones
+    index_of = {pb.name: i for i, pb in enumerate(pose_bones)}
+    # Vertex group index -> our bone index, for groups naming a deforming bone.
+    group_to_bone: dict[int, int] = {}
+    bone_names: list[str] = []
+    bone_indices: list[int] = []
+    for group in mesh_object.vertex_groups:
+        pb = pose_bones.get(group.name)
+        if pb is None or not pb.bone.use_deform:
+            continue
+        group_to_bone[group.index] = len(bone_names)
+        bone_names.append(pb.name)
+        bone_indices.append(index_of[pb.name])
+
+    vertex_count = len(mesh.vertices)
+    offsets = np.zeros(vertex_count + 1, np.int64)
+    bones: list[int] = []
+    weights: list[float] = []
+    mask_index = mesh_object.vertex_groups.find(mask_group) if mask_group else -1
+    # Outside the mask group a vertex's weight in it is 0. Blender applies the mask only to
+    # meshes that have vertex weights at all.
+    mask = np.zeros(vertex_count, np.float32) if mask_index >= 0 else None
+    any_weights = False
+    for v in mesh.vertices:
+        for g in v.groups:
+            any_weights = True
+            b = group_to_bone.get(g.group)
+            if b is not None:
+                bones.append(b)
+                weights.append(g.weight)
+            if g.group == mask_index:
+                mask[v.index] = g.weight
+        offsets[v.index + 1] = len(bones)
+    if mask is not None:
+        if not any_weights:
+            mask = None
+        elif invert_mask:
+            mask = (1.0 - mask).astype(np.float32)
+    influences = dqskin.Influences(
+        offsets,
+        np.asarray(bones, np.int64),
+        np.asarray(weights, np.float32),
+        len(bone_names),
+    )
+    return Binding(influences, bone_names, np.asarray(bone_indices, np.int64), mask, vertex_count)
+
+
+def _pose_matrices(collection, prop: str) -> np.ndarray:
+    """`(N, 4, 4)` row-major float32 from a collection's 4×4 matrix property (stored by columns)."""
+    flat = np.empty(len(collection) * 16, np.float32)
+    collection.foreach_get(prop, flat)
+    return np.ascontiguousarray(flat.reshape(-1, 4, 4).transpose(0, 2, 1))
+
+
+def bone_matrices(armature, binding: Binding) -> tuple[np.ndarray, np.ndarray]:
+    """`(deform, rest)` matrices of the bound bones for the current pose."""
+    deform = _pose_matrices(armature.pose.bones, "matrix_channel")[binding.bone_indices]
+    rest = _pose_matrices(armature.data.bones, "matrix_local")
+    # data.bones and pose.bones share their order.
+    rest = rest[binding.bone_indices]
+    return np.ascontiguousarray(deform), np.ascontiguousarray(rest)
+
+
+def spaces(mesh_object, armature) -> tuple[np.ndarray, np.ndarray]:
+    """`(premat, postmat)`: mesh space to armature space and back, as Blender computes them."""
+    obmat = np.linalg.inv(np.array(mesh_object.matrix_world, np.float32))
+    postmat = (obmat @ np.array(armature.matrix_world, np.float32)).astype(np.float32)
+    premat = np.linalg.inv(postmat).astype(np.float32)
+    return premat, postmat
+
+
+def skin(
+    binding: Binding,
+    mesh_object,
+    armature,
+    positions: np.ndarray,
+    method: str,
+    *,
+    blend: np.ndarray | None = None,
+    blend_factor: float = 1.0,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """Skins `positions` (the coordinates that reach the modifier, `(V, 3)` float32) for the
+    armature's current pose; returns `out`."""
+    deform, rest = bone_matrices(armature, binding)
+    premat, postmat = spaces(mesh_object, armature)
+    return dqskin.skin(
+        positions,
+        binding.influences,
+        deform,
+        rest,
+        method=method,
+        blend=blend,
+        blend_factor=blend_factor,
+        premat=premat,
+        postmat=postmat,
+        mask=binding.mask,
+        out=out,
+    )
+
+
+def mesh_positions(mesh) -> np.ndarray:
+    """A mesh's vertex positions as `(V, 3)` float32 (the fast attribute path)."""
+    flat = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.attributes["position"].data.foreach_get("vector", flat)
+    return flat.reshape(-1, 3)

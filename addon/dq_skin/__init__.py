@@ -1,16 +1,25 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """DQ Skin: dual quaternion skinning for Blender, exact against the Armature modifier.
 
-Blender glue only: `rig` reads Blender data into arrays for the bundled `dqskin` module (the Rust
-core), which does all the math.
+Blender glue only: Blender data is read into arrays for the bundled `dqskin` module (the Rust
+core), which does all the math. The modifier is a Geometry Nodes modifier (see `nodes`) whose
+result the handlers (see `handlers`) keep current.
 """
 
-from . import rig  # noqa: F401  (imported so that a broken bundle fails at enable time)
+import bpy
+
+from . import handlers, operators, rig, ui  # noqa: F401
+
+CLASSES = (*operators.CLASSES, *ui.CLASSES)
 
 
 def register():
-    pass
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    handlers.register()
 
 
 def unregister():
-    pass
+    handlers.unregister()
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -87,6 +87,15 @@ def bind(mesh_object, armature, mask_group: str = "", invert_mask: bool = False)
     return Binding(influences, bone_names, np.asarray(bone_indices, np.int64), mask, vertex_count)
 
 
+def bind_none(mesh_object) -> Binding:
+    """No influences at all (vertex groups off): every vertex stays where it is."""
+    count = len(mesh_object.data.vertices)
+    influences = dqskin.Influences(
+        np.zeros(count + 1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float32), 0
+    )
+    return Binding(influences, [], np.zeros(0, np.int64), None, count)
+
+
 def _pose_matrices(collection, prop: str) -> np.ndarray:
     """`(N, 4, 4)` row-major float32 from a collection's 4×4 matrix property (stored by columns)."""
     flat = np.empty(len(collection) * 16, np.float32)
@@ -111,6 +120,29 @@ def spaces(mesh_object, armature) -> tuple[np.ndarray, np.ndarray]:
     return premat, postmat
 
 
+@dataclass
+class Frame:
+    """The per-frame inputs besides positions: bone matrices and spaces."""
+
+    deform: np.ndarray
+    rest: np.ndarray
+    premat: np.ndarray
+    postmat: np.ndarray
+
+    def same_as(self, other: "Frame | None") -> bool:
+        return other is not None and all(
+            np.array_equal(a, b)
+            for a, b in ((self.deform, other.deform), (self.premat, other.premat), (self.postmat, other.postmat))
+        )
+
+
+def frame(binding: Binding, mesh_object, armature) -> Frame:
+    """The current pose's matrices for `binding` (use evaluated objects inside handlers)."""
+    deform, rest = bone_matrices(armature, binding)
+    premat, postmat = spaces(mesh_object, armature)
+    return Frame(deform, rest, premat, postmat)
+
+
 def skin(
     binding: Binding,
     mesh_object,
@@ -121,21 +153,21 @@ def skin(
     blend: np.ndarray | None = None,
     blend_factor: float = 1.0,
     out: np.ndarray | None = None,
+    matrices: Frame | None = None,
 ) -> np.ndarray:
     """Skins `positions` (the coordinates that reach the modifier, `(V, 3)` float32) for the
-    armature's current pose; returns `out`."""
-    deform, rest = bone_matrices(armature, binding)
-    premat, postmat = spaces(mesh_object, armature)
+    armature's current pose (or the given `matrices`); returns `out`."""
+    f = matrices or frame(binding, mesh_object, armature)
     return dqskin.skin(
         positions,
         binding.influences,
-        deform,
-        rest,
+        f.deform,
+        f.rest,
         method=method,
-        blend=blend,
+        blend=blend if method == "blend" else None,
         blend_factor=blend_factor,
-        premat=premat,
-        postmat=postmat,
+        premat=f.premat,
+        postmat=f.postmat,
         mask=binding.mask,
         out=out,
     )

@@ -1,0 +1,162 @@
+"""The DQ Skin modifier in Blender: added by its operator, live on frame changes and posing,
+equal to the Armature modifier, and removable without a trace."""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Quaternion
+
+from scenes import rig_tube
+from test_exactness import REL_TOL, evaluated_positions, import_character
+
+
+def reference_copy(obj, preserve_volume: bool):
+    """A copy of `obj` sharing its mesh, deformed by a plain Armature modifier."""
+    copy = obj.copy()
+    bpy.context.scene.collection.objects.link(copy)
+    for m in list(copy.modifiers):
+        if m.type == "NODES":
+            copy.modifiers.remove(m)
+    arm_mod = next(m for m in copy.modifiers if m.type == "ARMATURE")
+    arm_mod.show_viewport = True
+    arm_mod.show_render = True
+    arm_mod.use_deform_preserve_volume = preserve_volume
+    return copy
+
+
+def add_dq_skin(obj, method="AUTO"):
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        result = bpy.ops.object.dq_skin_add(method=method)
+    assert result == {"FINISHED"}
+    return next(m for m in obj.modifiers if m.type == "NODES")
+
+
+def relative_deviation(a, b):
+    diag = float(np.linalg.norm(b.max(0) - b.min(0)))
+    return float(np.abs(a - b).max()) / diag
+
+
+def snapshot(obj):
+    """Everything of the object and its mesh that DQ Skin must leave as it found it."""
+    mesh = obj.data
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    return {
+        "modifiers": [(m.name, m.type, m.show_viewport, m.show_render) for m in obj.modifiers],
+        "object_props": sorted(obj.keys()),
+        "mesh_props": sorted(mesh.keys()),
+        "attributes": sorted(a.name for a in mesh.attributes),
+        "groups": [g.name for g in obj.vertex_groups],
+        "weights": [[(g.group, round(g.weight, 7)) for g in v.groups] for v in mesh.vertices],
+        "co": co.tobytes(),
+        "shape_keys": [(k.name, k.value) for k in mesh.shape_keys.key_blocks] if mesh.shape_keys else None,
+    }
+
+
+@pytest.mark.parametrize("method, preserve_volume", [("DUAL_QUATERNION", True), ("LINEAR", False)])
+def test_follows_every_frame_of_an_animation_exactly(dq_skin, assets, method, preserve_volume):
+    obj, arm_mod = import_character(assets / "CesiumMan.glb")
+    reference = reference_copy(obj, preserve_volume)
+    mod = add_dq_skin(obj, method)
+    assert not arm_mod.show_viewport and not arm_mod.show_render
+    scene = bpy.context.scene
+    rest = evaluated_positions(reference)
+    for frame in (3, 11, 24, 40, 11):  # also backwards: no state from the previous frame leaks
+        scene.frame_set(frame)
+        ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
+        dev = relative_deviation(ours, theirs)
+        assert dev <= REL_TOL, f"frame {frame}: {dev:.2e}"
+    assert np.abs(theirs - rest).max() > 1e-3  # the character really moves
+    assert dq_skin.modifier.state(obj, mod).error == ""
+
+
+def test_follows_posing_without_a_frame_change(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    reference = reference_copy(obj, True)
+    add_dq_skin(obj, "DUAL_QUATERNION")
+    bpy.context.scene.frame_set(1)
+    arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((0, 1, 0), math.radians(150))
+    bpy.context.view_layer.update()
+    dev = relative_deviation(evaluated_positions(obj), evaluated_positions(reference))
+    assert dev <= REL_TOL, dev
+
+
+def test_shape_keys_are_applied_before_skinning(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    basis = obj.shape_key_add(name="Basis")
+    key = obj.shape_key_add(name="Bulge")
+    for i, p in enumerate(key.data):
+        p.co = basis.data[i].co * 1.3
+    key.value = 0.6
+    reference = reference_copy(obj, True)
+    add_dq_skin(obj, "DUAL_QUATERNION")
+    arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 1.3)
+    bpy.context.scene.frame_set(2)
+    dev = relative_deviation(evaluated_positions(obj), evaluated_positions(reference))
+    assert dev <= REL_TOL, dev
+
+
+def test_remove_operator_restores_the_object_exactly(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    obj.vertex_groups.new(name="Mask").add([1, 2, 3], 0.5, "REPLACE")
+    arm_mod.vertex_group = "Mask"
+    before = snapshot(obj)
+    add_dq_skin(obj)
+    bpy.context.scene.frame_set(3)
+    assert snapshot(obj) != before
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_remove() == {"FINISHED"}
+    assert snapshot(obj) == before
+    assert not [o for o in bpy.data.objects if o.get("dq_skin_result")]
+
+
+def test_plain_modifier_removal_restores_the_object_too(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    before = snapshot(obj)
+    mod = add_dq_skin(obj)
+    bpy.context.scene.frame_set(3)
+    obj.modifiers.remove(mod)
+    bpy.context.view_layer.update()
+    assert snapshot(obj) == before
+
+
+def test_add_reports_a_clear_error_without_an_armature_modifier(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    obj.modifiers.remove(arm_mod)
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        with pytest.raises(RuntimeError, match="has no Armature modifier"):
+            bpy.ops.object.dq_skin_add()
+    assert not [m for m in obj.modifiers if m.type == "NODES"]
+
+
+def test_settings_come_from_the_armature_modifier(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    obj.vertex_groups.new(name="Mask")
+    arm_mod.vertex_group = "Mask"
+    arm_mod.invert_vertex_group = True
+    arm_mod.use_deform_preserve_volume = False
+    mod = add_dq_skin(obj)
+    s = dq_skin.modifier.settings(mod)
+    assert (s.armature, s.method, s.mask_group, s.invert_mask) == (arm, "linear", "Mask", True)
+    assert list(obj.modifiers).index(mod) == 0  # where the Armature modifier was
+
+
+def test_armature_in_edit_mode_is_reported_and_passes_the_mesh_through(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 1.0)
+    mod = add_dq_skin(obj)
+    bpy.context.view_layer.objects.active = arm
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.context.scene.frame_set(5)
+    st = dq_skin.modifier.state(obj, mod)
+    assert "Edit Mode" in st.error
+    rest = np.empty(len(obj.data.vertices) * 3, np.float32)
+    obj.data.vertices.foreach_get("co", rest)
+    np.testing.assert_allclose(evaluated_positions(obj), rest.reshape(-1, 3), atol=1e-6)
+    bpy.ops.object.mode_set(mode="OBJECT")

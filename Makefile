@@ -50,9 +50,11 @@ test-python: setup
 demo: setup
 	$(PY) -m dqskin.demo
 
-# Kernel throughput against a memory-bandwidth reference (a benchmark, not a test).
-bench:
+# Kernel throughput against a memory-bandwidth reference, then DQ Skin against Blender's Armature
+# modifier per frame in one Blender session (benchmarks, not tests).
+bench: setup
 	cargo run --release -p dqskin-bench -- --json target/bench-kernels.json
+	$(PY) bench/blender_bench.py --out target/bench-blender.json
 
 clean:
 	rm -rf $(STAMPS) target $(VENV)

@@ -151,6 +151,10 @@ def evaluate(obj, mod, depsgraph) -> None:
         key = _binding_key(obj, s)
         if st.binding is None or st.binding_key != key:
             st.binding = rig.bind(obj, arm, s.mask_group, s.invert_mask) if s.use_vertex_groups else rig.bind_none(obj)
+            bbones = [n for n in st.binding.bone_names if arm.data.bones[n].bbone_segments > 1]
+            if bbones:
+                st.binding = None
+                raise SkinError(f"B-Bones are not supported yet ({', '.join(bbones[:3])})")
             st.blend = _group_weights(obj, s.blend_group) if s.blend_group else None
             st.binding_key = key
         evaluated = obj.evaluated_get(depsgraph)

@@ -160,3 +160,33 @@ def test_armature_in_edit_mode_is_reported_and_passes_the_mesh_through(dq_skin):
     obj.data.vertices.foreach_get("co", rest)
     np.testing.assert_allclose(evaluated_positions(obj), rest.reshape(-1, 3), atol=1e-6)
     bpy.ops.object.mode_set(mode="OBJECT")
+
+
+def test_unsupported_b_bones_are_reported_not_silently_wrong(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    arm.data.bones["Bone1"].bbone_segments = 4
+    mod = add_dq_skin(obj)
+    bpy.context.scene.frame_set(4)
+    assert "B-Bones are not supported yet" in dq_skin.modifier.state(obj, mod).error
+
+
+def test_blend_between_linear_and_dual_quaternion(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    amount = obj.vertex_groups.new(name="Amount")
+    for v in obj.data.vertices:
+        amount.add([v.index], (v.index % 5) / 4.0, "REPLACE")
+    arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((0, 1, 0), 2.5)
+    lbs_ref = reference_copy(obj, False)
+    dqs_ref = reference_copy(obj, True)
+    mod = add_dq_skin(obj, "BLEND")
+    from bl_ext.user_default.dq_skin.operators import set_attribute, set_input
+
+    set_attribute(mod, "Blend Amount", "Amount")
+    set_input(mod, "Blend Factor", 0.8)
+    bpy.context.scene.frame_set(6)
+    lbs, dqs = evaluated_positions(lbs_ref), evaluated_positions(dqs_ref)
+    alpha = 0.8 * (np.arange(len(lbs)) % 5 / 4.0)[:, None]
+    want = (1 - alpha) * lbs + alpha * dqs
+    dev = relative_deviation(evaluated_positions(obj), want)
+    assert dev <= REL_TOL, dev
+    assert np.abs(lbs - dqs).max() > 0.05  # the two methods really differ here

@@ -49,6 +49,7 @@ test-python: setup
 
 demo: setup
 	$(PY) -m dqskin.demo
+	$(PY) addon/demo.py
 
 # Kernel throughput against a memory-bandwidth reference, then DQ Skin against Blender's Armature
 # modifier per frame in one Blender session (benchmarks, not tests).

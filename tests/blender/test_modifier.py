@@ -190,3 +190,25 @@ def test_blend_between_linear_and_dual_quaternion(dq_skin):
     dev = relative_deviation(evaluated_positions(obj), want)
     assert dev <= REL_TOL, dev
     assert np.abs(lbs - dqs).max() > 0.05  # the two methods really differ here
+
+
+def test_several_objects_keep_their_own_settings_through_save_and_load(dq_skin, tmp_path):
+    a, arm_a, _ = rig_tube()
+    b, arm_b, _ = rig_tube()
+    b.location = (3.0, 0.0, 0.0)
+    for arm in (arm_a, arm_b):
+        arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((0, 1, 0), 2.6)
+    add_dq_skin(a, "LINEAR")
+    add_dq_skin(b, "DUAL_QUATERNION")
+    names = (a.name, b.name)
+    path = tmp_path / "two.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    a, b = (bpy.data.objects[n] for n in names)
+    methods = [dq_skin.modifier.settings(next(m for m in o.modifiers if m.type == "NODES")).method for o in (a, b)]
+    assert methods == ["linear", "dual_quaternion"]
+    bpy.context.scene.frame_set(7)
+    for obj, pv in ((a, False), (b, True)):
+        reference = reference_copy(obj, pv)
+        dev = relative_deviation(evaluated_positions(obj), evaluated_positions(reference))
+        assert dev <= REL_TOL, (obj.name, dev)

@@ -41,6 +41,7 @@ class State:
     binding: rig.Binding | None = None
     binding_key: tuple = ()
     blend: np.ndarray | None = None
+    envelopes: np.ndarray | None = field(default=None, repr=False)
     status: str = ""
     error: str = ""
     seconds: float = 0.0
@@ -113,7 +114,12 @@ def _binding_key(obj, s: Settings) -> tuple:
         len(mesh.vertices),
         tuple(g.name for g in obj.vertex_groups),
         s.armature.as_pointer() if s.armature else 0,
-        tuple((b.name, b.use_deform) for b in s.armature.data.bones) if s.armature else (),
+        tuple(
+            (b.name, b.use_deform, b.use_envelope_multiply, b.head_radius, b.tail_radius, b.envelope_distance, b.envelope_weight)
+            for b in s.armature.data.bones
+        )
+        if s.armature
+        else (),
         s.mask_group,
         s.invert_mask,
         s.blend_group,
@@ -146,11 +152,10 @@ def evaluate(obj, mod, depsgraph) -> None:
             raise SkinError("No armature object set")
         if arm.mode == "EDIT" or arm.data.is_editmode:
             raise SkinError(f"Armature {arm.name} is in Edit Mode")
-        if s.use_envelopes:
-            raise SkinError("Envelopes are not supported yet")
         key = _binding_key(obj, s)
         if st.binding is None or st.binding_key != key:
-            st.binding = rig.bind(obj, arm, s.mask_group, s.invert_mask) if s.use_vertex_groups else rig.bind_none(obj)
+            st.binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups)
+            st.envelopes = rig.envelopes(arm, st.binding)
             bbones = [n for n in st.binding.bone_names if arm.data.bones[n].bbone_segments > 1]
             if bbones:
                 st.binding = None
@@ -172,7 +177,7 @@ def evaluate(obj, mod, depsgraph) -> None:
         positions = positions.reshape(-1, 3)
         arm_eval = arm.evaluated_get(depsgraph)
         matrices = rig.frame(st.binding, evaluated, arm_eval)
-        signature = (s.method, s.blend_factor)
+        signature = (s.method, s.blend_factor, s.use_envelopes)
         result = ensure_result(obj, mod)
         if (
             signature == st.last_settings
@@ -184,8 +189,15 @@ def evaluate(obj, mod, depsgraph) -> None:
             return  # the result is already this
         if st.out is None or len(st.out) != count:
             st.out = np.empty((count, 3), np.float32)
+        binding = st.binding
+        if s.use_envelopes or st.envelopes[:, 10].any():
+            # Envelopes depend on where the vertices are: this frame's influences.
+            effective = binding.influences.with_envelopes(
+                positions, st.envelopes, matrices.premat, s.use_vertex_groups, s.use_envelopes
+            )
+            binding = rig.Binding(effective, binding.bone_names, binding.bone_indices, binding.mask, binding.vertex_count)
         rig.skin(
-            st.binding,
+            binding,
             evaluated,
             arm_eval,
             positions,

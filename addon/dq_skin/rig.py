@@ -37,22 +37,27 @@ def deforming_bones(armature) -> list:
     return [pb for pb in armature.pose.bones if pb.bone.use_deform]
 
 
-def bind(mesh_object, armature, mask_group: str = "", invert_mask: bool = False) -> Binding:
-    """Influences of `mesh_object`'s vertex groups on `armature`'s deforming bones."""
+def bind(
+    mesh_object, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True
+) -> Binding:
+    """Influences of `mesh_object`'s vertex groups on `armature`'s deforming bones. The bone
+    indices run over every deforming pose bone in Blender's order (what envelopes need too);
+    zero weights are kept, since a vertex with any group mapped to a bone never uses envelopes."""
     mesh = mesh_object.data
     pose_bones = armature.pose.bones
-    index_of = {pb.name: i for i, pb in enumerate(pose_bones)}
-    # Vertex group index -> our bone index, for groups naming a deforming bone.
-    group_to_bone: dict[int, int] = {}
     bone_names: list[str] = []
     bone_indices: list[int] = []
-    for group in mesh_object.vertex_groups:
-        pb = pose_bones.get(group.name)
-        if pb is None or not pb.bone.use_deform:
-            continue
-        group_to_bone[group.index] = len(bone_names)
-        bone_names.append(pb.name)
-        bone_indices.append(index_of[pb.name])
+    for i, pb in enumerate(pose_bones):
+        if pb.bone.use_deform:
+            bone_names.append(pb.name)
+            bone_indices.append(i)
+    ours = {name: k for k, name in enumerate(bone_names)}
+    # Vertex group index -> our bone index, for groups naming a deforming bone.
+    group_to_bone: dict[int, int] = {}
+    if use_vertex_groups:
+        for group in mesh_object.vertex_groups:
+            if group.name in ours:
+                group_to_bone[group.index] = ours[group.name]
 
     vertex_count = len(mesh.vertices)
     offsets = np.zeros(vertex_count + 1, np.int64)
@@ -87,15 +92,6 @@ def bind(mesh_object, armature, mask_group: str = "", invert_mask: bool = False)
     return Binding(influences, bone_names, np.asarray(bone_indices, np.int64), mask, vertex_count)
 
 
-def bind_none(mesh_object) -> Binding:
-    """No influences at all (vertex groups off): every vertex stays where it is."""
-    count = len(mesh_object.data.vertices)
-    influences = dqskin.Influences(
-        np.zeros(count + 1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float32), 0
-    )
-    return Binding(influences, [], np.zeros(0, np.int64), None, count)
-
-
 def _pose_matrices(collection, prop: str) -> np.ndarray:
     """`(N, 4, 4)` row-major float32 from a collection's 4×4 matrix property (stored by columns)."""
     flat = np.empty(len(collection) * 16, np.float32)
@@ -118,6 +114,18 @@ def spaces(mesh_object, armature) -> tuple[np.ndarray, np.ndarray]:
     postmat = (obmat @ np.array(armature.matrix_world, np.float32)).astype(np.float32)
     premat = np.linalg.inv(postmat).astype(np.float32)
     return premat, postmat
+
+
+def envelopes(armature, binding: Binding) -> np.ndarray:
+    """`(B, 11)` float32 envelope rows of the bound bones (see `dqskin.Influences.with_envelopes`)."""
+    rows = np.empty((len(binding.bone_names), 11), np.float32)
+    for k, name in enumerate(binding.bone_names):
+        b = armature.data.bones[name]
+        rows[k, 0:3] = b.head_local
+        rows[k, 3:6] = b.tail_local
+        rows[k, 6:10] = (b.head_radius, b.tail_radius, b.envelope_distance, b.envelope_weight)
+        rows[k, 10] = 1.0 if b.use_envelope_multiply else 0.0
+    return rows
 
 
 @dataclass

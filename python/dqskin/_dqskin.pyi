@@ -131,6 +131,15 @@ class Influences:
     @staticmethod
     def from_dense(bones: IntArray, weights: F32Array, bone_count: int) -> Influences:
         """From ``(V, K)`` arrays (as glTF stores joints and weights); zero weights dropped."""
+    def with_envelopes(
+        self,
+        positions: F32Array,
+        envelopes: F32Array,
+        premat: ArrayLike | None = None,
+        use_vertex_groups: bool = True,
+        use_envelopes: bool = True,
+    ) -> Influences:
+        """This frame's influences with bone envelopes; ``envelopes`` is ``(B, 11)`` float32."""
     @property
     def vertex_count(self) -> int: ...
     @property

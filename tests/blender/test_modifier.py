@@ -212,3 +212,50 @@ def test_several_objects_keep_their_own_settings_through_save_and_load(dq_skin, 
         reference = reference_copy(obj, pv)
         dev = relative_deviation(evaluated_positions(obj), evaluated_positions(reference))
         assert dev <= REL_TOL, (obj.name, dev)
+
+
+def envelope_rig(groups: bool, multiply: bool, skip=()):
+    obj, arm, arm_mod = rig_tube(bones=3, skip=skip)
+    if not groups:
+        obj.vertex_groups.clear()
+    for i, b in enumerate(arm.data.bones):
+        b.head_radius, b.tail_radius = 0.15 + 0.05 * i, 0.25
+        b.envelope_distance = 0.6 + 0.2 * i
+        b.envelope_weight = 1.0 - 0.2 * i
+        b.use_envelope_multiply = multiply
+    arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 1.1)
+    arm.pose.bones["Bone2"].rotation_quaternion = Quaternion((0, 1, 0), 2.3)
+    return obj, arm, arm_mod
+
+
+@pytest.mark.parametrize("method, preserve_volume", [("DUAL_QUATERNION", True), ("LINEAR", False)])
+@pytest.mark.parametrize(
+    "case",
+    ["envelopes only", "envelope times vertex group", "envelopes where groups are missing"],
+)
+def test_envelopes_match_the_armature_modifier(dq_skin, case, method, preserve_volume):
+    if case == "envelopes only":
+        obj, arm, arm_mod = envelope_rig(groups=False, multiply=False)
+        arm_mod.use_vertex_groups = False
+        arm_mod.use_bone_envelopes = True
+    elif case == "envelope times vertex group":
+        obj, arm, arm_mod = envelope_rig(groups=True, multiply=True)
+        arm_mod.use_bone_envelopes = False
+    else:
+        obj, arm, arm_mod = envelope_rig(groups=True, multiply=False, skip=set(range(0, 200, 3)))
+        arm_mod.use_bone_envelopes = True
+    reference = reference_copy(obj, preserve_volume)
+    mod = add_dq_skin(obj, method)
+    bpy.context.scene.frame_set(8)
+    assert dq_skin.modifier.state(obj, mod).error == ""
+    ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
+    dev = relative_deviation(ours, theirs)
+    assert dev <= REL_TOL, dev
+    rest = rig_positions(obj)
+    assert np.abs(theirs - rest).max() > 0.05  # the envelopes really move the mesh
+
+
+def rig_positions(obj):
+    co = np.empty(len(obj.data.vertices) * 3, np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3)

@@ -74,6 +74,52 @@ impl PyInfluences {
         })
     }
 
+    /// The influences Blender's Armature modifier uses this frame, with bone envelopes.
+    ///
+    /// ``self`` holds the vertex-group influences (every group mapped to a deforming bone, zero
+    /// weights included, in stored order). ``envelopes`` is ``(B, 11)`` float32, one row per
+    /// bone in Blender's pose-bone order: head xyz, tail xyz (``Bone.head_local``,
+    /// ``tail_local``), head radius, tail radius, envelope distance, envelope weight, and 1 where
+    /// the bone multiplies its vertex group by the envelope. ``positions`` ``(V, 3)`` float32 are
+    /// the coordinates reaching the modifier, taken to armature space by ``premat``.
+    /// A vertex uses its groups (with ``use_vertex_groups`` and at least one group), else every
+    /// envelope that reaches it (with ``use_envelopes``).
+    #[pyo3(signature = (positions, envelopes, premat = None, use_vertex_groups = true, use_envelopes = true))]
+    fn with_envelopes(
+        &self,
+        positions: &Bound<'_, PyAny>,
+        envelopes: &Bound<'_, PyAny>,
+        premat: Option<&Bound<'_, PyAny>>,
+        use_vertex_groups: bool,
+        use_envelopes: bool,
+    ) -> PyResult<Self> {
+        guard(|| {
+            let py = positions.py();
+            let v = self.0.vertex_count();
+            let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
+            let env = arrays::readonly::<f32>(envelopes, "envelopes", &[Some(self.0.bone_count()), Some(11)], &["B"])?;
+            let env_data = env.as_slice()?;
+            arrays::check_finite("envelopes", env_data)?;
+            let envelopes: Vec<dqskin_core::Envelope> = env_data
+                .chunks_exact(11)
+                .map(|r| dqskin_core::Envelope {
+                    head: dqskin_core::glam::Vec3::new(r[0], r[1], r[2]),
+                    tail: dqskin_core::glam::Vec3::new(r[3], r[4], r[5]),
+                    head_radius: r[6],
+                    tail_radius: r[7],
+                    distance: r[8],
+                    weight: r[9],
+                    multiply_groups: r[10] != 0.0,
+                })
+                .collect();
+            let premat = space(premat, "premat")?;
+            let points = as_points(pos.as_slice()?);
+            py.detach(|| self.0.with_envelopes(points, premat, &envelopes, use_vertex_groups, use_envelopes))
+                .map(Self)
+                .map_err(skin_error)
+        })
+    }
+
     /// Number of vertices.
     #[getter]
     fn vertex_count(&self) -> usize {

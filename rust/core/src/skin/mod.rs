@@ -18,10 +18,12 @@
 mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod envelope;
 mod influences;
 mod kernels;
 mod pose;
 
+pub use envelope::{distance_factor, Envelope};
 pub use influences::{Influence, Influences};
 pub use pose::Pose;
 

@@ -156,10 +156,13 @@ def evaluate(obj, mod, depsgraph) -> None:
         if st.binding is None or st.binding_key != key:
             st.binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups)
             st.envelopes = rig.envelopes(arm, st.binding)
-            bbones = [n for n in st.binding.bone_names if arm.data.bones[n].bbone_segments > 1]
-            if bbones:
+            curved = [
+                n for n in st.binding.bone_names
+                if arm.data.bones[n].bbone_segments > 1 and arm.data.bones[n].bbone_mapping_mode != "STRAIGHT"
+            ]
+            if curved:
                 st.binding = None
-                raise SkinError(f"B-Bones are not supported yet ({', '.join(bbones[:3])})")
+                raise SkinError(f"Curved B-Bone mapping is not supported yet ({', '.join(curved[:3])})")
             st.blend = _group_weights(obj, s.blend_group) if s.blend_group else None
             st.binding_key = key
         evaluated = obj.evaluated_get(depsgraph)
@@ -190,12 +193,22 @@ def evaluate(obj, mod, depsgraph) -> None:
         if st.out is None or len(st.out) != count:
             st.out = np.empty((count, 3), np.float32)
         binding = st.binding
-        if s.use_envelopes or st.envelopes[:, 10].any():
-            # Envelopes depend on where the vertices are: this frame's influences.
-            effective = binding.influences.with_envelopes(
-                positions, st.envelopes, matrices.premat, s.use_vertex_groups, s.use_envelopes
+        segments = rig.bbone_segments(arm_eval, binding)
+        if s.use_envelopes or st.envelopes[:, 10].any() or segments.max(initial=0) > 1:
+            # Envelopes and B-Bone segments depend on where the vertices are: this frame's
+            # influences, over the bones followed by the B-Bones' segment joints.
+            effective = binding.influences.effective(
+                positions,
+                matrices.premat,
+                envelopes=st.envelopes,
+                use_vertex_groups=s.use_vertex_groups,
+                use_envelopes=s.use_envelopes,
+                bbone_segments=segments,
+                rest=matrices.rest,
+                lengths=rig.bone_lengths(arm_eval, binding),
             )
             binding = rig.Binding(effective, binding.bone_names, binding.bone_indices, binding.mask, binding.vertex_count)
+            matrices = rig.with_bbone_joints(matrices, arm_eval, st.binding, segments)
         rig.skin(
             binding,
             evaluated,

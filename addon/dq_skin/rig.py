@@ -128,6 +128,17 @@ def envelopes(armature, binding: Binding) -> np.ndarray:
     return rows
 
 
+def bbone_segments(armature, binding: Binding) -> np.ndarray:
+    """Segment count of each bound bone (1 for ordinary bones)."""
+    bones = armature.data.bones
+    return np.array([bones[n].bbone_segments for n in binding.bone_names], np.int64)
+
+
+def bone_lengths(armature, binding: Binding) -> np.ndarray:
+    bones = armature.data.bones
+    return np.array([bones[n].length for n in binding.bone_names], np.float32)
+
+
 @dataclass
 class Frame:
     """The per-frame inputs besides positions: bone matrices and spaces."""
@@ -149,6 +160,26 @@ def frame(binding: Binding, mesh_object, armature) -> Frame:
     deform, rest = bone_matrices(armature, binding)
     premat, postmat = spaces(mesh_object, armature)
     return Frame(deform, rest, premat, postmat)
+
+
+def with_bbone_joints(f: Frame, armature, binding: Binding, segments: np.ndarray) -> Frame:
+    """`f` with every B-Bone's segment joints appended after the bones (in bone order), read
+    from the armature's current B-Bone shape (use the evaluated armature)."""
+    deform, rest = [f.deform], [f.rest]
+    for k in np.flatnonzero(segments > 1):
+        pb = armature.pose.bones[binding.bone_names[k]]
+        n = int(segments[k])
+        pose = np.array([np.array(pb.bbone_segment_matrix(a), np.float32) for a in range(n + 1)], np.float32)
+        rest_joints = np.array([np.array(pb.bbone_segment_matrix(a, rest=True), np.float32) for a in range(n + 1)], np.float32)
+        d, r = dqskin.bbone_segment_matrices(f.deform[k], f.rest[k], pose, rest_joints)
+        deform.append(d)
+        rest.append(r)
+    return Frame(
+        np.ascontiguousarray(np.concatenate(deform), np.float32),
+        np.ascontiguousarray(np.concatenate(rest), np.float32),
+        f.premat,
+        f.postmat,
+    )
 
 
 def skin(

@@ -131,15 +131,19 @@ class Influences:
     @staticmethod
     def from_dense(bones: IntArray, weights: F32Array, bone_count: int) -> Influences:
         """From ``(V, K)`` arrays (as glTF stores joints and weights); zero weights dropped."""
-    def with_envelopes(
+    def effective(
         self,
         positions: F32Array,
-        envelopes: F32Array,
         premat: ArrayLike | None = None,
+        *,
+        envelopes: F32Array | None = None,
         use_vertex_groups: bool = True,
-        use_envelopes: bool = True,
+        use_envelopes: bool = False,
+        bbone_segments: IntArray | None = None,
+        rest: F32Array | None = None,
+        lengths: ArrayLike | None = None,
     ) -> Influences:
-        """This frame's influences with bone envelopes; ``envelopes`` is ``(B, 11)`` float32."""
+        """This frame's influences with envelopes ``(B, 11)`` and B-Bones (expanded bone list)."""
     @property
     def vertex_count(self) -> int: ...
     @property
@@ -169,6 +173,11 @@ def skin(
     out: F32Array | None = None,
 ) -> F32Array:
     """Skins ``(V, 3)`` positions exactly as Blender's Armature modifier; returns ``out``."""
+
+def bbone_segment_matrices(
+    channel: ArrayLike, rest: ArrayLike, pose_joints: ArrayLike, rest_joints: ArrayLike
+) -> tuple[F32Array, F32Array]:
+    """Deform and rest matrices ``(N+1, 4, 4)`` of a B-Bone's segment joints, as Blender builds them."""
 
 def mesh_volume(positions: F32Array, triangles: IntArray) -> float:
     """Enclosed volume of a closed, outward-oriented triangle mesh."""

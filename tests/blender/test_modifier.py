@@ -162,12 +162,13 @@ def test_armature_in_edit_mode_is_reported_and_passes_the_mesh_through(dq_skin):
     bpy.ops.object.mode_set(mode="OBJECT")
 
 
-def test_unsupported_b_bones_are_reported_not_silently_wrong(dq_skin):
+def test_curved_b_bone_mapping_is_reported_not_silently_wrong(dq_skin):
     obj, arm, arm_mod = rig_tube()
     arm.data.bones["Bone1"].bbone_segments = 4
+    arm.data.bones["Bone1"].bbone_mapping_mode = "CURVED"
     mod = add_dq_skin(obj)
     bpy.context.scene.frame_set(4)
-    assert "B-Bones are not supported yet" in dq_skin.modifier.state(obj, mod).error
+    assert "Curved B-Bone mapping is not supported yet" in dq_skin.modifier.state(obj, mod).error
 
 
 def test_blend_between_linear_and_dual_quaternion(dq_skin):
@@ -259,3 +260,30 @@ def rig_positions(obj):
     co = np.empty(len(obj.data.vertices) * 3, np.float32)
     obj.data.vertices.foreach_get("co", co)
     return co.reshape(-1, 3)
+
+
+@pytest.mark.parametrize("method, preserve_volume", [("DUAL_QUATERNION", True), ("LINEAR", False)])
+def test_b_bones_match_the_armature_modifier(dq_skin, method, preserve_volume):
+    obj, arm, arm_mod = rig_tube(rings=40, bones=3)
+    bones = arm.data.bones
+    bones["Bone1"].bbone_segments = 6
+    bones["Bone2"].bbone_segments = 3
+    bones["Bone1"].bbone_easein = 1.5
+    pbs = arm.pose.bones
+    pbs["Bone1"].bbone_curveinx = 0.4
+    pbs["Bone1"].bbone_rollout = 0.8
+    pbs["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 0.7)
+    pbs["Bone2"].rotation_quaternion = Quaternion((0, 1, 0), 1.9)
+    pbs["Bone2"].bbone_scalein = (1.3, 1.0, 0.8)
+    reference = reference_copy(obj, preserve_volume)
+    mod = add_dq_skin(obj, method)
+    bpy.context.scene.frame_set(9)
+    assert dq_skin.modifier.state(obj, mod).error == ""
+    ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
+    dev = relative_deviation(ours, theirs)
+    assert dev <= REL_TOL, dev
+    # The B-Bones really bend the mesh differently from plain bones.
+    for b in ("Bone1", "Bone2"):
+        bones[b].bbone_segments = 1
+    plain = evaluated_positions(reference)
+    assert np.abs(plain - theirs).max() > 0.01

@@ -32,4 +32,4 @@ pub use dual_quat::{DualNumber, DualQuat, NotRigid, Screw};
 pub use glam;
 pub use hierarchy::{forward_kinematics, HierarchyError};
 pub use quat_interp::{make_signs_continuous, slerp, Squad};
-pub use skin::{skin, Envelope, Influence, Influences, Method, Pose, SkinError, SkinOptions};
+pub use skin::{skin, BBone, Effective, Envelope, Influence, Influences, Method, Pose, SkinError, SkinOptions};

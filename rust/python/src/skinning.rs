@@ -2,7 +2,7 @@
 
 use dqskin_core::glam::Mat4;
 use dqskin_core::{Influences, Method, Pose, SkinError, SkinOptions};
-use numpy::{PyArray1, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
@@ -74,49 +74,89 @@ impl PyInfluences {
         })
     }
 
-    /// The influences Blender's Armature modifier uses this frame, with bone envelopes.
+    /// The influences Blender's Armature modifier uses this frame, with bone envelopes and
+    /// B-Bones.
     ///
     /// ``self`` holds the vertex-group influences (every group mapped to a deforming bone, zero
-    /// weights included, in stored order). ``envelopes`` is ``(B, 11)`` float32, one row per
-    /// bone in Blender's pose-bone order: head xyz, tail xyz (``Bone.head_local``,
-    /// ``tail_local``), head radius, tail radius, envelope distance, envelope weight, and 1 where
-    /// the bone multiplies its vertex group by the envelope. ``positions`` ``(V, 3)`` float32 are
-    /// the coordinates reaching the modifier, taken to armature space by ``premat``.
-    /// A vertex uses its groups (with ``use_vertex_groups`` and at least one group), else every
-    /// envelope that reaches it (with ``use_envelopes``).
-    #[pyo3(signature = (positions, envelopes, premat = None, use_vertex_groups = true, use_envelopes = true))]
-    fn with_envelopes(
+    /// weights included, in stored order). ``positions`` ``(V, 3)`` float32 are the coordinates
+    /// reaching the modifier, taken to armature space by ``premat``.
+    ///
+    /// - ``envelopes``: ``(B, 11)`` float32, one row per bone in Blender's pose-bone order: head
+    ///   xyz, tail xyz (``Bone.head_local``, ``tail_local``), head radius, tail radius, envelope
+    ///   distance, envelope weight, and 1 where the bone multiplies its vertex group by the
+    ///   envelope. A vertex uses its groups (with ``use_vertex_groups`` and at least one group),
+    ///   else every envelope that reaches it (with ``use_envelopes``).
+    /// - ``bbone_segments``: ``(B,)`` integers, the segment count of each bone (0 or 1 for
+    ///   ordinary bones), with ``rest`` ``(B, 4, 4)`` rest matrices and ``lengths`` ``(B,)`` bone
+    ///   lengths. The result's bone indices then run over an expanded list: the ``B`` bones, then
+    ///   for each B-Bone in order its ``segments + 1`` joints (see ``bbone_segment_matrices``).
+    #[pyo3(signature = (positions, premat = None, *, envelopes = None, use_vertex_groups = true,
+        use_envelopes = false, bbone_segments = None, rest = None, lengths = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn effective(
         &self,
         positions: &Bound<'_, PyAny>,
-        envelopes: &Bound<'_, PyAny>,
         premat: Option<&Bound<'_, PyAny>>,
+        envelopes: Option<&Bound<'_, PyAny>>,
         use_vertex_groups: bool,
         use_envelopes: bool,
+        bbone_segments: Option<&Bound<'_, PyAny>>,
+        rest: Option<&Bound<'_, PyAny>>,
+        lengths: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         guard(|| {
             let py = positions.py();
             let v = self.0.vertex_count();
+            let b = self.0.bone_count();
             let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
-            let env = arrays::readonly::<f32>(envelopes, "envelopes", &[Some(self.0.bone_count()), Some(11)], &["B"])?;
-            let env_data = env.as_slice()?;
-            arrays::check_finite("envelopes", env_data)?;
-            let envelopes: Vec<dqskin_core::Envelope> = env_data
-                .chunks_exact(11)
-                .map(|r| dqskin_core::Envelope {
-                    head: dqskin_core::glam::Vec3::new(r[0], r[1], r[2]),
-                    tail: dqskin_core::glam::Vec3::new(r[3], r[4], r[5]),
-                    head_radius: r[6],
-                    tail_radius: r[7],
-                    distance: r[8],
-                    weight: r[9],
-                    multiply_groups: r[10] != 0.0,
-                })
-                .collect();
+            let envelopes = match envelopes {
+                Some(e) if !e.is_none() => {
+                    let env = arrays::readonly::<f32>(e, "envelopes", &[Some(b), Some(11)], &["B"])?;
+                    let data = env.as_slice()?;
+                    arrays::check_finite("envelopes", data)?;
+                    Some(data.chunks_exact(11).map(envelope_row).collect::<Vec<_>>())
+                }
+                _ => None,
+            };
+            let mut expanded = b;
+            let bbones: Vec<Option<dqskin_core::BBone>> = match bbone_segments {
+                Some(seg) if !seg.is_none() => {
+                    let segments = arrays::indices(seg, "bbone_segments")?;
+                    if segments.len() != b {
+                        return Err(PyValueError::new_err(format!("bbone_segments must have {b} entries, got {}", segments.len())));
+                    }
+                    let rest = rest.ok_or_else(|| PyValueError::new_err("rest is required with bbone_segments"))?;
+                    let rest = matrices(rest, "rest", Some(b))?;
+                    let lengths = lengths.ok_or_else(|| PyValueError::new_err("lengths is required with bbone_segments"))?;
+                    let (lengths, _) = arrays::small(lengths, "lengths", &[Some(b)], &["B"])?;
+                    let mut out = Vec::with_capacity(b);
+                    for (i, &n) in segments.iter().enumerate() {
+                        if n > 1 {
+                            out.push(Some(dqskin_core::BBone {
+                                first: expanded as u32,
+                                segments: n,
+                                inverse_rest: rest[i].inverse(),
+                                length: lengths[i],
+                            }));
+                            expanded += n as usize + 1;
+                        } else {
+                            out.push(None);
+                        }
+                    }
+                    out
+                }
+                _ => Vec::new(),
+            };
             let premat = space(premat, "premat")?;
+            let what = dqskin_core::Effective {
+                envelopes: envelopes.as_deref(),
+                use_vertex_groups,
+                use_envelopes,
+                bbones: &bbones,
+                expanded_bone_count: expanded,
+            };
             let points = as_points(pos.as_slice()?);
-            py.detach(|| self.0.with_envelopes(points, premat, &envelopes, use_vertex_groups, use_envelopes))
-                .map(Self)
-                .map_err(skin_error)
+            py.detach(|| self.0.effective(points, premat, &what)).map(Self).map_err(skin_error)
         })
     }
 
@@ -172,6 +212,50 @@ impl PyInfluences {
             self.0.max_per_vertex()
         )
     }
+}
+
+fn envelope_row(r: &[f32]) -> dqskin_core::Envelope {
+    dqskin_core::Envelope {
+        head: dqskin_core::glam::Vec3::new(r[0], r[1], r[2]),
+        tail: dqskin_core::glam::Vec3::new(r[3], r[4], r[5]),
+        head_radius: r[6],
+        tail_radius: r[7],
+        distance: r[8],
+        weight: r[9],
+        multiply_groups: r[10] != 0.0,
+    }
+}
+
+/// The deform and rest matrices of a B-Bone's segment joints, as Blender builds them for the
+/// Armature modifier: ``deform_a = channel · rest · P_a · R_a⁻¹ · rest⁻¹`` and rest
+/// ``normalize(rest · R_a)``, from the bone's ``matrix_channel`` and ``matrix_local`` and its
+/// joints' ``bbone_segment_matrix(a)`` / ``bbone_segment_matrix(a, rest=True)`` (``(N+1, 4, 4)``
+/// each). Returns ``(deform, rest)``, both ``(N+1, 4, 4)`` float32.
+#[pyfunction]
+fn bbone_segment_matrices<'py>(
+    channel: &Bound<'py, PyAny>,
+    rest: &Bound<'py, PyAny>,
+    pose_joints: &Bound<'py, PyAny>,
+    rest_joints: &Bound<'py, PyAny>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    guard(|| {
+        let py = channel.py();
+        let (c, _) = arrays::small(channel, "channel", &[Some(4), Some(4)], &[])?;
+        let (r, _) = arrays::small(rest, "rest", &[Some(4), Some(4)], &[])?;
+        let (p, pd) = arrays::small(pose_joints, "pose_joints", &[None, Some(4), Some(4)], &["N+1"])?;
+        let (rj, rd) = arrays::small(rest_joints, "rest_joints", &[None, Some(4), Some(4)], &["N+1"])?;
+        if pd[0] != rd[0] {
+            return Err(PyValueError::new_err(format!("pose_joints has {} matrices but rest_joints has {}", pd[0], rd[0])));
+        }
+        let to = |d: &[f32]| d.chunks_exact(16).map(mat4_from_row_major).collect::<Vec<_>>();
+        let m = dqskin_core::skin::bbone_segment_matrices(mat4_from_row_major(&c), mat4_from_row_major(&r), &to(&p), &to(&rj));
+        let n = m.len();
+        let flat = |f: fn(&(Mat4, Mat4)) -> Mat4| -> Vec<f32> { m.iter().flat_map(|x| arrays::mat4_to_row_major(&f(x))).collect() };
+        Ok((
+            PyArray1::from_vec(py, flat(|x| x.0)).reshape([n, 4, 4])?.into_any(),
+            PyArray1::from_vec(py, flat(|x| x.1)).reshape([n, 4, 4])?.into_any(),
+        ))
+    })
 }
 
 fn matrices(obj: &Bound<'_, PyAny>, name: &str, count: Option<usize>) -> PyResult<Vec<Mat4>> {
@@ -344,6 +428,7 @@ fn polygon_area(points: &Bound<'_, PyAny>) -> PyResult<f64> {
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyInfluences>()?;
     m.add_function(wrap_pyfunction!(skin, m)?)?;
+    m.add_function(wrap_pyfunction!(bbone_segment_matrices, m)?)?;
     m.add_function(wrap_pyfunction!(mesh_volume, m)?)?;
     m.add_function(wrap_pyfunction!(polygon_area, m)?)?;
     Ok(())

@@ -23,7 +23,7 @@ mod influences;
 mod kernels;
 mod pose;
 
-pub use envelope::{distance_factor, Envelope};
+pub use envelope::{bbone_segment_matrices, distance_factor, BBone, Effective, Envelope};
 pub use influences::{Influence, Influences};
 pub use pose::Pose;
 

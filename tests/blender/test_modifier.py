@@ -58,20 +58,28 @@ def snapshot(obj):
     }
 
 
+@pytest.mark.parametrize("asset", ["RiggedSimple.glb", "RiggedFigure.glb", "CesiumMan.glb", "Fox.glb"])
 @pytest.mark.parametrize("method, preserve_volume", [("DUAL_QUATERNION", True), ("LINEAR", False)])
-def test_follows_every_frame_of_an_animation_exactly(dq_skin, assets, method, preserve_volume):
-    obj, arm_mod = import_character(assets / "CesiumMan.glb")
+def test_follows_every_frame_of_every_animation_exactly(dq_skin, assets, asset, method, preserve_volume):
+    obj, arm_mod = import_character(assets / asset)
+    arm = arm_mod.object
     reference = reference_copy(obj, preserve_volume)
     mod = add_dq_skin(obj, method)
     assert not arm_mod.show_viewport and not arm_mod.show_render
     scene = bpy.context.scene
     rest = evaluated_positions(reference)
-    for frame in (3, 11, 24, 40, 11):  # also backwards: no state from the previous frame leaks
-        scene.frame_set(frame)
-        ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
-        dev = relative_deviation(ours, theirs)
-        assert dev <= REL_TOL, f"frame {frame}: {dev:.2e}"
-    assert np.abs(theirs - rest).max() > 1e-3  # the character really moves
+    worst, moved, frames = 0.0, 0.0, 0
+    for action in bpy.data.actions:
+        arm.animation_data.action = action
+        start, end = (int(round(f)) for f in action.frame_range)
+        for frame in [*range(start, end + 1), start + 1]:  # ends with a jump back
+            scene.frame_set(frame)
+            ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
+            worst = max(worst, relative_deviation(ours, theirs))
+            moved = max(moved, float(np.abs(theirs - rest).max()))
+            frames += 1
+    assert worst <= REL_TOL, f"{asset}: worst {worst:.2e} over {frames} frames"
+    assert moved > 1e-3  # the character really moves
     assert dq_skin.modifier.state(obj, mod).error == ""
 
 
@@ -287,3 +295,48 @@ def test_b_bones_match_the_armature_modifier(dq_skin, method, preserve_volume):
         bones[b].bbone_segments = 1
     plain = evaluated_positions(reference)
     assert np.abs(plain - theirs).max() > 0.01
+
+
+class _Recorder:
+    """Stands in for a panel layout and records the labels drawn."""
+
+    def __init__(self, lines):
+        self.lines = lines
+
+    def row(self, **_):
+        return self
+
+    def box(self, **_):
+        return self
+
+    def label(self, text="", **_):
+        self.lines.append(text)
+
+    def operator(self, idname, **_):
+        self.lines.append(f"[{idname}]")
+        return type("Props", (), {})()
+
+
+def draw_panel(dq_skin, obj):
+    lines = []
+    panel = type("P", (), {"layout": _Recorder(lines)})()
+    context = type("C", (), {"object": obj})()
+    dq_skin.ui.OBJECT_PT_dq_skin.draw(panel, context)
+    return lines
+
+
+def test_panel_shows_method_status_and_errors(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    assert draw_panel(dq_skin, obj) == ["[object.dq_skin_add]"]
+    add_dq_skin(obj, "BLEND")
+    bpy.context.scene.frame_set(2)
+    lines = draw_panel(dq_skin, obj)
+    assert lines[0] == "DQ Skin: Blend"
+    assert "bones" in lines[1] and "influences" in lines[1] and "ms" in lines[1]
+    assert lines[-1] == "[object.dq_skin_remove]"
+    arm_mod_obj = arm
+    bpy.context.view_layer.objects.active = arm_mod_obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.context.scene.frame_set(3)
+    assert any("Edit Mode" in line for line in draw_panel(dq_skin, obj))
+    bpy.ops.object.mode_set(mode="OBJECT")

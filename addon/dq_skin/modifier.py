@@ -156,13 +156,6 @@ def evaluate(obj, mod, depsgraph) -> None:
         if st.binding is None or st.binding_key != key:
             st.binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups)
             st.envelopes = rig.envelopes(arm, st.binding)
-            curved = [
-                n for n in st.binding.bone_names
-                if arm.data.bones[n].bbone_segments > 1 and arm.data.bones[n].bbone_mapping_mode != "STRAIGHT"
-            ]
-            if curved:
-                st.binding = None
-                raise SkinError(f"Curved B-Bone mapping is not supported yet ({', '.join(curved[:3])})")
             st.blend = _group_weights(obj, s.blend_group) if s.blend_group else None
             st.binding_key = key
         evaluated = obj.evaluated_get(depsgraph)
@@ -206,6 +199,7 @@ def evaluate(obj, mod, depsgraph) -> None:
                 bbone_segments=segments,
                 rest=matrices.rest,
                 lengths=rig.bone_lengths(arm_eval, binding),
+                bbone_mapping=rig.curved_bbone_mapping(arm_eval, binding, positions, matrices.premat, s.use_envelopes),
             )
             binding = rig.Binding(effective, binding.bone_names, binding.bone_indices, binding.mask, binding.vertex_count)
             matrices = rig.with_bbone_joints(matrices, arm_eval, st.binding, segments)

@@ -162,6 +162,37 @@ def frame(binding: Binding, mesh_object, armature) -> Frame:
     return Frame(deform, rest, premat, postmat)
 
 
+def curved_bbone_mapping(armature, binding: Binding, positions: np.ndarray, premat: np.ndarray, use_envelopes: bool):
+    """For B-Bones with the Curved vertex mapping, `{bone index: (segment index, blend)}` per
+    vertex from Blender's own `PoseBone.bbone_segment_index` (its runtime data is not exposed),
+    for the vertices the bone can influence; -1 elsewhere. None when no bone needs it."""
+    bones = armature.data.bones
+    curved = [
+        k for k, name in enumerate(binding.bone_names)
+        if bones[name].bbone_segments > 1 and bones[name].bbone_mapping_mode == "CURVED"
+    ]
+    if not curved:
+        return None
+    from mathutils import Vector
+
+    counts = np.diff(binding.influences.offsets)
+    owner = np.repeat(np.arange(len(counts)), counts)
+    influence_bones = binding.influences.bones
+    co = dqskin.transform_points(premat, positions)
+    mapping = {}
+    for k in curved:
+        vertices = set(owner[influence_bones == k].tolist())
+        if use_envelopes:
+            vertices.update(np.flatnonzero(counts == 0).tolist())
+        index = np.full(len(counts), -1, np.int32)
+        blend = np.zeros(len(counts), np.float32)
+        pb = armature.pose.bones[binding.bone_names[k]]
+        for v in sorted(vertices):
+            index[v], blend[v] = pb.bbone_segment_index(Vector(co[v]))
+        mapping[k] = (index, blend)
+    return mapping
+
+
 def with_bbone_joints(f: Frame, armature, binding: Binding, segments: np.ndarray) -> Frame:
     """`f` with every B-Bone's segment joints appended after the bones (in bone order), read
     from the armature's current B-Bone shape (use the evaluated armature)."""

@@ -36,6 +36,7 @@ from ._dqskin import (
     slerp,
     squad,
     squad_control_points,
+    transform_points,
 )
 from ._dqskin import _panic_for_tests  # noqa: F401  (tests check panics become RuntimeError)
 
@@ -60,4 +61,5 @@ __all__ = [
     "slerp",
     "squad",
     "squad_control_points",
+    "transform_points",
 ]

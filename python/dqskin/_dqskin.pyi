@@ -142,6 +142,7 @@ class Influences:
         bbone_segments: IntArray | None = None,
         rest: F32Array | None = None,
         lengths: ArrayLike | None = None,
+        bbone_mapping: dict[int, tuple[npt.NDArray[np.int32], F32Array]] | None = None,
     ) -> Influences:
         """This frame's influences with envelopes ``(B, 11)`` and B-Bones (expanded bone list)."""
     @property
@@ -178,6 +179,9 @@ def bbone_segment_matrices(
     channel: ArrayLike, rest: ArrayLike, pose_joints: ArrayLike, rest_joints: ArrayLike
 ) -> tuple[F32Array, F32Array]:
     """Deform and rest matrices ``(N+1, 4, 4)`` of a B-Bone's segment joints, as Blender builds them."""
+
+def transform_points(matrix: ArrayLike, points: F32Array) -> F32Array:
+    """``(N, 3)`` points transformed by an affine 4x4 matrix."""
 
 def mesh_volume(positions: F32Array, triangles: IntArray) -> float:
     """Enclosed volume of a closed, outward-oriented triangle mesh."""

@@ -54,7 +54,7 @@ fn checked<'a, 'py, T: Element>(
     shape: Shape<'_>,
     names: &[&str],
 ) -> PyResult<&'a Bound<'py, PyArrayDyn<T>>> {
-    let want = std::any::type_name::<T>().replace("f32", "float32").replace("u32", "uint32");
+    let want = std::any::type_name::<T>().replace("f32", "float32").replace("u32", "uint32").replace("i32", "int32");
     let arr = as_numpy(obj, name, &want)?;
     if !arr.dtype().is_equiv_to(&dtype::<T>(obj.py())) {
         return Err(PyTypeError::new_err(format!(

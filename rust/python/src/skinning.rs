@@ -90,8 +90,12 @@ impl PyInfluences {
     ///   ordinary bones), with ``rest`` ``(B, 4, 4)`` rest matrices and ``lengths`` ``(B,)`` bone
     ///   lengths. The result's bone indices then run over an expanded list: the ``B`` bones, then
     ///   for each B-Bone in order its ``segments + 1`` joints (see ``bbone_segment_matrices``).
+    ///   Segments are found with Blender's Straight mapping, except for the bones in
+    ///   ``bbone_mapping``: ``{bone index: (index (V,) int32, blend (V,) float32)}`` computed
+    ///   elsewhere (``PoseBone.bbone_segment_index`` for the Curved mapping); a negative index
+    ///   falls back to the Straight mapping for that vertex.
     #[pyo3(signature = (positions, premat = None, *, envelopes = None, use_vertex_groups = true,
-        use_envelopes = false, bbone_segments = None, rest = None, lengths = None))]
+        use_envelopes = false, bbone_segments = None, rest = None, lengths = None, bbone_mapping = None))]
     #[allow(clippy::too_many_arguments)]
     fn effective(
         &self,
@@ -103,11 +107,27 @@ impl PyInfluences {
         bbone_segments: Option<&Bound<'_, PyAny>>,
         rest: Option<&Bound<'_, PyAny>>,
         lengths: Option<&Bound<'_, PyAny>>,
+        bbone_mapping: Option<&Bound<'_, pyo3::types::PyDict>>,
     ) -> PyResult<Self> {
         guard(|| {
             let py = positions.py();
             let v = self.0.vertex_count();
             let b = self.0.bone_count();
+            let mut mappings: Vec<(usize, Vec<i32>, Vec<f32>)> = Vec::new();
+            if let Some(d) = bbone_mapping {
+                for (key, value) in d.iter() {
+                    let bone: usize = key.extract().map_err(|_| PyTypeError::new_err("bbone_mapping keys must be bone indices"))?;
+                    let (idx, blend): (Bound<'_, PyAny>, Bound<'_, PyAny>) = value
+                        .extract()
+                        .map_err(|_| PyTypeError::new_err("bbone_mapping values must be (index, blend) pairs of arrays"))?;
+                    let idx = arrays::readonly::<i32>(&idx, "bbone_mapping index", &[Some(v)], &["V"])?.as_slice()?.to_vec();
+                    let blend = arrays::readonly::<f32>(&blend, "bbone_mapping blend", &[Some(v)], &["V"])?.as_slice()?.to_vec();
+                    if bone >= b {
+                        return Err(PyValueError::new_err(format!("bbone_mapping has bone {bone}, but there are {b} bones")));
+                    }
+                    mappings.push((bone, idx, blend));
+                }
+            }
             let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
             let envelopes = match envelopes {
                 Some(e) if !e.is_none() => {
@@ -137,6 +157,10 @@ impl PyInfluences {
                                 segments: n,
                                 inverse_rest: rest[i].inverse(),
                                 length: lengths[i],
+                                mapped: mappings
+                                    .iter()
+                                    .find(|m| m.0 == i)
+                                    .map(|m| (m.1.as_slice(), m.2.as_slice())),
                             }));
                             expanded += n as usize + 1;
                         } else {
@@ -392,6 +416,25 @@ fn as_points_mut(flat: &mut [f32]) -> &mut [[f32; 3]] {
     chunks
 }
 
+/// ``points`` ``(N, 3)`` float32 transformed by the affine 4×4 ``matrix`` (row-major), as a new
+/// array.
+#[pyfunction]
+fn transform_points<'py>(matrix: &Bound<'py, PyAny>, points: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    guard(|| {
+        let py = points.py();
+        let m = space(Some(matrix), "matrix")?.expect("given");
+        if let Some(problem) = dqskin_core::skin::affine_problem(&m) {
+            return Err(PyValueError::new_err(format!("matrix {problem}")));
+        }
+        let p = arrays::readonly::<f32>(points, "points", &[None, Some(3)], &["N"])?;
+        let src = as_points(p.as_slice()?);
+        let out: Vec<f32> = py.detach(|| {
+            src.iter().flat_map(|c| m.transform_point3(dqskin_core::glam::Vec3::from_array(*c)).to_array()).collect()
+        });
+        Ok(PyArray1::from_vec(py, out).reshape([src.len(), 3])?.into_any())
+    })
+}
+
 /// Enclosed volume of a closed, consistently oriented triangle mesh: ``positions`` ``(V, 3)``
 /// float32, ``triangles`` ``(T, 3)`` integers.
 #[pyfunction]
@@ -429,6 +472,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyInfluences>()?;
     m.add_function(wrap_pyfunction!(skin, m)?)?;
     m.add_function(wrap_pyfunction!(bbone_segment_matrices, m)?)?;
+    m.add_function(wrap_pyfunction!(transform_points, m)?)?;
     m.add_function(wrap_pyfunction!(mesh_volume, m)?)?;
     m.add_function(wrap_pyfunction!(polygon_area, m)?)?;
     Ok(())

@@ -60,14 +60,17 @@ pub fn distance_factor(co: Vec3, head: Vec3, tail: Vec3, head_radius: f32, tail_
 /// segments` of the expanded bone list, and its rest matrix's inverse takes armature-space points
 /// into the bone's space, whose Y axis runs from head (0) to tail (`length`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BBone {
+pub struct BBone<'a> {
     pub first: u32,
     pub segments: u32,
     pub inverse_rest: Mat4,
     pub length: f32,
+    /// Per-vertex `(index, blend)` computed elsewhere (Blender's Curved mapping, which needs
+    /// its runtime data), used where the index is not negative; the straight mapping otherwise.
+    pub mapped: Option<(&'a [i32], &'a [f32])>,
 }
 
-impl BBone {
+impl BBone<'_> {
     /// Blender's straight mapping (`find_bbone_segment_index_straight`): the first segment joint
     /// affecting `co` (armature space) and the blend toward the next one.
     pub fn segment(&self, co: Vec3) -> (u32, f32) {
@@ -88,7 +91,7 @@ pub struct Effective<'a> {
     pub use_vertex_groups: bool,
     pub use_envelopes: bool,
     /// One entry per bone (`None` for ordinary bones), or empty when there are no B-Bones.
-    pub bbones: &'a [Option<BBone>],
+    pub bbones: &'a [Option<BBone<'a>>],
     /// Size of the expanded bone list (bones, then every B-Bone's segment joints).
     pub expanded_bone_count: usize,
 }
@@ -158,9 +161,15 @@ impl Influences {
         for (b, bb) in what.bbones.iter().enumerate() {
             if let Some(bb) = bb {
                 let last = bb.first as usize + bb.segments as usize;
-                if bb.segments < 2 || last >= what.expanded_bone_count || !(bb.length > 0.0) || !bb.inverse_rest.is_finite() {
+                let mapped_ok = bb.mapped.is_none_or(|(i, f)| i.len() == n && f.len() == n);
+                if bb.segments < 2
+                    || last >= what.expanded_bone_count
+                    || !(bb.length > 0.0)
+                    || !bb.inverse_rest.is_finite()
+                    || !mapped_ok
+                {
                     return Err(SkinError::InvalidInfluences(format!(
-                        "B-Bone {b}: needs at least 2 segments, a positive length, a finite rest matrix and joints inside the {} expanded bones",
+                        "B-Bone {b}: needs at least 2 segments, a positive length, a finite rest matrix, joints inside the {} expanded bones and one mapped segment per vertex",
                         what.expanded_bone_count
                     )));
                 }
@@ -222,7 +231,12 @@ impl Influences {
                             .into_iter()
                             .flat_map(|(b, w)| match what.bbones[b as usize] {
                                 Some(bb) => {
-                                    let (index, blend) = bb.segment(co);
+                                    let (index, blend) = match bb.mapped {
+                                        Some((i, f)) if i[v] >= 0 => {
+                                            ((i[v] as u32).min(bb.segments - 1), f[v].clamp(0.0, 1.0))
+                                        }
+                                        _ => bb.segment(co),
+                                    };
                                     let j = bb.first + index;
                                     vec![(j, w * (1.0 - blend)), (j + 1, w * blend)]
                                 }
@@ -342,7 +356,7 @@ mod bbone_tests {
 
     #[test]
     fn straight_mapping_follows_blender() {
-        let bb = BBone { first: 5, segments: 4, inverse_rest: Mat4::IDENTITY, length: 2.0 };
+        let bb = BBone { first: 5, segments: 4, inverse_rest: Mat4::IDENTITY, length: 2.0, mapped: None };
         assert_eq!(bb.segment(Vec3::new(0.0, -1.0, 0.0)), (0, 0.0));
         assert_eq!(bb.segment(Vec3::new(0.0, 0.75, 0.0)), (1, 0.5));
         assert_eq!(bb.segment(Vec3::new(0.3, 2.0, 9.0)), (3, 1.0));
@@ -352,15 +366,22 @@ mod bbone_tests {
     #[test]
     fn b_bone_influences_split_over_two_joints() {
         let groups = Influences::from_lists(&[vec![(0, 0.6), (1, 0.4)]], 2).unwrap();
-        let bbones = [None, Some(BBone { first: 2, segments: 3, inverse_rest: Mat4::IDENTITY, length: 3.0 })];
+        let bbones = [None, Some(BBone { first: 2, segments: 3, inverse_rest: Mat4::IDENTITY, length: 3.0, mapped: None })];
         let what = Effective { envelopes: None, use_vertex_groups: true, use_envelopes: false, bbones: &bbones, expanded_bone_count: 6 };
         let e = groups.effective(&[[0.0, 1.25, 0.0]], None, &what).unwrap();
         let got: Vec<(u32, f32)> = e.of_vertex(0).iter().map(|i| (i.bone, i.weight)).collect();
         assert_eq!(got, vec![(0, 0.6), (3, 0.4 * 0.75), (4, 0.4 * 0.25)]);
         assert_eq!(e.bone_count(), 6);
-        let bad = [None, Some(BBone { first: 4, segments: 3, inverse_rest: Mat4::IDENTITY, length: 3.0 })];
+        let bad = [None, Some(BBone { first: 4, segments: 3, inverse_rest: Mat4::IDENTITY, length: 3.0, mapped: None })];
         let what = Effective { bbones: &bad, ..what };
         assert!(groups.effective(&[[0.0; 3]], None, &what).is_err());
+        // A mapping computed elsewhere wins where given.
+        let (index, blend) = ([2i32], [0.5f32]);
+        let mapped = [None, Some(BBone { first: 2, segments: 3, inverse_rest: Mat4::IDENTITY, length: 3.0, mapped: Some((&index, &blend)) })];
+        let what = Effective { bbones: &mapped, ..what };
+        let e = groups.effective(&[[0.0, 1.25, 0.0]], None, &what).unwrap();
+        let got: Vec<(u32, f32)> = e.of_vertex(0).iter().map(|i| (i.bone, i.weight)).collect();
+        assert_eq!(got, vec![(0, 0.6), (4, 0.4 * 0.5), (5, 0.4 * 0.5)]);
     }
 
     #[test]

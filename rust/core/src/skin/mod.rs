@@ -25,7 +25,7 @@ mod pose;
 
 pub use envelope::{bbone_segment_matrices, distance_factor, BBone, Effective, Envelope};
 pub use influences::{Influence, Influences};
-pub use pose::Pose;
+pub use pose::{affine_problem, Pose};
 
 use glam::Mat4;
 

@@ -155,7 +155,7 @@ fn check_affine(what: &'static str, bone: usize, m: &Mat4) -> Result<(), SkinErr
 }
 
 /// What makes `m` unusable as an affine transform, if anything.
-pub(super) fn affine_problem(m: &Mat4) -> Option<&'static str> {
+pub fn affine_problem(m: &Mat4) -> Option<&'static str> {
     if !m.is_finite() {
         Some("has a NaN or infinite entry")
     } else if (m.row(3) - Vec4::W).abs().max_element() > 1e-6 {

@@ -344,3 +344,14 @@ def test_panel_shows_method_status_and_errors(dq_skin):
     bpy.context.scene.frame_set(3)
     assert any("Edit Mode" in line for line in draw_panel(dq_skin, obj))
     bpy.ops.object.mode_set(mode="OBJECT")
+
+
+def test_vertex_count_changed_by_an_earlier_modifier_is_reported(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    mod = add_dq_skin(obj)
+    subsurf = obj.modifiers.new("Subdivision", "SUBSURF")
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.modifier_move_to_index(modifier=subsurf.name, index=0)
+    bpy.context.scene.frame_set(4)
+    assert "changed the vertex count" in dq_skin.modifier.state(obj, mod).error
+    assert len(evaluated_positions(obj)) > len(obj.data.vertices)  # passed through, not broken

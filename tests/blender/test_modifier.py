@@ -355,3 +355,15 @@ def test_vertex_count_changed_by_an_earlier_modifier_is_reported(dq_skin):
     bpy.context.scene.frame_set(4)
     assert "changed the vertex count" in dq_skin.modifier.state(obj, mod).error
     assert len(evaluated_positions(obj)) > len(obj.data.vertices)  # passed through, not broken
+
+
+def test_missing_armature_is_reported_and_passes_the_mesh_through(dq_skin):
+    obj, arm, arm_mod = rig_tube()
+    arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 1.0)
+    mod = add_dq_skin(obj)
+    from bl_ext.user_default.dq_skin.operators import set_input
+
+    set_input(mod, "Armature", None)
+    bpy.context.scene.frame_set(5)
+    assert dq_skin.modifier.state(obj, mod).error == "No armature object set"
+    np.testing.assert_allclose(evaluated_positions(obj), rig_positions(obj), atol=1e-6)

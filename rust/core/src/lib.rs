@@ -9,6 +9,7 @@
 //! - [`hierarchy`]: forward kinematics with dual quaternions (Kenwright 2012).
 //! - [`skin`]: LBS, DQS (exactly Blender's Armature modifier) and their per-vertex blend.
 //! - [`pool`]: the thread pool the kernels run on.
+//! - [`tracks`]: keyed rotation and transform tracks (Slerp, Squad in time, ScLERP, Spring).
 //! - [`rigs`]: procedural test rigs (the twisted cylinder) and mesh measurements.
 
 // `!(x >= 0.0)` is deliberate throughout: unlike `x < 0.0` it is also true for NaN.
@@ -24,6 +25,7 @@ pub mod quat_interp;
 pub mod rigs;
 mod scalar;
 pub mod skin;
+pub mod tracks;
 #[cfg(test)]
 mod test_support;
 

@@ -16,6 +16,12 @@ Skinning matches Blender's Armature modifier: ``method='linear'`` is Preserve Vo
 """
 
 from ._dqskin import (
+    angular_speeds,
+    continuous_signs,
+    curvature_energy,
+    sample_rotations,
+    sample_transforms,
+    spring,
     DualQuat,
     Influences,
     Screw,
@@ -41,6 +47,12 @@ from ._dqskin import (
 from ._dqskin import _panic_for_tests  # noqa: F401  (tests check panics become RuntimeError)
 
 __all__ = [
+    "angular_speeds",
+    "continuous_signs",
+    "curvature_energy",
+    "sample_rotations",
+    "sample_transforms",
+    "spring",
     "DualQuat",
     "Influences",
     "Screw",

@@ -212,4 +212,26 @@ class TwistCylinder:
         """Deform matrices ``(2, 4, 4)`` with the upper bone twisted by ``angle`` radians."""
     def ring(self, r: int) -> npt.NDArray[np.int64]: ...
 
+def continuous_signs(keys: ArrayLike) -> tuple[F32Array, int]:
+    """Keys ``(K, 4)`` made sign-continuous and normalized; returns ``(keys, flipped)``."""
+
+def sample_rotations(
+    times: ArrayLike, keys: ArrayLike, at: ArrayLike, method: Literal["slerp", "squad"] = "squad"
+) -> F32Array:
+    """Rotation keys at ``times`` sampled at ``at`` with Slerp or time-aware Squad; ``(T, 4)``."""
+
+def sample_transforms(times: ArrayLike, keys: ArrayLike, at: ArrayLike) -> F32Array:
+    """Transform keys ``(K, 8)`` sampled along piecewise ScLERP; ``(T, 8)``."""
+
+def spring(
+    times: ArrayLike, keys: ArrayLike, step: float = 1.0, levels: int = 3, iterations: int = 400, key_weight: float = 1.2
+) -> F32Array:
+    """Dam et al.'s curvature-minimizing Spring through the keys, every ``step``; ``(T, 4)``."""
+
+def angular_speeds(rotations: ArrayLike) -> F32Array:
+    """Rotation angle (radians) between consecutive rotations; ``(T-1,)``."""
+
+def curvature_energy(rotations: ArrayLike) -> float:
+    """Summed squared discrete curvature of evenly spaced rotations."""
+
 def _panic_for_tests() -> None: ...

@@ -13,6 +13,7 @@ mod blending;
 mod dual_quat;
 mod rigs;
 mod skinning;
+mod tracks;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
@@ -66,5 +67,6 @@ fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     blending::register(m)?;
     skinning::register(m)?;
     rigs::register(m)?;
+    tracks::register(m)?;
     Ok(())
 }

@@ -8,9 +8,9 @@ result the handlers (see `handlers`) keep current.
 
 import bpy
 
-from . import handlers, operators, rig, ui  # noqa: F401
+from . import animation, handlers, operators, rig, ui  # noqa: F401
 
-CLASSES = (*operators.CLASSES, *ui.CLASSES)
+CLASSES = (*operators.CLASSES, *animation.CLASSES, *ui.CLASSES)
 
 
 def register():

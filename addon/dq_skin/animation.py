@@ -6,6 +6,8 @@ undoable, and reports what it did or why it could not. The math is the bundled c
 
 from __future__ import annotations
 
+import math
+
 import bpy
 import numpy as np
 from mathutils import Matrix
@@ -33,6 +35,7 @@ class ANIM_OT_dq_quaternion_cleanup(bpy.types.Operator):
         if not targets:
             self.report({"ERROR"}, "Nothing selected has keyed quaternion rotation")
             return {"CANCELLED"}
+        remember_speeds(context, targets)
         changed = flipped = 0
         for t in targets:
             frames = keys.key_frames(t, ("rotation_quaternion",))
@@ -69,6 +72,7 @@ class ANIM_OT_dq_rotation_bake(bpy.types.Operator):
         if not targets:
             self.report({"ERROR"}, "Nothing selected has keyed rotation")
             return {"CANCELLED"}
+        remember_speeds(context, targets)
         baked = 0
         for t in targets:
             kind = keys.rotation_kind(t)
@@ -100,6 +104,7 @@ class ANIM_OT_dq_screw_inbetweens(bpy.types.Operator):
 
     def execute(self, context):
         targets = keys.selected_targets(context)
+        remember_speeds(context, [t for t in targets if keys.rotation_kind(t)])
         done = 0
         for t in targets:
             frames = keys.key_frames(t, ("location", "rotation_quaternion", "rotation_euler"))
@@ -190,7 +195,147 @@ class ANIM_OT_dq_blend_transforms(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class ANIM_OT_dq_spring_smoothing(bpy.types.Operator):
+    """Experimental: refit rotation between keys with Dam et al.'s curvature-minimizing Spring
+    (multi-step gradient descent, extra weight at the keys); the keys stay fixed"""
+
+    bl_idname = "anim.dq_spring_smoothing"
+    bl_label = "Spring Smoothing (Experimental)"
+    bl_options = {"REGISTER", "UNDO"}
+
+    step: bpy.props.FloatProperty(name="Step", description="Frames between samples; keys must lie on this grid", default=1.0, min=0.05, soft_max=5.0)
+    iterations: bpy.props.IntProperty(name="Iterations", description="Gradient steps per level", default=400, min=1, max=100000)
+    levels: bpy.props.IntProperty(name="Levels", description="Coarse-to-fine levels", default=3, min=1, max=12)
+    key_weight: bpy.props.FloatProperty(name="Key Weight", description="Extra weight of the curvature at the keys", default=1.2, min=0.01, soft_max=5.0)
+
+    def execute(self, context):
+        targets = [t for t in keys.selected_targets(context) if keys.rotation_kind(t)]
+        if not targets:
+            self.report({"ERROR"}, "Nothing selected has keyed rotation")
+            return {"CANCELLED"}
+        remember_speeds(context, targets)
+        done = 0
+        for t in targets:
+            frames = keys.key_frames(t)
+            if len(frames) < 2:
+                continue
+            q = keys.rotations_at(t, frames)
+            try:
+                samples = dqskin.spring(frames, q, step=self.step, levels=self.levels, iterations=self.iterations, key_weight=self.key_weight)
+            except ValueError as e:
+                self.report({"ERROR"}, f"{t.label}: {e}")
+                return {"CANCELLED"}
+            at = (frames[0] + self.step * np.arange(len(samples))).astype(F32)
+            if keys.rotation_kind(t) == "EULER":
+                keys.remove_channels(t, "rotation_euler", 3)
+                t.item.rotation_mode = "QUATERNION"
+            keys.write(t, "rotation_quaternion", at, samples, replace_between=(float(frames[0]), float(frames[-1])))
+            done += 1
+        if not done:
+            self.report({"ERROR"}, "Nothing selected has two or more rotation keys")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Spring Smoothing on {done} item(s)")
+        return {"FINISHED"}
+
+
+def _draw_line(pixels: np.ndarray, xs: np.ndarray, ys: np.ndarray, color) -> None:
+    """Draws a polyline into an (H, W, 4) image, one dot per pixel column between points."""
+    h, w, _ = pixels.shape
+    for x0, y0, x1, y1 in zip(xs[:-1], ys[:-1], xs[1:], ys[1:]):
+        n = int(max(abs(x1 - x0), abs(y1 - y0))) + 1
+        for u in np.linspace(0.0, 1.0, n + 1):
+            x, y = int(round(x0 + u * (x1 - x0))), int(round(y0 + u * (y1 - y0)))
+            if 0 <= x < w and 0 <= y < h:
+                pixels[y, x] = color
+
+
+SPEEDS_KEY = "dq_skin_speeds_deg"
+BEFORE_KEY = "dq_skin_speeds_before_deg"
+
+
+class ANIM_OT_dq_rotation_speed_plot(bpy.types.Operator):
+    """Plot the angular speed (degrees per frame) of the active object or pose bone over the
+    scene's frame range as an image (Image Editor), with the curve before the last DQ Skin
+    animation tool if there is one; optionally saved as PNG"""
+
+    bl_idname = "anim.dq_rotation_speed_plot"
+    bl_label = "Rotation Speed Plot"
+    bl_options = {"REGISTER"}
+
+    width: bpy.props.IntProperty(name="Width", default=640, min=64, max=8192)
+    height: bpy.props.IntProperty(name="Height", default=320, min=64, max=8192)
+    filepath: bpy.props.StringProperty(name="Save As", description="PNG to write (optional)", subtype="FILE_PATH", default="")
+
+    def execute(self, context):
+        target = active_target(context)
+        if target is None or not keys.rotation_kind(target):
+            self.report({"ERROR"}, "The active object or bone has no keyed rotation")
+            return {"CANCELLED"}
+        scene = context.scene
+        speeds = rotation_speeds(target, scene.frame_start, scene.frame_end)
+        before = target.owner.get(BEFORE_KEY, {}).get(target.label)
+        image = plot_image(f"Rotation Speed {target.label}", speeds, before, self.width, self.height)
+        if self.filepath:
+            image.filepath_raw = bpy.path.abspath(self.filepath)
+            image.file_format = "PNG"
+            image.save()
+        self.report({"INFO"}, f"Rotation speed of {target.label}: max {max(speeds):.2f}°/frame, image {image.name!r}")
+        return {"FINISHED"}
+
+
+def active_target(context):
+    if context.mode == "POSE" and context.active_pose_bone is not None:
+        return keys.Target(context.active_pose_bone.id_data, context.active_pose_bone.name)
+    return keys.Target(context.active_object) if context.active_object else None
+
+
+def rotation_speeds(target, start: int, end: int) -> list[float]:
+    """Angular speed in degrees per frame between consecutive frames `start..end`."""
+    frames = np.arange(start, end + 1, dtype=F32)
+    return [math.degrees(s) for s in dqskin.angular_speeds(keys.rotations_at(target, frames))]
+
+
+def remember_speeds(context, targets) -> None:
+    """Stores each target's speeds before a tool changes its keys, for the plot."""
+    scene = context.scene
+    for t in targets:
+        store = dict(t.owner.get(BEFORE_KEY, {}))
+        store[t.label] = rotation_speeds(t, scene.frame_start, scene.frame_end)
+        t.owner[BEFORE_KEY] = store
+
+
+def plot_image(name: str, speeds, before, width: int, height: int):
+    """An image with the speed curve (white) over the earlier one (orange), axes in grey."""
+    pixels = np.zeros((height, width, 4), F32)
+    pixels[..., 3] = 1.0
+    pixels[..., :3] = 0.12
+    margin = 8
+    all_values = list(speeds) + list(before or [])
+    top = max(all_values) * 1.1 if all_values and max(all_values) > 0 else 1.0
+    n = max(len(speeds), 1)
+    xs = margin + np.arange(n) * (width - 2 * margin - 1) / max(n - 1, 1)
+    to_y = lambda v: margin + np.asarray(v) / top * (height - 2 * margin - 1)  # noqa: E731
+    pixels[margin, margin:width - margin, :3] = 0.5
+    pixels[margin:height - margin, margin, :3] = 0.5
+    if before:
+        _draw_line(pixels, xs[: len(before)], to_y(before), (1.0, 0.55, 0.1, 1.0))
+    _draw_line(pixels, xs, to_y(speeds), (1.0, 1.0, 1.0, 1.0))
+    image = bpy.data.images.get(name)
+    if image is None or tuple(image.size) != (width, height):
+        if image is not None:
+            bpy.data.images.remove(image)
+        image = bpy.data.images.new(name, width, height, alpha=True)
+    image.pixels.foreach_set(pixels.ravel())
+    image.update()
+    image[SPEEDS_KEY] = list(map(float, speeds))
+    if before:
+        image[BEFORE_KEY] = list(map(float, before))
+    return image
+
+
 CLASSES = (
+    ANIM_OT_dq_spring_smoothing,
+    ANIM_OT_dq_rotation_speed_plot,
     ANIM_OT_dq_quaternion_cleanup,
     ANIM_OT_dq_rotation_bake,
     ANIM_OT_dq_screw_inbetweens,

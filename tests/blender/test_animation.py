@@ -214,3 +214,39 @@ def test_tools_report_clear_errors(dq):
             run_on_objects(op, [empty])
     with pytest.raises(RuntimeError, match="Select the transforms"):
         run_on_objects(bpy.ops.anim.dq_blend_transforms, [empty])
+
+
+def test_spring_smoothing_keeps_keys_and_lowers_curvature(dq):
+    dqskin, keys = dq
+    frames = [1, 11, 17, 31]
+    rots = KEY_ROTATIONS + [Quaternion((0, 0, 1), -1.0)]
+    obj = keyed_object("Springy", frames, rots)
+    assert run_on_objects(bpy.ops.anim.dq_spring_smoothing, [obj], iterations=600) == {"FINISHED"}
+    t = keys.Target(obj)
+    for f, q in zip(frames, rots):
+        assert angle_between(rotation_at(dq, obj, f), np.array(q)) < 1e-5
+    grid = np.arange(1, 32, dtype=F32)
+    spring_curve = keys.rotations_at(t, grid)
+    squad = dqskin.sample_rotations(np.array(frames, F32), np.array([tuple(q) for q in rots], F32), grid, method="squad")
+    assert dqskin.curvature_energy(spring_curve) < dqskin.curvature_energy(squad)
+
+
+def test_rotation_speed_plot_before_and_after_a_bake(dq, tmp_path):
+    dqskin, keys = dq
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 17
+    obj = keyed_object("Plotted", KEY_FRAMES, KEY_ROTATIONS)
+    # Blender's own (component-wise) interpolation first, then Slerp.
+    run_on_objects(bpy.ops.anim.dq_rotation_bake, [obj], method="SLERP", step=1.0)
+    path = tmp_path / "speed.png"
+    assert run_on_objects(bpy.ops.anim.dq_rotation_speed_plot, [obj], width=200, height=100, filepath=str(path)) == {"FINISHED"}
+    image = bpy.data.images["Rotation Speed Plotted"]
+    assert tuple(image.size) == (200, 100)
+    assert path.is_file() and path.stat().st_size > 0
+    frames = np.arange(1, 18, dtype=F32)
+    direct = np.degrees(dqskin.angular_speeds(keys.rotations_at(keys.Target(obj), frames)))
+    np.testing.assert_allclose(image["dq_skin_speeds_deg"], direct, atol=1e-4)
+    before = np.array(image["dq_skin_speeds_before_deg"])
+    assert len(before) == 16 and np.ptp(before[:10]) > np.ptp(direct[:10]) + 1e-3  # Blender's was uneven
+    pixels = np.array(image.pixels[:]).reshape(100, 200, 4)
+    assert (pixels[..., :3] > 0.99).all(axis=-1).sum() > 100  # the white curve is drawn

@@ -16,10 +16,12 @@ CLASSES = (*operators.CLASSES, *animation.CLASSES, *ui.CLASSES)
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    ui.register_menus()
     handlers.register()
 
 
 def unregister():
     handlers.unregister()
+    ui.unregister_menus()
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

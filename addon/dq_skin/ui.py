@@ -43,4 +43,42 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
             op.modifier = mod.name
 
 
-CLASSES = (OBJECT_PT_dq_skin,)
+class VIEW3D_MT_dq_skin_animation(bpy.types.Menu):
+    """The animation tools, in the Object and Pose menus' Animation submenu"""
+
+    bl_label = "DQ Skin"
+    bl_idname = "VIEW3D_MT_dq_skin_animation"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator("anim.dq_blend_transforms")
+        layout.operator("anim.dq_screw_inbetweens")
+        layout.operator("anim.dq_rotation_bake")
+        layout.operator("anim.dq_quaternion_cleanup")
+        layout.operator("anim.dq_spring_smoothing")
+        layout.separator()
+        layout.operator("anim.dq_rotation_speed_plot")
+
+
+def draw_menu_entry(self, context):
+    self.layout.menu(VIEW3D_MT_dq_skin_animation.bl_idname)
+
+
+MENUS = ("VIEW3D_MT_object_animation", "VIEW3D_MT_pose_motion")
+
+
+def register_menus():
+    for name in MENUS:
+        menu = getattr(bpy.types, name, None)
+        if menu is not None:
+            menu.append(draw_menu_entry)
+
+
+def unregister_menus():
+    for name in MENUS:
+        menu = getattr(bpy.types, name, None)
+        if menu is not None:
+            menu.remove(draw_menu_entry)
+
+
+CLASSES = (OBJECT_PT_dq_skin, VIEW3D_MT_dq_skin_animation)

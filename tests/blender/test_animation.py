@@ -250,3 +250,15 @@ def test_rotation_speed_plot_before_and_after_a_bake(dq, tmp_path):
     assert len(before) == 16 and np.ptp(before[:10]) > np.ptp(direct[:10]) + 1e-3  # Blender's was uneven
     pixels = np.array(image.pixels[:]).reshape(100, 200, 4)
     assert (pixels[..., :3] > 0.99).all(axis=-1).sum() > 100  # the white curve is drawn
+
+
+def test_tools_are_in_the_animation_menus(dq_skin):
+    lines = []
+    menu = type("M", (), {"layout": type("L", (), {"operator": lambda self, idname, **_: lines.append(idname), "separator": lambda self: None})()})()
+    dq_skin.ui.VIEW3D_MT_dq_skin_animation.draw(menu, bpy.context)
+    assert lines == [
+        "anim.dq_blend_transforms", "anim.dq_screw_inbetweens", "anim.dq_rotation_bake",
+        "anim.dq_quaternion_cleanup", "anim.dq_spring_smoothing", "anim.dq_rotation_speed_plot",
+    ]
+    for idname in lines:
+        assert hasattr(bpy.ops.anim, idname.split(".")[1])

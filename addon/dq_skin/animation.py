@@ -260,7 +260,7 @@ class ANIM_OT_dq_rotation_speed_plot(bpy.types.Operator):
 
     bl_idname = "anim.dq_rotation_speed_plot"
     bl_label = "Rotation Speed Plot"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     width: bpy.props.IntProperty(name="Width", default=640, min=64, max=8192)
     height: bpy.props.IntProperty(name="Height", default=320, min=64, max=8192)

@@ -262,3 +262,45 @@ def test_tools_are_in_the_animation_menus(dq_skin):
     ]
     for idname in lines:
         assert hasattr(bpy.ops.anim, idname.split(".")[1])
+
+
+@pytest.mark.parametrize("tool", ["cleanup", "inbetweens", "spring", "plot"])
+def test_tools_on_pose_bones_of_the_fox(dq, assets, tool, tmp_path):
+    dqskin, keys = dq
+    bpy.ops.import_scene.gltf(filepath=str(assets / "Fox.glb"))
+    arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    name = "b_Hip_01"  # keyed location and rotation
+    target = keys.Target(arm, name)
+    for prop, size in (("rotation_quaternion", 4), ("location", 3)):
+        for i in range(size):
+            fc = keys.channel(target, prop, i)
+            assert fc is not None, (prop, i)
+            for k in [k for k in fc.keyframe_points if round(k.co[0]) % 10][::-1]:
+                fc.keyframe_points.remove(k, fast=True)
+            fc.update()
+    frames = keys.key_frames(target)
+    before_rot = keys.rotations_at(target, frames)
+    before_loc = keys.locations_at(target, frames)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = int(frames[0]), int(frames[-1])
+    bpy.context.view_layer.objects.active = arm
+    bpy.ops.object.mode_set(mode="POSE")
+    pb = arm.pose.bones[name]
+    ops = {
+        "cleanup": lambda: bpy.ops.anim.dq_quaternion_cleanup(),
+        "inbetweens": lambda: bpy.ops.anim.dq_screw_inbetweens(step=2.0),
+        "spring": lambda: bpy.ops.anim.dq_spring_smoothing(iterations=200),
+        "plot": lambda: bpy.ops.anim.dq_rotation_speed_plot(width=120, height=80, filepath=str(tmp_path / "fox.png")),
+    }
+    with bpy.context.temp_override(selected_pose_bones=[pb], active_pose_bone=pb):
+        assert ops[tool]() == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    # The keys' rotations (and locations) are where they were.
+    after_rot = keys.rotations_at(target, frames)
+    for a, b in zip(after_rot, before_rot):
+        assert angle_between(a, b) < 1e-5
+    np.testing.assert_allclose(keys.locations_at(target, frames), before_loc, atol=1e-5)
+    if tool == "plot":
+        image = bpy.data.images[f"Rotation Speed {arm.name}:{name}"]
+        assert len(image["dq_skin_speeds_deg"]) == int(frames[-1] - frames[0])
+        assert (tmp_path / "fox.png").is_file()

@@ -101,13 +101,23 @@ class ANIM_OT_dq_screw_inbetweens(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     step: bpy.props.FloatProperty(name="Step", description="Frames between baked keys (sub-frames allowed)", default=1.0, min=0.01, soft_max=10.0)
+    use_frame_range: bpy.props.BoolProperty(name="Frame Range", description="Bake only between Start and End (else between all keys)", default=False)
+    frame_start: bpy.props.FloatProperty(name="Start", default=1.0)
+    frame_end: bpy.props.FloatProperty(name="End", default=250.0)
 
     def execute(self, context):
+        if self.use_frame_range and not self.frame_end > self.frame_start:
+            self.report({"ERROR"}, "The frame range's End must be after its Start")
+            return {"CANCELLED"}
         targets = keys.selected_targets(context)
         remember_speeds(context, [t for t in targets if keys.rotation_kind(t)])
         done = 0
         for t in targets:
             frames = keys.key_frames(t, ("location", "rotation_quaternion", "rotation_euler"))
+            if self.use_frame_range:
+                # The keys inside the range, plus the transforms at its ends.
+                inside = frames[(frames > self.frame_start) & (frames < self.frame_end)]
+                frames = np.concatenate([[self.frame_start], inside, [self.frame_end]]).astype(F32)
             if len(frames) < 2:
                 continue
             kind = keys.rotation_kind(t)

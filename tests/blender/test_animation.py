@@ -304,3 +304,21 @@ def test_tools_on_pose_bones_of_the_fox(dq, assets, tool, tmp_path):
         image = bpy.data.images[f"Rotation Speed {arm.name}:{name}"]
         assert len(image["dq_skin_speeds_deg"]) == int(frames[-1] - frames[0])
         assert (tmp_path / "fox.png").is_file()
+
+
+def test_screw_inbetweens_on_a_frame_range_leave_the_rest_alone(dq):
+    dqskin, keys = dq
+    obj = keyed_object(
+        "Ranged", [1, 11, 21],
+        [Quaternion((1, 0, 0, 0)), Quaternion((0, 0, 1), 1.0), Quaternion((0, 0, 1), 2.0)],
+        locations=[(0, 0, 0), (1.0, 0.0, 0.0), (1.0, 2.0, 0.0)],
+    )
+    t = keys.Target(obj)
+    outside = keys.locations_at(t, np.arange(11, 22, dtype=F32))
+    props = dict(step=1.0, use_frame_range=True, frame_start=3.0, frame_end=9.0)
+    assert run_on_objects(bpy.ops.anim.dq_screw_inbetweens, [obj], **props) == {"FINISHED"}
+    frames = keys.key_frames(t, ("location",))
+    assert frames.min() == 1 and frames.max() == 21 and set(np.arange(3, 10)).issubset(set(frames.tolist()))
+    np.testing.assert_allclose(keys.locations_at(t, np.arange(11, 22, dtype=F32)), outside, atol=1e-6)
+    with pytest.raises(RuntimeError, match="End must be after its Start"):
+        run_on_objects(bpy.ops.anim.dq_screw_inbetweens, [obj], step=1.0, use_frame_range=True, frame_start=5.0, frame_end=5.0)

@@ -18,7 +18,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE = ROOT / "addon" / "dq_skin"
 # What of the wheel's `dqskin/` package goes into the extension.
-BUNDLED = ("__init__.py", "_dqskin.pyi", "py.typed")
+BUNDLED = ("__init__.py", "_dqskin.pyi", "py.typed", "pc2.py")
 
 
 def blender_ext() -> Path:

@@ -1,0 +1,144 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Baking a DQ Skin modifier's result to a PC2 point cache, played back by Blender's own Mesh
+Cache modifier, so the animation plays and renders where this add-on is not installed."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from . import modifier
+from .dqskin import pc2
+
+CACHE_NAME = "DQ Skin Cache"
+
+
+def _positions(obj, depsgraph) -> np.ndarray:
+    ev = obj.evaluated_get(depsgraph)
+    flat = np.empty(len(ev.data.vertices) * 3, np.float32)
+    ev.data.attributes["position"].data.foreach_get("vector", flat)
+    return flat.reshape(-1, 3)
+
+
+class Progress:
+    """Progress on the terminal (a text bar) and in the UI (`window_manager.progress_*`)."""
+
+    def __init__(self, context, total: int, label: str):
+        self.wm = getattr(context, "window_manager", None)
+        self.total, self.label, self.done = max(total, 1), label, 0
+        self.start = time.perf_counter()
+        self.tty = sys.stderr.isatty()
+        if self.wm is not None:
+            self.wm.progress_begin(0, self.total)
+
+    def step(self) -> None:
+        self.done += 1
+        if self.wm is not None:
+            self.wm.progress_update(self.done)
+        width = 30
+        filled = int(width * self.done / self.total)
+        line = f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total}"
+        if self.tty or self.done == self.total:
+            sys.stderr.write(line + ("\n" if self.done == self.total else ""))
+            sys.stderr.flush()
+
+    def end(self) -> None:
+        if self.wm is not None:
+            self.wm.progress_end()
+
+
+def bake(context, obj, mod, path, frame_start: int, frame_end: int) -> pc2.Header:
+    """Writes the modifier's output for every frame of `[frame_start, frame_end]` to `path` (PC2,
+    object space). Modifiers after it are muted while baking, so the cache holds exactly what DQ
+    Skin passes on. Nothing is written under `path` if anything fails."""
+    if frame_end < frame_start:
+        raise ValueError(f"the frame range {frame_start}–{frame_end} is empty")
+    scene = context.scene
+    mods = list(obj.modifiers)
+    later = [m for m in mods[mods.index(mod) + 1:] if m.show_viewport]
+    current = scene.frame_current
+    progress = Progress(context, frame_end - frame_start + 1, f"Baking {obj.name}")
+    try:
+        for m in later:
+            m.show_viewport = False
+        with pc2.Writer(path, len(obj.data.vertices), frame_start, 1.0) as writer:
+            for frame in range(frame_start, frame_end + 1):
+                scene.frame_set(frame)
+                depsgraph = context.evaluated_depsgraph_get()
+                st = modifier.state(obj, mod)
+                if st.error:
+                    raise RuntimeError(f"frame {frame}: {st.error}")
+                writer.add(_positions(obj, depsgraph))
+                progress.step()
+    finally:
+        for m in later:
+            m.show_viewport = True
+        scene.frame_set(current)
+        progress.end()
+    return pc2.read_header(path)
+
+
+def add_cache_modifier(obj, mod, path, frame_start: int):
+    """A Mesh Cache modifier playing `path` in DQ Skin's place (right after it)."""
+    cache = obj.modifiers.get(CACHE_NAME) or obj.modifiers.new(CACHE_NAME, "MESH_CACHE")
+    cache.cache_format = "PC2"
+    cache.filepath = str(path)
+    cache.frame_start = float(frame_start)
+    cache.frame_scale = 1.0
+    cache.play_mode = "SCENE"
+    cache.time_mode = "FRAME"
+    cache.deform_mode = "OVERWRITE"
+    cache.forward_axis, cache.up_axis = "POS_Y", "POS_Z"
+    index = list(obj.modifiers).index(mod) + 1
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.modifier_move_to_index(modifier=cache.name, index=min(index, len(obj.modifiers) - 1))
+    return cache
+
+
+class OBJECT_OT_dq_skin_bake(bpy.types.Operator):
+    """Bake the DQ Skin result over a frame range to a PC2 point cache and play it with a Mesh
+    Cache modifier (so it works without this add-on)"""
+
+    bl_idname = "object.dq_skin_bake"
+    bl_label = "Bake DQ Skin to Cache"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filepath: bpy.props.StringProperty(name="File", description="PC2 file to write", subtype="FILE_PATH", default="//dq_skin.pc2")
+    frame_start: bpy.props.IntProperty(name="Start", description="First frame (default: the scene's)", default=-1)
+    frame_end: bpy.props.IntProperty(name="End", description="Last frame (default: the scene's)", default=-1)
+    disable_dq_skin: bpy.props.BoolProperty(name="Disable DQ Skin", description="Turn the DQ Skin modifier off once baked", default=True)
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and obj.type == "MESH"
+
+    def execute(self, context):
+        obj = context.active_object
+        mods = modifier.dq_skin_modifiers(obj)
+        if not mods:
+            self.report({"ERROR"}, f"{obj.name} has no DQ Skin modifier to bake")
+            return {"CANCELLED"}
+        mod = mods[0]
+        scene = context.scene
+        start = self.frame_start if self.frame_start >= 0 else scene.frame_start
+        end = self.frame_end if self.frame_end >= 0 else scene.frame_end
+        path = Path(bpy.path.abspath(self.filepath))
+        try:
+            header = bake(context, obj, mod, path, start, end)
+        except (RuntimeError, ValueError, OSError) as e:
+            self.report({"ERROR"}, f"Bake failed, nothing written: {e}")
+            return {"CANCELLED"}
+        add_cache_modifier(obj, mod, path, start)
+        if self.disable_dq_skin:
+            mod.show_viewport = False
+            mod.show_render = False
+        self.report({"INFO"}, f"Baked {header.samples} frames of {header.points} points to {path}")
+        return {"FINISHED"}
+
+
+CLASSES = (OBJECT_OT_dq_skin_bake,)

@@ -1,0 +1,148 @@
+"""PC2 point caches, the format Blender's Mesh Cache modifier reads (and 3ds Max writes).
+
+Layout (little-endian): the 12 bytes ``POINTCACHE2\\0``, int32 version (1), int32 number of
+points, float32 start frame, float32 sample rate (frames between samples), int32 number of
+samples, then ``samples × points × 3`` float32 coordinates.
+
+Files are written to a temporary file beside the target and renamed into place when complete,
+so a failed or interrupted bake never leaves a partial cache under the final name.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+MAGIC = b"POINTCACHE2\0"
+HEADER = struct.Struct("<12siiffi")
+
+
+class PC2Error(ValueError):
+    """A file that is not a PC2 cache, or caches that cannot be combined."""
+
+
+@dataclass(frozen=True)
+class Header:
+    points: int
+    start_frame: float
+    sample_rate: float
+    samples: int
+
+    @property
+    def end_frame(self) -> float:
+        return self.start_frame + self.sample_rate * max(self.samples - 1, 0)
+
+
+def read_header(path) -> Header:
+    with open(path, "rb") as f:
+        raw = f.read(HEADER.size)
+    if len(raw) < HEADER.size:
+        raise PC2Error(f"{path}: too short for a PC2 header")
+    magic, version, points, start, rate, samples = HEADER.unpack(raw)
+    if magic != MAGIC:
+        raise PC2Error(f"{path}: not a PC2 file (bad signature)")
+    if version != 1:
+        raise PC2Error(f"{path}: unsupported PC2 version {version}")
+    if points < 0 or samples < 0:
+        raise PC2Error(f"{path}: negative point or sample count")
+    size = os.path.getsize(path)
+    expected = HEADER.size + points * samples * 12
+    if size != expected:
+        raise PC2Error(f"{path}: {size} bytes, but the header promises {expected}")
+    return Header(points, start, rate, samples)
+
+
+def read(path) -> tuple[Header, np.ndarray]:
+    """The header and the samples as a ``(samples, points, 3)`` float32 array."""
+    header = read_header(path)
+    data = np.fromfile(path, dtype="<f4", offset=HEADER.size)
+    return header, data.reshape(header.samples, header.points, 3)
+
+
+class Writer:
+    """Streams samples into a PC2 file: ``with Writer(path, points, start) as w: w.add(xyz)``.
+
+    The file appears under ``path`` only when the ``with`` block ends without an exception.
+    """
+
+    def __init__(self, path, points: int, start_frame: float, sample_rate: float = 1.0):
+        if points < 0:
+            raise PC2Error("points must be ≥ 0")
+        if not sample_rate > 0:
+            raise PC2Error("sample_rate must be positive")
+        self.path = Path(path)
+        self.points = int(points)
+        self.header = (float(start_frame), float(sample_rate))
+        self.samples = 0
+        self._file = None
+        self._tmp = None
+
+    def __enter__(self) -> "Writer":
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
+        self._tmp = Path(tmp)
+        self._file = os.fdopen(fd, "wb")
+        self._file.write(HEADER.pack(MAGIC, 1, self.points, *self.header, 0))
+        return self
+
+    def add(self, positions) -> None:
+        a = np.ascontiguousarray(positions, dtype="<f4")
+        if a.shape != (self.points, 3):
+            raise PC2Error(f"a sample must have shape ({self.points}, 3), got {a.shape}")
+        self._file.write(a.tobytes())
+        self.samples += 1
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is None:
+                self._file.seek(0)
+                self._file.write(HEADER.pack(MAGIC, 1, self.points, *self.header, self.samples))
+                self._file.flush()
+                os.fsync(self._file.fileno())
+            self._file.close()
+            if exc_type is None:
+                os.replace(self._tmp, self.path)
+        finally:
+            if self._tmp is not None and self._tmp.exists():
+                self._tmp.unlink()
+
+
+def write(path, samples, start_frame: float, sample_rate: float = 1.0) -> Header:
+    """Writes ``(samples, points, 3)`` positions; returns the header written."""
+    samples = np.asarray(samples)
+    if samples.ndim != 3 or samples.shape[2] != 3:
+        raise PC2Error(f"samples must have shape (samples, points, 3), got {samples.shape}")
+    with Writer(path, samples.shape[1], start_frame, sample_rate) as w:
+        for s in samples:
+            w.add(s)
+    return read_header(path)
+
+
+def merge(paths, out) -> Header:
+    """Joins caches of consecutive frame ranges (e.g. a farm's chunks) into one, in frame order.
+    They must have the same point count and sample rate and follow each other without gaps or
+    overlaps."""
+    if not paths:
+        raise PC2Error("nothing to merge")
+    headers = sorted(((read_header(p), p) for p in paths), key=lambda hp: hp[0].start_frame)
+    first = headers[0][0]
+    for (prev, pp), (cur, cp) in zip(headers, headers[1:]):
+        if cur.points != first.points:
+            raise PC2Error(f"{cp} has {cur.points} points, {headers[0][1]} has {first.points}")
+        if abs(cur.sample_rate - first.sample_rate) > 1e-6:
+            raise PC2Error(f"{cp} has sample rate {cur.sample_rate}, {headers[0][1]} has {first.sample_rate}")
+        expected = prev.start_frame + prev.samples * prev.sample_rate
+        if abs(cur.start_frame - expected) > 1e-4:
+            kind = "a gap" if cur.start_frame > expected else "an overlap"
+            raise PC2Error(f"{pp} ends before frame {expected} but {cp} starts at {cur.start_frame}: {kind}")
+    with Writer(out, first.points, first.start_frame, first.sample_rate) as w:
+        for _, p in headers:
+            _, data = read(p)
+            for s in data:
+                w.add(s)
+    return read_header(out)

@@ -1,0 +1,77 @@
+"""Baking DQ Skin to a PC2 cache played by Blender's Mesh Cache modifier."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+from test_exactness import evaluated_positions, import_character
+from test_modifier import add_dq_skin
+
+PLAYBACK_TOL = 1e-6  # of the bounding-box diagonal: float32 positions stored and read back
+
+
+def test_mesh_cache_playback_reproduces_the_live_result(dq_skin, assets, tmp_path):
+    from bl_ext.user_default.dq_skin.dqskin import pc2
+
+    obj, arm_mod = import_character(assets / "CesiumMan.glb")
+    mod = add_dq_skin(obj, "DUAL_QUATERNION")
+    action = arm_mod.object.animation_data.action
+    start, end = (int(round(f)) for f in action.frame_range)
+    scene = bpy.context.scene
+    live = {}
+    for f in range(start, end + 1):
+        scene.frame_set(f)
+        live[f] = evaluated_positions(obj)
+    path = tmp_path / "cesium.pc2"
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        result = bpy.ops.object.dq_skin_bake(filepath=str(path), frame_start=start, frame_end=end)
+    assert result == {"FINISHED"}
+    header = pc2.read_header(path)
+    assert (header.points, header.start_frame, header.sample_rate, header.samples) == (
+        len(obj.data.vertices), start, 1.0, end - start + 1)
+    assert not mod.show_viewport and not mod.show_render
+    cache = obj.modifiers["DQ Skin Cache"]
+    assert cache.type == "MESH_CACHE" and list(obj.modifiers).index(cache) == list(obj.modifiers).index(mod) + 1
+    worst = 0.0
+    for f in list(range(start, end + 1))[::-1]:  # backwards too
+        scene.frame_set(f)
+        played = evaluated_positions(obj)
+        diag = float(np.linalg.norm(live[f].max(0) - live[f].min(0)))
+        worst = max(worst, float(np.abs(played - live[f]).max()) / diag)
+    assert worst <= PLAYBACK_TOL, worst
+    # Without the add-on's modifier at all, the cache alone deforms the mesh.
+    mid = (start + end) // 2
+    obj.modifiers.remove(mod)
+    scene.frame_set(mid)
+    np.testing.assert_allclose(evaluated_positions(obj), live[mid], atol=PLAYBACK_TOL * 2)
+
+
+def test_failed_bake_writes_nothing(dq_skin, tmp_path):
+    from scenes import rig_tube
+
+    obj, arm, arm_mod = rig_tube()
+    mod = add_dq_skin(obj)
+    arm_obj = arm
+    bpy.context.view_layer.objects.active = arm_obj
+    bpy.ops.object.mode_set(mode="EDIT")  # DQ Skin reports an error on every frame
+    path = tmp_path / "never.pc2"
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        with pytest.raises(RuntimeError, match="Bake failed, nothing written"):
+            bpy.ops.object.dq_skin_bake(filepath=str(path), frame_start=1, frame_end=5)
+    assert not path.exists()
+    assert not list(tmp_path.iterdir())  # no temporary file left either
+    assert "DQ Skin Cache" not in obj.modifiers
+    assert mod.show_viewport
+
+
+def test_bake_needs_a_dq_skin_modifier(dq_skin, tmp_path):
+    from scenes import rig_tube
+
+    obj, arm, arm_mod = rig_tube()
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        with pytest.raises(RuntimeError, match="has no DQ Skin modifier"):
+            bpy.ops.object.dq_skin_bake(filepath=str(tmp_path / "x.pc2"))

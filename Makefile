@@ -50,6 +50,8 @@ test-python: setup
 demo: setup
 	$(PY) -m dqskin.demo
 	$(PY) addon/demo.py
+	BLENDER_USER_RESOURCES=$(abspath .blender_user) $(PY) -m dqskin.blender compare ../shared/assets/CesiumMan.glb --out out/CesiumMan
+	@cat out/CesiumMan/report.md
 
 # Kernel throughput against a memory-bandwidth reference, then DQ Skin against Blender's Armature
 # modifier per frame in one Blender session (benchmarks, not tests).

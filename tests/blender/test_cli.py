@@ -1,0 +1,79 @@
+"""The batch command line, run as users run it: a separate `python -m dqskin.blender` process."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from conftest import ASSETS, USER
+
+
+def run(*args, cwd=None):
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(USER))
+    return subprocess.run([sys.executable, "-m", "dqskin.blender", *args], capture_output=True, text=True, env=env, cwd=cwd, timeout=600)
+
+
+def test_bake_then_merge_chunks_like_a_farm(tmp_path):
+    from dqskin import pc2
+
+    whole = tmp_path / "whole.pc2"
+    r = run("bake", str(ASSETS / "CesiumMan.glb"), "--object", "Cesium_Man", "--frames", "1-20", "--out", str(whole))
+    assert r.returncode == 0, r.stderr
+    chunks = []
+    for a, b in ((1, 8), (9, 20)):
+        chunk = tmp_path / f"chunk_{a}.pc2"
+        r = run("bake", str(ASSETS / "CesiumMan.glb"), "--object", "Cesium_Man", "--frames", f"{a}-{b}", "--out", str(chunk))
+        assert r.returncode == 0, r.stderr
+        chunks.append(chunk)
+    merged = tmp_path / "merged.pc2"
+    r = run("merge", str(merged), *map(str, chunks[::-1]))
+    assert r.returncode == 0, r.stderr
+    hw, dw = pc2.read(whole)
+    hm, dm = pc2.read(merged)
+    assert hw == hm
+    np.testing.assert_array_equal(dw, dm)
+
+
+def test_failures_exit_non_zero_with_one_line_and_write_nothing(tmp_path):
+    out = tmp_path / "x.pc2"
+    r = run("bake", str(ASSETS / "CesiumMan.glb"), "--object", "Nobody", "--out", str(out))
+    assert r.returncode != 0 and "no mesh object named 'Nobody'" in r.stderr
+    assert len(r.stderr.strip().splitlines()[-1]) < 200
+    r = run("bake", str(tmp_path / "missing.glb"), "--object", "A", "--out", str(out))
+    assert r.returncode != 0 and "no such file" in r.stderr
+    r = run("bake", str(ASSETS / "CesiumMan.glb"), "--object", "Cesium_Man", "--frames", "9-3", "--out", str(out))
+    assert r.returncode != 0 and "end is before the start" in r.stderr
+    assert not out.exists()
+    r = run("merge", str(tmp_path / "m.pc2"), str(tmp_path / "missing.pc2"))
+    assert r.returncode != 0 and not (tmp_path / "m.pc2").exists()
+
+
+def test_apply_saves_a_file_with_dq_skin(tmp_path):
+    out = tmp_path / "fox_dq.blend"
+    r = run("apply", str(ASSETS / "Fox.glb"), "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert out.is_file() and "replaced 1 Armature modifier" in r.stdout
+    check = tmp_path / "check.py"
+    check.write_text(
+        "import sys, bpy\n"
+        f"bpy.ops.wm.open_mainfile(filepath={str(out)!r})\n"
+        "o = next(o for o in bpy.data.objects if o.type == 'MESH' and any(m.type == 'ARMATURE' for m in o.modifiers))\n"
+        "print('MODS', [m.type for m in o.modifiers], [m.show_viewport for m in o.modifiers])\n"
+    )
+    r = subprocess.run([sys.executable, str(check)], capture_output=True, text=True, timeout=300)
+    assert "MODS ['NODES', 'ARMATURE'] [True, False]" in r.stdout, r.stdout + r.stderr
+
+
+def test_compare_writes_a_report(tmp_path):
+    r = run("compare", str(ASSETS / "RiggedFigure.glb"), "--frames", "1-10", "--out", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stderr
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    methods = report["objects"][0]["methods"]
+    assert set(methods) == {"linear", "dual_quaternion"}
+    assert all(m["max_deviation_of_diagonal"] <= 1e-5 for m in methods.values())
+    assert "| linear |" in (tmp_path / "out" / "report.md").read_text()

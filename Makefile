@@ -50,8 +50,9 @@ test-python: setup
 demo: setup
 	$(PY) -m dqskin.demo
 	$(PY) addon/demo.py
+	BLENDER_USER_RESOURCES=$(abspath .blender_user) $(PY) -m dqskin.blender compare --out out/rigs
 	BLENDER_USER_RESOURCES=$(abspath .blender_user) $(PY) -m dqskin.blender compare ../shared/assets/CesiumMan.glb --out out/CesiumMan
-	@cat out/CesiumMan/report.md
+	@cat out/rigs/report.md out/CesiumMan/report.md
 
 # Kernel throughput against a memory-bandwidth reference, then DQ Skin against Blender's Armature
 # modifier per frame in one Blender session (benchmarks, not tests).

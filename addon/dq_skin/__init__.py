@@ -8,9 +8,9 @@ result the handlers (see `handlers`) keep current.
 
 import bpy
 
-from . import animation, bake, handlers, operators, rig, ui  # noqa: F401
+from . import animation, bake, compare, handlers, operators, rig, ui  # noqa: F401
 
-CLASSES = (*operators.CLASSES, *bake.CLASSES, *animation.CLASSES, *ui.CLASSES)
+CLASSES = (*operators.CLASSES, *bake.CLASSES, *compare.CLASSES, *animation.CLASSES, *ui.CLASSES)
 
 
 def register():

@@ -11,9 +11,10 @@ Commands:
   Skin result (added from its Armature modifier if missing) to a PC2 cache.
 - ``apply FILE --out FILE.blend``: replace every Armature modifier with DQ Skin and save.
 - ``merge OUT IN [IN ...]``: join PC2 chunks of consecutive frame ranges (farm bakes).
-- ``compare FILE [--frames A-B] [--out DIR]``: per deformed object, DQ Skin (Linear, Dual
-  Quaternion) against the built-in modifier: max and mean deviation and per-frame times, as
-  ``report.json`` and ``report.md``.
+- ``compare [FILE] [--frames A-B] [--out DIR]``: a comparison scene (the file's first rigged
+  mesh, or built-in test rigs) with the Armature modifier (Linear, Preserve Volume) and DQ Skin
+  (Linear, Dual Quaternion, Blend) side by side: ``report.json`` and ``report.md`` (deviations
+  from each built-in method, volume relative to rest, per-frame time) and ``comparison.png``.
 
 On failure the exit code is non-zero with a one-line reason, and no output file is written (all
 outputs go to a temporary file that is renamed into place).
@@ -142,68 +143,48 @@ def cmd_merge(args) -> str:
     return f"merged {len(args.inputs)} caches into {args.out}: frames {header.start_frame:g}-{header.end_frame:g}"
 
 
-def _positions(bpy, obj):
-    import numpy as np
-
-    ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    flat = np.empty(len(ev.data.vertices) * 3, np.float32)
-    ev.data.attributes["position"].data.foreach_get("vector", flat)
-    return flat.reshape(-1, 3)
-
-
 def cmd_compare(args) -> str:
-    import numpy as np
-
     bpy = _bpy(args.user_resources)
-    _load(bpy, args.file)
-    objects = _skinned(bpy)
-    if not objects:
-        raise Failure(f"{args.file}: no object has an Armature modifier")
+    from bl_ext.user_default.dq_skin import compare
+
+    if args.file:
+        _load(bpy, args.file)
+        sources = _skinned(bpy)[:1]
+        if not sources:
+            raise Failure(f"{args.file}: no object has an Armature modifier")
+        name = Path(args.file).name
+    else:
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+        sources = compare.builtin_rigs(bpy.context.scene)
+        bpy.context.scene.frame_start, bpy.context.scene.frame_end = compare.FRAMES
+        name = "built-in test rigs"
     scene = bpy.context.scene
     start, end = _frames(args.frames, scene)
-    frames = list(range(start, end + 1))
-    report = {"file": str(args.file), "frames": [start, end], "objects": []}
-    for obj in objects:
-        arm_mod = next(m for m in obj.modifiers if m.type == "ARMATURE")
-        entry = {"object": obj.name, "vertices": len(obj.data.vertices), "methods": {}}
-        reference, timing = {}, {}
-        for name, pv in (("linear", False), ("dual_quaternion", True)):
-            arm_mod.use_deform_preserve_volume = pv
-            t0 = time.perf_counter()
-            reference[name] = [scene.frame_set(f) or _positions(bpy, obj) for f in frames]
-            timing[name] = (time.perf_counter() - t0) / len(frames)
-        mod = _add_dq_skin(bpy, obj, "LINEAR")
-        from bl_ext.user_default.dq_skin import operators
-
-        for name, item in (("linear", "Linear"), ("dual_quaternion", "Dual Quaternion")):
-            operators.set_input(mod, "Method", operators.menu_value(mod.node_group, item))
-            t0 = time.perf_counter()
-            ours = [scene.frame_set(f) or _positions(bpy, obj) for f in frames]
-            seconds = (time.perf_counter() - t0) / len(frames)
-            dev = np.stack([np.linalg.norm(a - b, axis=1) for a, b in zip(ours, reference[name])])
-            diag = max(float(np.linalg.norm(r.max(0) - r.min(0))) for r in reference[name])
-            entry["methods"][name] = {
-                "max_deviation": float(dev.max()),
-                "mean_deviation": float(dev.mean()),
-                "max_deviation_of_diagonal": float(dev.max()) / diag,
-                "builtin_ms_per_frame": timing[name] * 1e3,
-                "dq_skin_ms_per_frame": seconds * 1e3,
-            }
-        report["objects"].append(entry)
+    _, rows = compare.build(bpy.context, sources)
+    result = compare.report(bpy.context, scene, rows, list(range(start, end + 1)))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_text(out / "report.json", json.dumps(report, indent=2))
-    lines = [f"# DQ Skin vs the Armature modifier: {Path(args.file).name}, frames {start}-{end}", ""]
-    lines.append("| object | method | max deviation | of diagonal | mean deviation | built-in ms/frame | DQ Skin ms/frame |")
-    lines.append("|---|---|---|---|---|---|---|")
-    for e in report["objects"]:
-        for m, r in e["methods"].items():
+    _atomic_text(out / "report.json", json.dumps({"source": name, "frames": [start, end], "rows": result}, indent=2))
+    lines = [f"# DQ Skin vs the Armature modifier: {name}, frames {start}-{end}", ""]
+    lines.append("| mesh | method | max dev. from Linear | max dev. from Preserve Volume | volume / rest | ms/frame |")
+    lines.append("|---|---|---|---|---|---|")
+    for row in result:
+        for method, r in row["methods"].items():
+            volume = r.get("volume_relative_to_rest")
             lines.append(
-                f"| {e['object']} | {m} | {r['max_deviation']:.3e} | {r['max_deviation_of_diagonal']:.2e} | "
-                f"{r['mean_deviation']:.3e} | {r['builtin_ms_per_frame']:.2f} | {r['dq_skin_ms_per_frame']:.2f} |"
+                f"| {row['mesh']} | {method} | {r['max_deviation_from_armature_linear']:.3e} | "
+                f"{r['max_deviation_from_armature_preserve_volume']:.3e} | "
+                f"{'' if volume is None else f'{volume:.3f}'} | {r['ms_per_frame']:.2f} |"
             )
+    if not args.no_render:
+        scene.frame_set(end)
+        png = out / "comparison.png"
+        tmp = out / ".comparison.render.png"
+        compare.render(scene, tmp, width=args.width, height=args.height, samples=args.samples)
+        os.replace(tmp, png)
+        lines += ["", f"![comparison at frame {end}](comparison.png)"]
     _atomic_text(out / "report.md", "\n".join(lines) + "\n")
-    return f"compared {len(objects)} object(s) over {len(frames)} frames: {out / 'report.md'}"
+    return f"compared {name} over frames {start}-{end}: {out / 'report.md'}"
 
 
 def _atomic_text(path: Path, text: str) -> None:
@@ -234,10 +215,14 @@ def parser() -> argparse.ArgumentParser:
     m.add_argument("out")
     m.add_argument("inputs", nargs="+")
     m.set_defaults(run=cmd_merge)
-    c = sub.add_parser("compare", help="DQ Skin against the built-in modifier, as a report")
-    c.add_argument("file")
+    c = sub.add_parser("compare", help="a comparison scene, its report and a render")
+    c.add_argument("file", nargs="?", help="a rigged file (default: the built-in test rigs)")
     c.add_argument("--frames")
     c.add_argument("--out", default="out")
+    c.add_argument("--no-render", action="store_true", help="skip the PNG")
+    c.add_argument("--width", type=int, default=960)
+    c.add_argument("--height", type=int, default=540)
+    c.add_argument("--samples", type=int, default=8)
     c.set_defaults(run=cmd_compare)
     return p
 

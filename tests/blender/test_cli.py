@@ -69,11 +69,22 @@ def test_apply_saves_a_file_with_dq_skin(tmp_path):
     assert "MODS ['NODES', 'ARMATURE'] [True, False]" in r.stdout, r.stdout + r.stderr
 
 
-def test_compare_writes_a_report(tmp_path):
-    r = run("compare", str(ASSETS / "RiggedFigure.glb"), "--frames", "1-10", "--out", str(tmp_path / "out"))
+def test_compare_writes_a_report_and_a_picture(tmp_path):
+    out = tmp_path / "out"
+    r = run("compare", str(ASSETS / "RiggedFigure.glb"), "--frames", "1-10", "--out", str(out), "--width", "160", "--height", "90", "--samples", "1")
     assert r.returncode == 0, r.stderr
-    report = json.loads((tmp_path / "out" / "report.json").read_text())
-    methods = report["objects"][0]["methods"]
-    assert set(methods) == {"linear", "dual_quaternion"}
-    assert all(m["max_deviation_of_diagonal"] <= 1e-5 for m in methods.values())
-    assert "| linear |" in (tmp_path / "out" / "report.md").read_text()
+    report = json.loads((out / "report.json").read_text())
+    methods = report["rows"][0]["methods"]
+    assert len(methods) == 5
+    assert methods["DQ Skin Linear"]["max_deviation_from_armature_linear"] < 1e-5
+    assert methods["DQ Skin Dual Quaternion"]["max_deviation_from_armature_preserve_volume"] < 1e-5
+    assert "| DQ Skin Blend |" in (out / "report.md").read_text()
+    assert (out / "comparison.png").stat().st_size > 0
+
+
+def test_compare_built_in_rigs(tmp_path):
+    out = tmp_path / "rigs"
+    r = run("compare", "--out", str(out), "--no-render")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads((out / "report.json").read_text())["rows"]
+    assert [row["mesh"] for row in rows] == ["Candy Wrapper Twist", "Elbow Bend", "Shoulder Raise"]

@@ -76,7 +76,7 @@ def builtin_rigs(scene):
     obj, arm = _tube_rig(scene, "Candy Wrapper Twist", 2)
     rigs.append((obj, arm, "Bone1", (0, 1, 0), math.radians(180)))  # about the bone's own axis
     obj, arm = _tube_rig(scene, "Elbow Bend", 2)
-    rigs.append((obj, arm, "Bone1", (1, 0, 0), math.radians(130)))
+    rigs.append((obj, arm, "Bone1", (0, 0, -1), math.radians(130)))  # bends across the view
     obj, arm = _tube_rig(scene, "Shoulder Raise", 3, length=5.0)
     rigs.append((obj, arm, "Bone1", (0, 0, 1), math.radians(150)))
     out = []
@@ -103,7 +103,7 @@ def build(context, sources, spacing: float | None = None):
         step = spacing or max(size.x, size.z * 0.6) * 1.6 + 0.5
         row = {}
         for col, (label, kind, preserve) in enumerate(VARIANTS):
-            offset = Vector((col * step, y, 0.0))
+            offset = Vector((col * step, 0.0, -y))  # rows stack downwards, facing the camera
             arm = arm_src.copy()
             arm.matrix_world = arm_src.matrix_world.copy()
             arm.location += offset
@@ -130,7 +130,8 @@ def build(context, sources, spacing: float | None = None):
                     mod = next(m for m in obj.modifiers if m.type == "NODES")
                     operators.set_input(mod, "Blend Factor", 0.5)
             text = bpy.data.objects.new(f"{label} label", bpy.data.curves.new(f"{label} label", "FONT"))
-            text.data.body = label.replace(" ", "\n", 1)
+            head, _, tail = label.partition(" Skin " if label.startswith("DQ") else " ")
+            text.data.body = f"{head} Skin\n{tail}" if label.startswith("DQ") else f"{head}\n{tail}"
             text.data.size = 0.25 * max(size.z, 1.0) / 4
             text.data.align_x = "CENTER"
             context.view_layer.update()
@@ -139,7 +140,7 @@ def build(context, sources, spacing: float | None = None):
             collection.objects.link(text)
             row[label] = obj
         rows.append(row)
-        y += max(size.y, 1.0) * 2.0 + 2.0
+        y += size.z * 1.8 + 1.5
     for src in sources:  # the originals stay, hidden, so the comparison shows once
         src.hide_viewport = src.hide_render = True
         arm_src = next(m for m in src.modifiers if m.type == "ARMATURE").object

@@ -238,6 +238,40 @@ def report(context, scene, rows, frames):
     return result
 
 
+def write_report(result, out_dir, source: str, frames, picture: str | None = None) -> None:
+    """`report.json` and `report.md` in `out_dir` (each written to a temporary file first)."""
+    import json
+    import os
+    import tempfile
+    from pathlib import Path
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    start, end = frames[0], frames[-1]
+    lines = [f"# DQ Skin vs the Armature modifier: {source}, frames {start}-{end}", ""]
+    lines.append("| mesh | method | max dev. from Linear | max dev. from Preserve Volume | volume / rest | ms/frame |")
+    lines.append("|---|---|---|---|---|---|")
+    for row in result:
+        for method, r in row["methods"].items():
+            volume = r.get("volume_relative_to_rest")
+            lines.append(
+                f"| {row['mesh']} | {method} | {r['max_deviation_from_armature_linear']:.3e} | "
+                f"{r['max_deviation_from_armature_preserve_volume']:.3e} | "
+                f"{'' if volume is None else f'{volume:.3f}'} | {r['ms_per_frame']:.2f} |"
+            )
+    if picture:
+        lines += ["", f"![comparison at frame {end}]({picture})"]
+    texts = {
+        "report.json": json.dumps({"source": source, "frames": [start, end], "rows": result}, indent=2),
+        "report.md": "\n".join(lines) + "\n",
+    }
+    for name, text in texts.items():
+        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, out / name)
+
+
 def render(scene, path, width=960, height=540, samples=8) -> None:
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
@@ -259,6 +293,10 @@ class OBJECT_OT_dq_skin_comparison_scene(bpy.types.Operator):
     bl_label = "Build Comparison Scene"
     bl_options = {"REGISTER", "UNDO"}
 
+    report_dir: bpy.props.StringProperty(
+        name="Report Folder", description="Where to write report.md and report.json (empty: no report)", subtype="DIR_PATH", default=""
+    )
+
     def execute(self, context):
         obj = context.active_object
         if obj is not None and obj.type == "MESH" and any(m.type == "ARMATURE" for m in obj.modifiers):
@@ -270,6 +308,10 @@ class OBJECT_OT_dq_skin_comparison_scene(bpy.types.Operator):
             self.report({"ERROR"}, f"{obj.name} has no Armature modifier to compare")
             return {"CANCELLED"}
         collection, rows = build(context, sources)
+        if self.report_dir:
+            frames = list(range(context.scene.frame_start, context.scene.frame_end + 1))
+            result = report(context, context.scene, rows, frames)
+            write_report(result, bpy.path.abspath(self.report_dir), sources[0].name if obj in sources else "built-in test rigs", frames)
         self.report({"INFO"}, f"Built {collection.name!r}: {len(rows)} row(s) of {len(VARIANTS)} variants")
         return {"FINISHED"}
 

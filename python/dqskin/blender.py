@@ -23,11 +23,9 @@ outputs go to a temporary file that is renamed into place).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 EXTENSION = "bl_ext.user_default.dq_skin"
@@ -164,34 +162,15 @@ def cmd_compare(args) -> str:
     result = compare.report(bpy.context, scene, rows, list(range(start, end + 1)))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_text(out / "report.json", json.dumps({"source": name, "frames": [start, end], "rows": result}, indent=2))
-    lines = [f"# DQ Skin vs the Armature modifier: {name}, frames {start}-{end}", ""]
-    lines.append("| mesh | method | max dev. from Linear | max dev. from Preserve Volume | volume / rest | ms/frame |")
-    lines.append("|---|---|---|---|---|---|")
-    for row in result:
-        for method, r in row["methods"].items():
-            volume = r.get("volume_relative_to_rest")
-            lines.append(
-                f"| {row['mesh']} | {method} | {r['max_deviation_from_armature_linear']:.3e} | "
-                f"{r['max_deviation_from_armature_preserve_volume']:.3e} | "
-                f"{'' if volume is None else f'{volume:.3f}'} | {r['ms_per_frame']:.2f} |"
-            )
+    picture = None
     if not args.no_render:
         scene.frame_set(end)
-        png = out / "comparison.png"
         tmp = out / ".comparison.render.png"
         compare.render(scene, tmp, width=args.width, height=args.height, samples=args.samples)
-        os.replace(tmp, png)
-        lines += ["", f"![comparison at frame {end}](comparison.png)"]
-    _atomic_text(out / "report.md", "\n".join(lines) + "\n")
+        os.replace(tmp, out / "comparison.png")
+        picture = "comparison.png"
+    compare.write_report(result, out, name, [start, end], picture)
     return f"compared {name} over frames {start}-{end}: {out / 'report.md'}"
-
-
-def _atomic_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
 
 
 def parser() -> argparse.ArgumentParser:

@@ -49,3 +49,14 @@ def test_comparison_of_a_character(dq_skin, assets):
     m = result[0]["methods"]
     assert m["DQ Skin Linear"]["max_deviation_from_armature_linear"] < 1e-5
     assert m["DQ Skin Dual Quaternion"]["max_deviation_from_armature_preserve_volume"] < 1e-5
+
+
+def test_operator_writes_the_report(dq_skin, tmp_path):
+    import json
+
+    bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 6
+    with bpy.context.temp_override(active_object=None, selected_objects=[]):
+        assert bpy.ops.object.dq_skin_comparison_scene(report_dir=str(tmp_path)) == {"FINISHED"}
+    rows = json.loads((tmp_path / "report.json").read_text())["rows"]
+    assert len(rows) == 3 and len(rows[0]["methods"]) == 5
+    assert "| Candy Wrapper Twist | DQ Skin Blend |" in (tmp_path / "report.md").read_text()

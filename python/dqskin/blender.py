@@ -157,6 +157,11 @@ def cmd_compare(args) -> str:
         bpy.context.scene.frame_start, bpy.context.scene.frame_end = compare.FRAMES
         name = "built-in test rigs"
     scene = bpy.context.scene
+    arm = next(m for m in sources[0].modifiers if m.type == "ARMATURE").object
+    action = arm.animation_data.action if arm and arm.animation_data else None
+    if args.file and action is not None and not args.frames:
+        # The animation's own range rather than the scene's default 1-250.
+        scene.frame_start, scene.frame_end = (int(round(f)) for f in action.frame_range)
     start, end = _frames(args.frames, scene)
     _, rows = compare.build(bpy.context, sources)
     result = compare.report(bpy.context, scene, rows, list(range(start, end + 1)))

@@ -75,7 +75,6 @@ class ANIM_OT_dq_rotation_bake(bpy.types.Operator):
         remember_speeds(context, targets)
         baked = 0
         for t in targets:
-            kind = keys.rotation_kind(t)
             frames = keys.key_frames(t)
             if len(frames) < 2:
                 self.report({"WARNING"}, f"{t.label}: fewer than two rotation keys, skipped")
@@ -83,9 +82,7 @@ class ANIM_OT_dq_rotation_bake(bpy.types.Operator):
             q = keys.rotations_at(t, frames)
             at = _frames_between(float(frames[0]), float(frames[-1]), self.step, frames)
             samples = dqskin.sample_rotations(frames, q, at, method=self.method.lower())
-            if kind == "EULER":
-                keys.remove_channels(t, "rotation_euler", 3)
-                t.item.rotation_mode = "QUATERNION"
+            keys.switch_to_quaternion(t)
             keys.write(t, "rotation_quaternion", at, samples, replace_between=(float(frames[0]), float(frames[-1])))
             baked += len(at)
         self.report({"INFO"}, f"Spherical Rotation Bake ({self.method.title()}): {baked} keys on {len(targets)} item(s)")
@@ -120,7 +117,6 @@ class ANIM_OT_dq_screw_inbetweens(bpy.types.Operator):
                 frames = np.concatenate([[self.frame_start], inside, [self.frame_end]]).astype(F32)
             if len(frames) < 2:
                 continue
-            kind = keys.rotation_kind(t)
             locations = keys.locations_at(t, frames)
             rotations = keys.rotations_at(t, frames)
             transforms = np.stack([
@@ -130,9 +126,7 @@ class ANIM_OT_dq_screw_inbetweens(bpy.types.Operator):
             samples = dqskin.sample_transforms(frames, transforms, at)
             matrices = dqskin.matrices_from_dual_quats(samples)
             span = (float(frames[0]), float(frames[-1]))
-            if kind == "EULER":
-                keys.remove_channels(t, "rotation_euler", 3)
-                t.item.rotation_mode = "QUATERNION"
+            keys.switch_to_quaternion(t)
             keys.write(t, "location", at, matrices[:, :3, 3], replace_between=span)
             keys.write(t, "rotation_quaternion", at, samples[:, :4], replace_between=span)
             done += 1
@@ -236,9 +230,7 @@ class ANIM_OT_dq_spring_smoothing(bpy.types.Operator):
                 self.report({"ERROR"}, f"{t.label}: {e}")
                 return {"CANCELLED"}
             at = (frames[0] + self.step * np.arange(len(samples))).astype(F32)
-            if keys.rotation_kind(t) == "EULER":
-                keys.remove_channels(t, "rotation_euler", 3)
-                t.item.rotation_mode = "QUATERNION"
+            keys.switch_to_quaternion(t)
             keys.write(t, "rotation_quaternion", at, samples, replace_between=(float(frames[0]), float(frames[-1])))
             done += 1
         if not done:

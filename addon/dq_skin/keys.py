@@ -158,3 +158,10 @@ def set_values(target: Target, prop: str, frames, values) -> None:
             k.handle_left[1] += delta
             k.handle_right[1] += delta
         fc.update()
+
+
+def switch_to_quaternion(target: Target) -> None:
+    """Before writing quaternion keys: drops keyed Euler channels and sets quaternion mode."""
+    if rotation_kind(target) == "EULER":
+        remove_channels(target, "rotation_euler", 3)
+        target.item.rotation_mode = "QUATERNION"

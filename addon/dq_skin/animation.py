@@ -23,6 +23,13 @@ def _frames_between(first: float, last: float, step: float, extra) -> np.ndarray
     return np.unique(np.round(np.concatenate([grid, np.asarray(extra, np.float64)]), 4)).astype(F32)
 
 
+def _keyed_rotation_targets(context) -> list:
+    """The selected targets with keyed rotation, their speeds remembered for the plot first."""
+    targets = [t for t in keys.selected_targets(context) if keys.rotation_kind(t)]
+    remember_speeds(context, targets)
+    return targets
+
+
 class ANIM_OT_dq_quaternion_cleanup(bpy.types.Operator):
     """Make quaternion rotation keys sign-continuous (no sudden 360° spins) and normalize them"""
 
@@ -68,11 +75,10 @@ class ANIM_OT_dq_rotation_bake(bpy.types.Operator):
     step: bpy.props.FloatProperty(name="Step", description="Frames between baked keys (sub-frames allowed)", default=1.0, min=0.01, soft_max=10.0)
 
     def execute(self, context):
-        targets = [t for t in keys.selected_targets(context) if keys.rotation_kind(t)]
+        targets = _keyed_rotation_targets(context)
         if not targets:
             self.report({"ERROR"}, "Nothing selected has keyed rotation")
             return {"CANCELLED"}
-        remember_speeds(context, targets)
         baked = 0
         for t in targets:
             frames = keys.key_frames(t)
@@ -213,11 +219,10 @@ class ANIM_OT_dq_spring_smoothing(bpy.types.Operator):
     key_weight: bpy.props.FloatProperty(name="Key Weight", description="Extra weight of the curvature at the keys", default=1.2, min=0.01, soft_max=5.0)
 
     def execute(self, context):
-        targets = [t for t in keys.selected_targets(context) if keys.rotation_kind(t)]
+        targets = _keyed_rotation_targets(context)
         if not targets:
             self.report({"ERROR"}, "Nothing selected has keyed rotation")
             return {"CANCELLED"}
-        remember_speeds(context, targets)
         done = 0
         for t in targets:
             frames = keys.key_frames(t)

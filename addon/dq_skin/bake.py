@@ -11,7 +11,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import modifier
+from . import modifier, operators
 from .dqskin import pc2
 
 CACHE_NAME = "DQ Skin Cache"
@@ -99,7 +99,7 @@ def add_cache_modifier(obj, mod, path, frame_start: int):
     return cache
 
 
-class OBJECT_OT_dq_skin_bake(bpy.types.Operator):
+class OBJECT_OT_dq_skin_bake(operators.ActiveMeshOperator):
     """Bake the DQ Skin result over a frame range to a PC2 point cache and play it with a Mesh
     Cache modifier (so it works without this add-on)"""
 
@@ -111,11 +111,6 @@ class OBJECT_OT_dq_skin_bake(bpy.types.Operator):
     frame_start: bpy.props.IntProperty(name="Start", description="First frame (default: the scene's)", default=-1)
     frame_end: bpy.props.IntProperty(name="End", description="Last frame (default: the scene's)", default=-1)
     disable_dq_skin: bpy.props.BoolProperty(name="Disable DQ Skin", description="Turn the DQ Skin modifier off once baked", default=True)
-
-    @classmethod
-    def poll(cls, context):
-        obj = context.active_object
-        return obj is not None and obj.type == "MESH"
 
     def execute(self, context):
         obj = context.active_object

@@ -34,7 +34,16 @@ def menu_value(group, item: str) -> int:
     return next(v for v, name in nodes.menu_values(group).items() if name == item)
 
 
-class OBJECT_OT_dq_skin_add(bpy.types.Operator):
+class ActiveMeshOperator(bpy.types.Operator):
+    """Base of the operators that work on the active mesh object."""
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and obj.type == "MESH"
+
+
+class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
     """Add a DQ Skin modifier configured from the Armature modifier, in its place, and disable
     the Armature modifier (it is kept, so removing DQ Skin restores it)"""
 
@@ -43,11 +52,6 @@ class OBJECT_OT_dq_skin_add(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     method: bpy.props.EnumProperty(name="Method", items=METHOD_ITEMS, default="AUTO")
-
-    @classmethod
-    def poll(cls, context):
-        obj = context.active_object
-        return obj is not None and obj.type == "MESH"
 
     def execute(self, context):
         obj = context.active_object
@@ -112,7 +116,7 @@ def remove_modifier(obj, mod) -> None:
         restore_armature_modifiers(obj)
 
 
-class OBJECT_OT_dq_skin_remove(bpy.types.Operator):
+class OBJECT_OT_dq_skin_remove(ActiveMeshOperator):
     """Remove the DQ Skin modifier and re-enable the Armature modifier it replaced"""
 
     bl_idname = "object.dq_skin_remove"
@@ -120,11 +124,6 @@ class OBJECT_OT_dq_skin_remove(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     modifier: bpy.props.StringProperty(name="Modifier", description="Name of the DQ Skin modifier (default: the first)")
-
-    @classmethod
-    def poll(cls, context):
-        obj = context.active_object
-        return obj is not None and obj.type == "MESH"
 
     def execute(self, context):
         obj = context.active_object

@@ -244,7 +244,7 @@ pub fn spring(times: &[f32], keys: &[Quat], settings: &SpringSettings) -> Result
     }
     let keys = track.keys().to_vec();
     // Level 0: Slerp on the coarsest grid.
-    let mut counts: Vec<usize> = segs.iter().map(|&n| coarse(n, s.levels - 1)).collect();
+    let counts: Vec<usize> = segs.iter().map(|&n| coarse(n, s.levels - 1)).collect();
     let mut curve: Vec<Vec<[f64; 4]>> = keys
         .windows(2)
         .zip(&counts)
@@ -254,11 +254,9 @@ pub fn spring(times: &[f32], keys: &[Quat], settings: &SpringSettings) -> Result
         if level > 0 {
             let next: Vec<usize> = segs.iter().map(|&n| coarse(n, s.levels - 1 - level)).collect();
             curve = curve.iter().zip(&next).map(|(c, &n)| resample(c, n)).collect();
-            counts = next;
         }
         descend(&mut curve, s.iterations, f64::from(s.key_weight));
     }
-    let _ = counts;
     let mut out = Vec::with_capacity(segs.iter().sum::<usize>() + 1);
     for (i, c) in curve.iter().enumerate() {
         let skip = usize::from(i > 0);
@@ -299,14 +297,12 @@ fn descend(curve: &mut [Vec<[f64; 4]>], iterations: u32, key_weight: f64) {
     // Flatten to one sequence with key flags (shared segment ends appear once).
     let mut q: Vec<[f64; 4]> = Vec::new();
     let mut is_key: Vec<bool> = Vec::new();
-    let mut ends = Vec::new();
     for (s, c) in curve.iter().enumerate() {
         let start = usize::from(s > 0);
         for (j, v) in c.iter().enumerate().skip(start) {
             q.push(*v);
             is_key.push(j == 0 || j + 1 == c.len());
         }
-        ends.push(q.len() - 1);
     }
     let n = q.len();
     if n < 3 {
@@ -354,7 +350,6 @@ fn descend(curve: &mut [Vec<[f64; 4]>], iterations: u32, key_weight: f64) {
             k += 1;
         }
     }
-    let _ = ends;
 }
 
 #[cfg(test)]

@@ -1,11 +1,17 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Keeps every DQ Skin modifier's result current.
+"""Keeps every DQ Skin modifier's result current, and files free of results.
 
-- `frame_change_post` (playback, `scene.frame_set()`, renders): Blender re-evaluates the scene
-  after this handler when it changed data, so the evaluated mesh is the new frame's, not the
-  previous one's.
-- `depsgraph_update_post` (posing, editing settings): only for updates that are not our own
-  writes to result meshes, so that our writes cannot loop.
+- `frame_change_pre` / `frame_change_post` (playback, `scene.frame_set()`, renders, motion blur
+  steps, exporters): Blender evaluates the scene, runs the post handlers, then evaluates what
+  they changed a second time. DQ Skin writes its results in the post handler, so the second
+  evaluation shows the new frame with no lag. Objects Blender would evaluate in the first pass
+  anyway output nothing there (see `Registry.frame_pre`), so the modifiers after DQ Skin run
+  once per frame.
+- `depsgraph_update_post` (posing, editing settings, painting weights): only what the update
+  concerns is evaluated again (see `registry`).
+- `save_pre` / `save_post`: files are written with every companion Armature modifier active and
+  no results (see `companion`), then put back.
+- `load_post`, `undo_post`, `redo_post`: the registry is rebuilt.
 """
 
 from __future__ import annotations
@@ -13,99 +19,102 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import modifier
+from .registry import REGISTRY
 
 _busy = False
+_saved: list = []
 
 
-def _result_names(scene) -> set[str]:
-    names = set()
-    for obj in scene.objects:
-        for mod in modifier.dq_skin_modifiers(obj):
-            s = modifier.nodes.socket_ids(mod.node_group)
-            result = mod.get(s["Result"])
-            if result is not None:
-                names.add(result.name_full)
-                names.add(result.data.name_full)
-    return names
+def _guarded(fn):
+    def run(*args):
+        global _busy
+        if _busy:
+            return
+        _busy = True
+        try:
+            fn(*args)
+        finally:
+            _busy = False
 
-
-def update_scene(scene, depsgraph) -> None:
-    global _busy
-    if _busy:
-        return
-    _busy = True
-    try:
-        for obj in scene.objects:
-            if obj.type != "MESH":
-                continue
-            for mod in modifier.dq_skin_modifiers(obj):
-                if mod.show_viewport or mod.show_render:
-                    modifier.evaluate(obj, mod, depsgraph)
-    finally:
-        _busy = False
+    return run
 
 
 @persistent
-def on_frame_change(scene, depsgraph=None):
-    update_scene(scene, depsgraph or bpy.context.evaluated_depsgraph_get())
-
-
-def _tidy(scene) -> None:
-    """After a DQ Skin modifier was removed without our operator (the X button), put back what
-    `dq_skin_add` changed and drop the orphaned result data."""
-    from .operators import REPLACED, restore_armature_modifiers
-
-    for obj in scene.objects:
-        if REPLACED in obj and not modifier.dq_skin_modifiers(obj):
-            restore_armature_modifiers(obj)
-    for result in [o for o in bpy.data.objects if o.get(modifier.RESULT_TAG) and o.users == 0]:
-        mesh = result.data
-        bpy.data.objects.remove(result)
-        if mesh is not None and mesh.users == 0:
-            bpy.data.meshes.remove(mesh)
+def on_frame_change_pre(scene, depsgraph=None):
+    _guarded(lambda: REGISTRY.frame_pre())()
 
 
 @persistent
-def on_depsgraph_update(scene, depsgraph):
-    if _busy:
-        return
-    _tidy(scene)
-    ours = _result_names(scene)
-    relevant = False
-    for update in depsgraph.updates:
-        id_ = update.id
-        name = getattr(id_, "original", id_).name_full if hasattr(id_, "name_full") else ""
-        if name in ours:
-            continue
-        if update.is_updated_geometry and isinstance(id_, bpy.types.Mesh):
-            # Weights or topology of this mesh may have changed: its objects bind again.
-            mesh = getattr(id_, "original", id_)
-            modifier.forget({o.name_full for o in scene.objects if o.data == mesh})
-        relevant = True
-    if relevant:
-        update_scene(scene, depsgraph)
+def on_frame_change_post(scene, depsgraph=None):
+    dg = depsgraph or bpy.context.evaluated_depsgraph_get()
+    _guarded(lambda: REGISTRY.frame(dg))()
 
 
 @persistent
-def on_load(*_args):
-    modifier.forget()
+def on_depsgraph_update_post(scene, depsgraph):
+    _guarded(lambda: REGISTRY.updates(depsgraph))()
+
+
+@persistent
+def on_load_post(*_args):
+    REGISTRY.reset()
+
+
+@persistent
+def on_undo(*_args):
+    REGISTRY.reset()
+
+
+@persistent
+def on_save_pre(*_args):
+    global _saved
+    _saved = REGISTRY.deactivate_all(detach=True)
+
+
+@persistent
+def on_save_post(*_args):
+    global _saved
+    from . import nodes
+
+    for obj, mod_name, result in _saved:
+        try:
+            mod = obj.modifiers.get(mod_name)
+            if mod is not None and result is not None:
+                nodes.put(mod, "Result", result)
+        except ReferenceError:
+            pass
+    _saved = []
+    # The next update evaluates everything again (results, companions parked).
+    for rec in REGISTRY.records.values():
+        rec.pending = True
 
 
 HANDLERS = (
-    (bpy.app.handlers.frame_change_post, on_frame_change),
-    (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
-    (bpy.app.handlers.load_post, on_load),
+    (bpy.app.handlers.frame_change_pre, on_frame_change_pre),
+    (bpy.app.handlers.frame_change_post, on_frame_change_post),
+    (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update_post),
+    (bpy.app.handlers.load_post, on_load_post),
+    (bpy.app.handlers.undo_post, on_undo),
+    (bpy.app.handlers.redo_post, on_undo),
+    (bpy.app.handlers.save_pre, on_save_pre),
+    (bpy.app.handlers.save_post, on_save_post),
 )
 
 
 def register():
     for handlers, fn in HANDLERS:
         if fn not in handlers:
-            handlers.append(fn)
+            # First, so that other add-ons' frame handlers run after DQ Skin wrote its results.
+            handlers.insert(0, fn)
 
 
 def unregister():
     for handlers, fn in HANDLERS:
         while fn in handlers:
             handlers.remove(fn)
+    # Without the add-on, Blender's own deformation takes over (as in a saved file).
+    try:
+        REGISTRY.deactivate_all(detach=False)
+    except Exception:
+        pass
+    REGISTRY.reset()

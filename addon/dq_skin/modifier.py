@@ -1,9 +1,20 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Evaluating DQ Skin modifiers: read their settings and input, skin, write the result.
+"""Evaluating the DQ Skin modifiers of one object: what reaches each, skinning it, writing the
+result, or falling back to Blender's own deformation with the reason on the modifier.
 
-Everything that does not change between frames (influences, mask, blend amounts) is cached per
-modifier until the mesh or its weights change. Errors are kept per modifier for the panel and
-never raised into Blender's handlers.
+What reaches a DQ Skin modifier (its *source*):
+- ``mesh``: nothing enabled before it: the mesh's coordinates with its shape keys mixed as
+  Blender mixes them (computed here, so the modifier needs no evaluation of its own first);
+- ``chain``: only other live DQ Skin modifiers before it: the previous one's output;
+- ``capture``: other modifiers before it: the coordinates the node group stored on its way
+  through, read from the evaluated mesh (which needs the modifiers after it to keep the vertex
+  count, else the companion takes over and the panel says why).
+
+For ``mesh`` and ``chain`` the result is a full copy of the mesh with skinned positions, output
+as is by the node group; for ``capture`` it is points whose positions the node group sets.
+Everything that does not change between frames is cached: mesh data per mesh (`meshdata`),
+influences per mesh version, armature and settings. Nothing is recomputed or written when
+nothing changed, which also keeps Blender's update loop from cycling.
 """
 
 from __future__ import annotations
@@ -14,7 +25,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import nodes, rig
+from . import companion, compat, dqskin, meshdata, nodes, results, rig
 
 
 class SkinError(Exception):
@@ -31,214 +42,430 @@ class Settings:
     use_envelopes: bool
     mask_group: str
     invert_mask: bool
-    result: object
+
+    def key(self) -> tuple:
+        arm = self.armature.session_uid if self.armature is not None else 0
+        return (arm, self.method, self.blend_group, self.blend_factor, self.use_vertex_groups, self.use_envelopes, self.mask_group, self.invert_mask)
+
+
+def settings(mod) -> Settings:
+    return Settings(
+        armature=nodes.get(mod, "Armature"),
+        method=nodes.METHOD_KEYS[nodes.get_method(mod)],
+        blend_group=nodes.get_attribute(mod, "Blend Amount"),
+        blend_factor=float(nodes.get(mod, "Blend Factor")),
+        use_vertex_groups=bool(nodes.get(mod, "Use Vertex Groups")),
+        use_envelopes=bool(nodes.get(mod, "Use Envelopes")),
+        mask_group=nodes.get_attribute(mod, "Mask"),
+        invert_mask=bool(nodes.get(mod, "Invert Mask")),
+    )
+
+
+LIVE = ("replace", "positions")
+
+# Modifiers that never add or remove vertices.
+KEEP_VERTEX_COUNT = {
+    "ARMATURE", "CAST", "CLOTH", "COLLISION", "CORRECTIVE_SMOOTH", "CURVE", "DATA_TRANSFER", "DISPLACE",
+    "HOOK", "LAPLACIANDEFORM", "LAPLACIANSMOOTH", "LATTICE", "MESH_DEFORM", "NORMAL_EDIT", "SHRINKWRAP",
+    "SIMPLE_DEFORM", "SMOOTH", "SOFT_BODY", "SURFACE_DEFORM", "UV_PROJECT", "UV_WARP", "VERTEX_WEIGHT_EDIT",
+    "VERTEX_WEIGHT_MIX", "VERTEX_WEIGHT_PROXIMITY", "WARP", "WAVE", "WEIGHTED_NORMAL", "MESH_CACHE",
+}
 
 
 @dataclass
 class State:
     """What the add-on knows about one DQ Skin modifier between evaluations."""
 
-    binding: rig.Binding | None = None
-    binding_key: tuple = ()
-    blend: np.ndarray | None = None
-    envelopes: np.ndarray | None = field(default=None, repr=False)
+    mode: str = ""  # replace, positions, fallback, linked, off, or "" before the first evaluation
+    source: str = ""
     status: str = ""
     error: str = ""
     seconds: float = 0.0
+    binding: rig.Binding | None = None
+    binding_key: tuple = ()
+    blend: np.ndarray | None = field(default=None, repr=False)
+    envelopes: np.ndarray | None = field(default=None, repr=False)
     out: np.ndarray | None = field(default=None, repr=False)
-    # What the last result was computed from, to skip work (and update loops) when nothing changed.
-    last_input: np.ndarray | None = field(default=None, repr=False)
-    last_frame: rig.Frame | None = field(default=None, repr=False)
-    last_settings: tuple = ()
+    mixed: np.ndarray | None = field(default=None, repr=False)
+    signature: tuple | None = field(default=None, repr=False)
+    generation: int = 0  # counts the outputs computed (a following DQ Skin's input signature)
+    result_version: int = 0  # mesh version the replace-mode result was copied from
+    armature_signature: tuple | None = field(default=None, repr=False)
+    check_armature: bool = True
+    result: object = field(default=None, repr=False)  # the result object last written
+
+    @property
+    def live(self) -> bool:
+        return self.mode in LIVE
 
 
-_states: dict[tuple[str, str], State] = {}
-
-RESULT_TAG = "dq_skin_result"
+_states: dict[tuple, State] = {}
 
 
 def state(obj, mod) -> State:
-    return _states.setdefault((obj.name_full, mod.name), State())
+    return _states.setdefault((obj.session_uid, compat.modifier_uid(mod)), State())
+
+
+def drop_state(key: tuple) -> None:
+    _states.pop(key, None)
 
 
 def forget(obj_names=None) -> None:
-    """Drops cached bindings (all, or those of the named objects), e.g. after weights change."""
+    """Drops cached bindings (all, or those of the named objects), e.g. after a load."""
     if obj_names is None:
         _states.clear()
+        meshdata.forget()
         return
-    for key in [k for k in _states if k[0] in obj_names]:
-        _states[key].binding = None
-        _states[key].last_input = None
-
-
-def settings(mod) -> Settings:
-    group = mod.node_group
-    ids = nodes.socket_ids(group)
-    value = lambda name: mod[ids[name]]  # noqa: E731
-    attribute = lambda name: mod.get(ids[name] + "_attribute_name", "") if mod.get(ids[name] + "_use_attribute") else ""  # noqa: E731
-    menu = nodes.menu_values(group).get(value("Method"), "Dual Quaternion")
-    return Settings(
-        armature=value("Armature"),
-        method=nodes.METHOD_KEYS[menu],
-        blend_group=attribute("Blend Amount"),
-        blend_factor=float(value("Blend Factor")),
-        use_vertex_groups=bool(value("Use Vertex Groups")),
-        use_envelopes=bool(value("Use Envelopes")),
-        mask_group=attribute("Mask"),
-        invert_mask=bool(value("Invert Mask")),
-        result=value("Result"),
-    )
+    uids = {o.session_uid for o in bpy.data.objects if o.name_full in obj_names}
+    for key in [k for k in _states if k[0] in uids]:
+        del _states[key]
 
 
 def dq_skin_modifiers(obj):
     return [m for m in obj.modifiers if nodes.is_dq_skin(m)] if obj.type == "MESH" else []
 
 
-def ensure_result(obj, mod):
-    """The vertex-only mesh object the modifier samples, created if missing. It is linked to no
-    scene; the modifier's reference keeps it alive and it goes with the modifier."""
-    ids = nodes.socket_ids(mod.node_group)
-    result = mod[ids["Result"]]
-    if result is None or result.type != "MESH":
-        mesh = bpy.data.meshes.new(f"DQ Skin result of {obj.name}")
-        result = bpy.data.objects.new(mesh.name, mesh)
-        result[RESULT_TAG] = True
-        mod[ids["Result"]] = result
+# -- one object ---------------------------------------------------------------------------------
+
+def evaluate_object(obj, depsgraph, claimed: dict, force: bool = False) -> bool:
+    """Evaluates every DQ Skin modifier of `obj` for `depsgraph`, in stack order. `claimed`:
+    result object uid -> owner key, shared by all objects (see `results`). Returns whether a
+    result was written (the object will be evaluated again)."""
+    render = depsgraph.mode == "RENDER"
+    obj_eval = obj.evaluated_get(depsgraph)
+    wrote = False
+    what_reaches = "mesh"  # mesh, dq (a live DQ Skin's output), other
+    previous: State | None = None
+    for mod in obj.modifiers:
+        enabled = mod.show_render if render else mod.show_viewport
+        if not nodes.is_dq_skin(mod):
+            if enabled:
+                what_reaches = "other"
+            continue
+        st = state(obj, mod)
+        if not enabled:
+            _off(obj, mod, st, render)
+            continue
+        source = {"mesh": "mesh", "dq": "chain"}.get(what_reaches, "capture")
+        if nodes.version_of(mod.node_group) != nodes.VERSION:
+            _note(st, "fallback", "Made with an older DQ Skin: remove it and add it again")
+            what_reaches = "other"
+            continue
+        wrote |= _evaluate(obj, obj_eval, mod, st, depsgraph, source, previous, claimed, force)
+        what_reaches = "dq" if st.live else "other"
+        previous = st
+    return wrote
+
+
+def _note(st: State, mode: str, message: str = "", status: str = "") -> None:
+    st.mode, st.error, st.status, st.signature = mode, message, status, None
+
+
+def _off(obj, mod, st: State, render: bool) -> None:
+    """DQ Skin switched off (for this kind of evaluation): nothing to compute; the companion
+    stays out of the way, as an Armature modifier switched off would not deform either."""
+    other = mod.show_viewport if render else mod.show_render
+    where = "renders" if render else "the viewport"
+    status = f"Off in {where}" + (" (on in the other: skinned there)" if other else "")
+    _note(st, "off", status=status)
+    if obj.library is None:
+        c = companion.find(obj, mod)
+        if c is not None:
+            companion.park(c)
+
+
+def _evaluate(obj, obj_eval, mod, st: State, depsgraph, source: str, previous: State | None, claimed: dict, force: bool) -> bool:
+    start = time.perf_counter()
+    st.source = source
+    if obj.library is not None:
+        lib = obj.library.filepath or obj.library.name
+        _note(st, "linked", status=f"Linked from {lib}: Blender's Armature modifier deforms it (make a Library Override to use DQ Skin)")
+        return False
+    try:
+        s = settings(mod)
+    except Exception as e:  # a damaged modifier: say so, let the companion deform
+        return _fallback(obj, mod, st, None, f"Cannot read the settings: {type(e).__name__}: {e}")
+    try:
+        return _skin(obj, obj_eval, mod, st, s, depsgraph, source, previous, claimed, force, start)
+    except SkinError as e:
+        return _fallback(obj, mod, st, s, str(e))
+    except Exception as e:  # never a traceback in the user's face; say what happened
+        return _fallback(obj, mod, st, s, f"{type(e).__name__}: {e}")
+
+
+def _skin(obj, obj_eval, mod, st: State, s: Settings, depsgraph, source, previous, claimed, force, start) -> bool:
+    arm = s.armature
+    if arm is None or arm.type != "ARMATURE":
+        raise SkinError("No armature object set")
+    if arm.mode == "EDIT" or arm.data.is_editmode:
+        raise SkinError(f"Armature {arm.name} is in Edit Mode")
+    if obj.mode == "EDIT":
+        raise SkinError(f"{obj.name} is in Edit Mode: DQ Skin resumes in Object Mode")
+    data = meshdata.get(obj)
+    arm_eval = arm.evaluated_get(depsgraph)
+
+    # What reaches the modifier.
+    if source == "mesh":
+        try:
+            positions, input_key = _mesh_input(obj, obj_eval, mod, st, data, depsgraph)
+        except _CaptureNeeded:
+            source = st.source = "capture"  # keys DQ Skin cannot mix: read Blender's
+    if source == "capture":
+        positions, input_key = _captured(obj, obj_eval, mod, data)
+    elif source == "chain":
+        if previous is None or previous.out is None or len(previous.out) != data.vertex_count:
+            raise SkinError("The DQ Skin modifier before this one has no result")
+        positions, input_key = previous.out, ("chain", id(previous), previous.generation)
+    if source != "capture":
+        _set_capture(mod, False)
+
+    # What does not change between frames.
+    if st.check_armature or st.armature_signature is None:
+        st.armature_signature = _armature_signature(arm)
+        st.check_armature = False
+    key = (data.uid, data.version, arm.session_uid, st.armature_signature, s.mask_group, s.invert_mask, s.blend_group, s.use_vertex_groups)
+    if st.binding is None or st.binding_key != key:
+        st.binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups, data=data)
+        st.envelopes = rig.envelopes(arm, st.binding)
+        st.blend = data.group_weights(s.blend_group) if s.blend_group else None
+        st.binding_key = key
+        st.signature = None
+    binding = st.binding
+    if len(positions) != binding.vertex_count:
+        raise SkinError(
+            f"An earlier modifier changed the vertex count ({binding.vertex_count} → {len(positions)}); "
+            "put DQ Skin before modifiers that add or remove vertices"
+        )
+    matrices = rig.frame(binding, obj_eval, arm_eval)
+    mode = nodes.RESULT_POSITIONS if source == "capture" else nodes.RESULT_REPLACE
+    result = _own_result(obj, mod, claimed)
+    signature = (
+        s.key(),
+        input_key,
+        matrices.deform.tobytes(),
+        matrices.premat.tobytes(),
+        result.session_uid,
+        data.version,
+    )
+    pending = results.mode_of(result) == nodes.RESULT_PENDING
+    if not force and not pending and signature == st.signature and st.live and results.mode_of(result) == mode:
+        return False  # the result is already this
+    if st.out is None or len(st.out) != binding.vertex_count:
+        st.out = np.empty((binding.vertex_count, 3), np.float32)
+    segments = rig.bbone_segments(arm_eval, binding)
+    if s.use_envelopes or st.envelopes[:, 10].any() or segments.max(initial=0) > 1:
+        # Envelopes and B-Bone segments depend on where the vertices are: this frame's
+        # influences, over the bones followed by the B-Bones' segment joints.
+        effective = binding.influences.effective(
+            positions,
+            matrices.premat,
+            envelopes=st.envelopes,
+            use_vertex_groups=s.use_vertex_groups,
+            use_envelopes=s.use_envelopes,
+            bbone_segments=segments,
+            rest=matrices.rest,
+            lengths=rig.bone_lengths(arm_eval, binding),
+            bbone_mapping=rig.curved_bbone_mapping(arm_eval, binding, positions, matrices.premat, s.use_envelopes),
+        )
+        binding = rig.Binding(effective, binding.bone_names, binding.bone_indices, binding.mask, binding.vertex_count, binding.rest)
+        matrices = rig.with_bbone_joints(matrices, arm_eval, st.binding, segments)
+    rig.skin(binding, obj_eval, arm_eval, positions, s.method, blend=st.blend, blend_factor=s.blend_factor, out=st.out, matrices=matrices)
+    st.generation += 1
+
+    # Write the result, then take the companion out of the way (in this order, so that no
+    # evaluation sees both or neither).
+    if mode == nodes.RESULT_REPLACE:
+        mesh = result.data
+        counts = (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops))
+        if st.result_version != data.version or counts != data.counts:
+            results.replace_mesh(result, obj.data)
+            st.result_version = data.version
+    else:
+        results.points_mesh(result, len(st.out))
+        st.result_version = 0
+    results.write_positions(result, st.out)
+    results.set_mode(result, mode)
+    st.result = result
+    c = companion.find(obj, mod)
+    if c is not None:
+        companion.park(c)
+    st.signature = signature
+    st.mode = "replace" if mode == nodes.RESULT_REPLACE else "positions"
+    st.error = ""
+    st.seconds = time.perf_counter() - start
+    method = {"linear": "Linear", "dual_quaternion": "Dual Quaternion", "blend": "Blend"}[s.method]
+    st.status = (
+        f"{method}: {len(st.binding.bone_names)} bones, {len(st.binding.influences)} influences, "
+        f"{st.seconds * 1e3:.1f} ms" + ("" if c is not None else " · no Armature modifier after it for Blender without DQ Skin")
+    )
+    return True
+
+
+def _mesh_input(obj, obj_eval, mod, st: State, data, depsgraph):
+    """The mesh's coordinates with its shape keys mixed, and a key that changes with them."""
+    keys = data.keys
+    if keys is None:
+        return data.positions, ("mesh", data.version)
+    if not keys.relative:
+        raise _needs_capture(mod, "absolute shape keys")
+    key_eval = obj.data.shape_keys.evaluated_get(depsgraph)
+    blocks = key_eval.key_blocks
+    if len(blocks) != len(keys.data):
+        raise _needs_capture(mod, "shape keys changing")
+    values = np.empty(len(blocks), np.float32)
+    blocks.foreach_get("value", values)
+    mutes = np.empty(len(blocks), bool)
+    blocks.foreach_get("mute", mutes)
+    shown = obj_eval.active_shape_key_index if obj_eval.show_only_shape_key else None
+    signature = ("keys", data.version, values.tobytes(), mutes.tobytes(), shown)
+    if st.mixed is not None and st.signature is not None and st.signature[1] == signature:
+        return st.mixed, signature
+    if st.mixed is None or len(st.mixed) != data.vertex_count:
+        st.mixed = np.empty((data.vertex_count, 3), np.float32)
+    blocks_in = [
+        (
+            keys.data[i],
+            keys.relative_to[i],
+            float(values[i]),
+            bool(mutes[i]),
+            data.group_weights(keys.vertex_groups[i]) if keys.vertex_groups[i] and data.groups is not None else None,
+        )
+        for i in range(len(keys.data))
+    ]
+    try:
+        dqskin.shape_key_mix(blocks_in, keys.reference, st.mixed, shown)
+    except ValueError as e:
+        raise _needs_capture(mod, str(e)) from None
+    return st.mixed, signature
+
+
+class _CaptureNeeded(SkinError):
+    """Shape keys DQ Skin cannot mix itself: it reads what reaches it from the evaluation."""
+
+
+def _needs_capture(mod, why: str) -> SkinError:
+    return _CaptureNeeded(why)
+
+
+def _set_capture(mod, on: bool) -> None:
+    if bool(nodes.get(mod, "Capture")) != on:
+        nodes.put(mod, "Capture", on)
+    if on:
+        nodes.put(mod, "Capture Name", capture_name(mod))
+
+
+def capture_name(mod) -> str:
+    return f"dq_skin_input_{compat.modifier_uid(mod)}"
+
+
+def _captured(obj, obj_eval, mod, data):
+    _set_capture(mod, True)
+    name = capture_name(mod)
+    mesh = obj_eval.data
+    attribute = mesh.attributes.get(name) if mesh is not None else None
+    if attribute is None:
+        raise SkinError("Waiting for the modifier to be evaluated (modifiers before DQ Skin)")
+    count = len(attribute.data)
+    if count != data.vertex_count:
+        mods = list(obj.modifiers)
+        at = mods.index(mod)
+        earlier = [m.name for m in mods[:at] if m.show_viewport and m.type not in KEEP_VERTEX_COUNT]
+        if earlier:
+            raise SkinError(
+                f"An earlier modifier changed the vertex count ({data.vertex_count} → {count}): "
+                f"put DQ Skin before {', '.join(earlier)}, which add or remove vertices"
+            )
+        later = [m.name for m in mods[at + 1:] if m.show_viewport and m.type not in KEEP_VERTEX_COUNT]
+        raise SkinError(
+            f"Modifiers before DQ Skin deform the mesh, so it reads the coordinates reaching it from "
+            f"the evaluated mesh, but {', '.join(later) or 'a later modifier'} changes the vertex count "
+            f"({data.vertex_count} → {count}); move them before DQ Skin's modifiers or apply them"
+        )
+    positions = np.empty(count * 3, np.float32)
+    attribute.data.foreach_get("vector", positions)
+    positions = positions.reshape(-1, 3)
+    return positions, ("capture", positions.tobytes())
+
+
+def _armature_signature(arm) -> tuple:
+    """What of the armature's bones the binding depends on (names, deform flags, rest pose,
+    envelopes); read when Blender says the armature changed."""
+    bones = arm.data.bones
+    n = len(bones)
+    deform = np.empty(n, bool)
+    bones.foreach_get("use_deform", deform)
+    rest = np.empty(n * 16, np.float32)
+    bones.foreach_get("matrix_local", rest)
+    envelope = np.empty(n * 4, np.float32)
+    for i, attr in enumerate(("head_radius", "tail_radius", "envelope_distance", "envelope_weight")):
+        col = np.empty(n, np.float32)
+        bones.foreach_get(attr, col)
+        envelope[i::4] = col
+    multiply = np.empty(n, bool)
+    bones.foreach_get("use_envelope_multiply", multiply)
+    segments = np.empty(n, np.int32)
+    bones.foreach_get("bbone_segments", segments)
+    return (tuple(b.name for b in bones), deform.tobytes(), rest.tobytes(), envelope.tobytes(), multiply.tobytes(), segments.tobytes())
+
+
+def _own_result(obj, mod, claimed: dict):
+    """This modifier's result object: the one it points at if that is ours and not another
+    modifier's, else a new one."""
+    uid = compat.modifier_uid(mod)
+    owner = results.owner_key(obj, uid)
+    me = (obj.session_uid, uid)
+    result = nodes.get(mod, "Result")
+    if result is not None and results.is_result(result) and result.library is None and claimed.get(result.session_uid, me) == me:
+        claimed[result.session_uid] = me
+        if result.get(results.OWNER) != owner:
+            result[results.OWNER] = owner
+        return result
+    result = results.create(obj, mod, owner)
+    claimed[result.session_uid] = me
+    nodes.put(mod, "Result", result)
     return result
 
 
-def _binding_key(obj, s: Settings) -> tuple:
-    mesh = obj.data
-    return (
-        mesh.as_pointer(),
-        len(mesh.vertices),
-        tuple(g.name for g in obj.vertex_groups),
-        s.armature.as_pointer() if s.armature else 0,
-        tuple(
-            (b.name, b.use_deform, b.use_envelope_multiply, b.head_radius, b.tail_radius, b.envelope_distance, b.envelope_weight)
-            for b in s.armature.data.bones
-        )
-        if s.armature
-        else (),
-        s.mask_group,
-        s.invert_mask,
-        s.blend_group,
-        s.use_vertex_groups,
-    )
+def _fallback(obj, mod, st: State, s: Settings | None, message: str) -> bool:
+    """DQ Skin cannot deform: pass the input through and let the companion deform as Blender
+    does; the panel shows why."""
+    st.mode, st.error, st.signature = "fallback", message, None
+    result = nodes.get(mod, "Result")
+    if result is not None and results.is_result(result) and result.library is None:
+        results.set_mode(result, 0.0)
+    c = companion.find(obj, mod)
+    if c is None:
+        st.status = "No Armature modifier after it: the mesh is not deformed"
+    else:
+        if s is not None:
+            companion.activate(c, mod, s)
+        else:
+            c.show_viewport, c.show_render = mod.show_viewport, mod.show_render
+        st.status = f"Blender's Armature modifier '{c.name}' deforms the mesh instead"
+    return False
 
 
-def _group_weights(obj, name: str) -> np.ndarray:
-    """A vertex group's weights per vertex (0 outside it)."""
-    weights = np.zeros(len(obj.data.vertices), np.float32)
-    index = obj.vertex_groups.find(name)
-    if index < 0:
-        return weights
-    for v in obj.data.vertices:
-        for g in v.groups:
-            if g.group == index:
-                weights[v.index] = g.weight
-    return weights
-
-
-def evaluate(obj, mod, depsgraph) -> None:
-    """Skins one DQ Skin modifier for the depsgraph's current state and writes its result.
-    Problems end up in the modifier's state (panel) and leave the input unchanged."""
-    st = state(obj, mod)
-    start = time.perf_counter()
+def deactivate(obj, mod, detach: bool) -> None:
+    """The state files are saved in: companion active, no result (detached with `detach`)."""
+    if obj.library is not None:
+        return
     try:
         s = settings(mod)
-        arm = s.armature
-        if arm is None or arm.type != "ARMATURE":
-            raise SkinError("No armature object set")
-        if arm.mode == "EDIT" or arm.data.is_editmode:
-            raise SkinError(f"Armature {arm.name} is in Edit Mode")
-        key = _binding_key(obj, s)
-        if st.binding is None or st.binding_key != key:
-            st.binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups)
-            st.envelopes = rig.envelopes(arm, st.binding)
-            st.blend = _group_weights(obj, s.blend_group) if s.blend_group else None
-            st.binding_key = key
-        evaluated = obj.evaluated_get(depsgraph)
-        attribute = evaluated.data.attributes.get(nodes.INPUT_ATTRIBUTE)
-        if attribute is None:
-            raise SkinError("Waiting for the modifier to be evaluated")
-        count = len(attribute.data)
-        if count != st.binding.vertex_count:
-            raise SkinError(
-                f"An earlier modifier changed the vertex count ({st.binding.vertex_count} → {count}); "
-                "put DQ Skin before modifiers that add or remove vertices"
-            )
-        positions = np.empty(count * 3, np.float32)
-        attribute.data.foreach_get("vector", positions)
-        positions = positions.reshape(-1, 3)
-        arm_eval = arm.evaluated_get(depsgraph)
-        matrices = rig.frame(st.binding, evaluated, arm_eval)
-        signature = (s.method, s.blend_factor, s.use_envelopes)
-        result = ensure_result(obj, mod)
-        if (
-            signature == st.last_settings
-            and matrices.same_as(st.last_frame)
-            and st.last_input is not None
-            and np.array_equal(positions, st.last_input)
-            and len(result.data.vertices) == count
-        ):
-            return  # the result is already this
-        if st.out is None or len(st.out) != count:
-            st.out = np.empty((count, 3), np.float32)
-        binding = st.binding
-        segments = rig.bbone_segments(arm_eval, binding)
-        if s.use_envelopes or st.envelopes[:, 10].any() or segments.max(initial=0) > 1:
-            # Envelopes and B-Bone segments depend on where the vertices are: this frame's
-            # influences, over the bones followed by the B-Bones' segment joints.
-            effective = binding.influences.effective(
-                positions,
-                matrices.premat,
-                envelopes=st.envelopes,
-                use_vertex_groups=s.use_vertex_groups,
-                use_envelopes=s.use_envelopes,
-                bbone_segments=segments,
-                rest=matrices.rest,
-                lengths=rig.bone_lengths(arm_eval, binding),
-                bbone_mapping=rig.curved_bbone_mapping(arm_eval, binding, positions, matrices.premat, s.use_envelopes),
-            )
-            binding = rig.Binding(effective, binding.bone_names, binding.bone_indices, binding.mask, binding.vertex_count)
-            matrices = rig.with_bbone_joints(matrices, arm_eval, st.binding, segments)
-        rig.skin(
-            binding,
-            evaluated,
-            arm_eval,
-            positions,
-            s.method,
-            blend=st.blend,
-            blend_factor=s.blend_factor,
-            out=st.out,
-            matrices=matrices,
-        )
-        mesh = result.data
-        if len(mesh.vertices) != count:
-            mesh.clear_geometry()
-            mesh.vertices.add(count)
-        mesh.attributes["position"].data.foreach_set("vector", st.out.ravel())
-        mesh.update()
-        st.last_input, st.last_frame, st.last_settings = positions, matrices, signature
-        st.error = ""
-        st.seconds = time.perf_counter() - start
-        st.status = (
-            f"{len(st.binding.bone_names)} bones, {len(st.binding.influences)} influences, "
-            f"{st.seconds * 1e3:.1f} ms"
-        )
-    except SkinError as e:
-        _fail(obj, mod, st, str(e))
-    except Exception as e:  # never a traceback in the user's face; say what happened
-        _fail(obj, mod, st, f"{type(e).__name__}: {e}")
-
-
-def _fail(obj, mod, st: State, message: str) -> None:
-    """Records the error and makes the modifier pass its input through (an empty result)."""
-    st.error = message
-    st.last_input = None
-    st.status = ""
-    result = nodes.socket_ids(mod.node_group) and mod.get(nodes.socket_ids(mod.node_group)["Result"])
-    if result is not None and result.type == "MESH" and len(result.data.vertices):
-        result.data.clear_geometry()
-        result.data.update()
+    except Exception:
+        s = None
+    c = companion.find(obj, mod)
+    if c is not None:
+        if s is not None:
+            companion.activate(c, mod, s)
+        else:
+            c.show_viewport, c.show_render = mod.show_viewport, mod.show_render
+    result = nodes.get(mod, "Result")
+    if result is not None and results.is_result(result) and result.library is None:
+        results.set_mode(result, 0.0)
+    if detach and result is not None:
+        nodes.put(mod, "Result", None)
+    st = _states.get((obj.session_uid, compat.modifier_uid(mod)))
+    if st is not None:
+        st.signature = None
+        if st.live:
+            st.mode = ""

@@ -2,60 +2,97 @@
 """The node group behind every DQ Skin modifier.
 
 A DQ Skin modifier is a Geometry Nodes modifier with this group, so it lives in the modifier
-stack like any modifier (order, toggles, name, settings saved per modifier in the .blend). The
-group does two things the add-on relies on:
-1. it stores the coordinates that reach it in the point attribute `dq_skin_input`, which the
-   add-on reads from the evaluated mesh (shape keys and earlier deform modifiers included);
-2. it sets each point's position to the same point of the modifier's *result* object, a
-   vertex-only mesh outside any scene into which the add-on writes the skinned positions.
-If the result does not have the same number of points, the input passes through unchanged.
+stack like any modifier (order, toggles, name, settings saved per modifier in the .blend).
+What it outputs depends on its hidden *Result* object, which the add-on owns (one per object and
+modifier, never saved in files) and whose X location says what to do:
+
+- ``RESULT_REPLACE`` (1): the result is a full copy of the object's mesh with skinned positions;
+  it is output as is when its element counts match the input (no per-vertex work at all);
+- ``RESULT_POSITIONS`` (2): the result holds only points; the input gets their positions;
+- ``RESULT_PENDING`` (3): the add-on is about to write this frame's result: output nothing, so
+  the modifiers after this one cost nothing in the evaluation Blender runs before its frame
+  handlers (the add-on's handler always follows with the real result);
+- anything else, or no result object (files opened without the add-on, linked data, errors):
+  the input passes through unchanged and the Armature modifier kept right after DQ Skin (its
+  *companion*) deforms the mesh the way Blender does. A Warning node says so (Blender 4.3+).
+
+With *Capture* on, the incoming positions are stored in the point attribute named by *Capture
+Name* first: the add-on reads them back when modifiers before DQ Skin deform the mesh.
 """
 
 from __future__ import annotations
 
+import json
+
 import bpy
+
+from . import compat
 
 GROUP_NAME = "DQ Skin"
 GROUP_TAG = "dq_skin_version"
-VERSION = 1
-INPUT_ATTRIBUTE = "dq_skin_input"
+VERSION = 2
+
+RESULT_REPLACE = 1.0
+RESULT_POSITIONS = 2.0
+RESULT_PENDING = 3.0
 
 METHODS = ("Linear", "Dual Quaternion", "Blend")
 METHOD_KEYS = {"Linear": "linear", "Dual Quaternion": "dual_quaternion", "Blend": "blend"}
-
-# (name, socket type, default, min, max, description)
-SETTINGS = (
-    ("Armature", "NodeSocketObject", None, None, None, "The armature object that deforms the mesh"),
-    ("Method", "NodeSocketMenu", "Dual Quaternion", None, None, "Linear, Dual Quaternion, or a per-vertex blend of both"),
-    ("Blend Amount", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend: how much Dual Quaternion per vertex (pick a vertex group with the attribute toggle)"),
-    ("Blend Factor", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend: overall factor multiplied with the amount"),
-    ("Use Vertex Groups", "NodeSocketBool", True, None, None, "Bind bones to vertex groups of the same name"),
-    ("Use Envelopes", "NodeSocketBool", False, None, None, "Bind bones to vertices inside their envelopes"),
-    ("Mask", "NodeSocketFloat", 1.0, 0.0, 1.0, "Strength per vertex (pick a vertex group with the attribute toggle), as the Armature modifier's vertex group"),
-    ("Invert Mask", "NodeSocketBool", False, None, None, "Invert the mask"),
-    ("Result", "NodeSocketObject", None, None, None, "Internal: where DQ Skin writes the skinned positions"),
+WARNING = (
+    "DQ Skin is not deforming this mesh (extension not installed or enabled, linked data, or an "
+    "error): the Armature modifier after it does, as Blender would"
 )
+
+# (name, socket type, default, min, max, description, hidden)
+SETTINGS = (
+    ("Armature", "NodeSocketObject", None, None, None, "The armature object that deforms the mesh", False),
+    ("Method", "NodeSocketMenu", "Dual Quaternion", None, None, "Linear, Dual Quaternion, or a per-vertex blend of both", False),
+    ("Blend Amount", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend: how much Dual Quaternion per vertex (pick a vertex group with the attribute toggle)", False),
+    ("Blend Factor", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend: overall factor multiplied with the amount", False),
+    ("Use Vertex Groups", "NodeSocketBool", True, None, None, "Bind bones to vertex groups of the same name", False),
+    ("Use Envelopes", "NodeSocketBool", False, None, None, "Bind bones to vertices inside their envelopes", False),
+    ("Mask", "NodeSocketFloat", 1.0, 0.0, 1.0, "Strength per vertex (pick a vertex group with the attribute toggle), as the Armature modifier's vertex group", False),
+    ("Invert Mask", "NodeSocketBool", False, None, None, "Invert the mask", False),
+    ("Result", "NodeSocketObject", None, None, None, "Internal: the skinned result DQ Skin writes (never saved)", True),
+    ("Capture", "NodeSocketBool", False, None, None, "Internal: store the incoming positions for the add-on", True),
+    ("Capture Name", "NodeSocketString", "", None, None, "Internal: the attribute the incoming positions are stored in", True),
+    ("Companion", "NodeSocketString", "", None, None, "Internal: the Armature modifier kept for Blender without DQ Skin, and its settings before DQ Skin", True),
+)
+FIELDS = ("Blend Amount", "Mask")
 
 
 def is_dq_skin(modifier) -> bool:
-    return (
-        modifier.type == "NODES"
-        and modifier.node_group is not None
-        and modifier.node_group.get(GROUP_TAG) is not None
-    )
+    group = modifier.node_group if modifier.type == "NODES" else None
+    return group is not None and group.get(GROUP_TAG) is not None
+
+
+def version_of(group) -> int:
+    return int(group.get(GROUP_TAG, 0)) if group is not None else 0
+
+
+_socket_ids: dict[int, dict[str, str]] = {}
 
 
 def socket_ids(group) -> dict[str, str]:
-    """Input name -> identifier (the modifier's property key)."""
-    return {
-        item.name: item.identifier
-        for item in group.interface.items_tree
-        if item.item_type == "SOCKET" and item.in_out == "INPUT"
-    }
+    """Input name -> identifier (the key of the modifier's value), cached per group."""
+    key = group.session_uid
+    ids = _socket_ids.get(key)
+    if ids is None:
+        ids = {
+            item.name: item.identifier
+            for item in group.interface.items_tree
+            if item.item_type == "SOCKET" and item.in_out == "INPUT"
+        }
+        _socket_ids[key] = ids
+    return ids
+
+
+def forget_socket_ids() -> None:
+    _socket_ids.clear()
 
 
 def menu_values(group) -> dict[int, str]:
-    """Menu value stored in a modifier -> method item name."""
+    """Menu value stored in a modifier -> method item name (up to Blender 5.1)."""
     switch = group.nodes.get("Method Items")
     return {
         int(sock.identifier.split("_")[1]): sock.name
@@ -64,70 +101,184 @@ def menu_values(group) -> dict[int, str]:
     }
 
 
+# -- reading and writing a modifier's settings ---------------------------------------------------
+
+def get(mod, name: str):
+    return compat.get_input(mod, socket_ids(mod.node_group)[name])
+
+
+def put(mod, name: str, value) -> bool:
+    """Sets a setting; returns whether it changed."""
+    return compat.set_input(mod, socket_ids(mod.node_group)[name], value)
+
+
+def get_attribute(mod, name: str) -> str:
+    return compat.get_attribute(mod, socket_ids(mod.node_group)[name])
+
+
+def put_attribute(mod, name: str, group: str) -> None:
+    compat.set_attribute(mod, socket_ids(mod.node_group)[name], group)
+
+
+def get_method(mod) -> str:
+    """'Linear', 'Dual Quaternion' or 'Blend'."""
+    group = mod.node_group
+    return compat.get_menu(mod, socket_ids(group)["Method"], menu_values(group)) or "Dual Quaternion"
+
+
+def put_method(mod, item: str) -> bool:
+    group = mod.node_group
+    return compat.set_menu(mod, socket_ids(group)["Method"], menu_values(group), item)
+
+
+def get_companion(mod) -> dict:
+    """What DQ Skin remembers of its companion Armature modifier: ``{"name": ..., "original":
+    {setting: value}}`` (empty if nothing)."""
+    try:
+        data = json.loads(get(mod, "Companion") or "{}")
+    except (ValueError, TypeError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def put_companion(mod, data: dict) -> None:
+    put(mod, "Companion", json.dumps(data, sort_keys=True))
+
+
+# -- the group ------------------------------------------------------------------------------------
+
 def ensure_group():
     """The DQ Skin node group, created on first use (shared by all DQ Skin modifiers)."""
     for group in bpy.data.node_groups:
-        if group.bl_idname == "GeometryNodeTree" and group.get(GROUP_TAG) == VERSION:
+        if group.bl_idname == "GeometryNodeTree" and group.get(GROUP_TAG) == VERSION and group.library is None:
             return group
+    return build_group()
+
+
+def build_group():
     group = bpy.data.node_groups.new(GROUP_NAME, "GeometryNodeTree")
     group[GROUP_TAG] = VERSION
     iface = group.interface
     iface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     iface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    for name, kind, default, lo, hi, description in SETTINGS:
+    method_socket = None
+    for name, kind, default, lo, hi, description, hidden in SETTINGS:
         sock = iface.new_socket(name, in_out="INPUT", socket_type=kind)
         sock.description = description
         if lo is not None:
             sock.min_value, sock.max_value = lo, hi
-        if kind in ("NodeSocketBool",) or (kind == "NodeSocketFloat" and name not in ("Blend Amount", "Mask")):
+        if default is not None and kind != "NodeSocketMenu":
+            sock.default_value = default
+        if kind == "NodeSocketBool" or (kind == "NodeSocketFloat" and name not in FIELDS):
             sock.force_non_field = True
-        if name == "Result":
+        if hidden:
             sock.hide_in_modifier = True
+        if kind == "NodeSocketMenu":
+            method_socket = sock
     nodes, links = group.nodes, group.links
-    g_in = nodes.new("NodeGroupInput")
-    g_out = nodes.new("NodeGroupOutput")
+
+    def node(kind, **props):
+        n = nodes.new(kind)
+        for k, v in props.items():
+            setattr(n, k, v)
+        return n
+
+    g_in = node("NodeGroupInput")
+    g_out = node("NodeGroupOutput")
     # The Method menu's items live on a Menu Switch; its output is not used.
-    switch = nodes.new("GeometryNodeMenuSwitch")
+    switch = node("GeometryNodeMenuSwitch")
     switch.name = "Method Items"
     switch.enum_items.clear()
     for item in METHODS:
         switch.enum_items.new(item)
     links.new(g_in.outputs["Method"], switch.inputs["Menu"])
-    for sock in iface.items_tree:
-        if getattr(sock, "name", "") == "Method" and sock.in_out == "INPUT":
-            sock.default_value = "Dual Quaternion"
-    position = nodes.new("GeometryNodeInputPosition")
-    store = nodes.new("GeometryNodeStoreNamedAttribute")
-    store.data_type = "FLOAT_VECTOR"
-    store.domain = "POINT"
-    store.inputs["Name"].default_value = INPUT_ATTRIBUTE
+    # Set after the items exist (and not while iterating the interface: Blender 4.4.0 crashes).
+    method_socket.default_value = "Dual Quaternion"
+
+    # Optional capture of the incoming positions.
+    position = node("GeometryNodeInputPosition")
+    store = node("GeometryNodeStoreNamedAttribute", data_type="FLOAT_VECTOR", domain="POINT")
     links.new(g_in.outputs["Geometry"], store.inputs["Geometry"])
+    links.new(g_in.outputs["Capture Name"], store.inputs["Name"])
     links.new(position.outputs["Position"], store.inputs["Value"])
-    info = nodes.new("GeometryNodeObjectInfo")
-    info.transform_space = "ORIGINAL"
+    captured = geometry_switch(node, links, g_in.outputs["Capture"], g_in.outputs["Geometry"], store.outputs["Geometry"])
+
+    # The result and what it asks for.
+    info = node("GeometryNodeObjectInfo", transform_space="ORIGINAL")
     links.new(g_in.outputs["Result"], info.inputs["Object"])
-    sample = nodes.new("GeometryNodeSampleIndex")
-    sample.data_type = "FLOAT_VECTOR"
-    sample.domain = "POINT"
-    index = nodes.new("GeometryNodeInputIndex")
+    where = node("ShaderNodeSeparateXYZ")
+    links.new(info.outputs["Location"], where.inputs[0])
+    mode = where.outputs["X"]
+    is_replace = equal(node, links, mode, RESULT_REPLACE, "VALUE")
+    is_positions = equal(node, links, mode, RESULT_POSITIONS, "VALUE")
+    is_pending = equal(node, links, mode, RESULT_PENDING, "VALUE")
+
+    size_in = node("GeometryNodeAttributeDomainSize", component="MESH")
+    size_result = node("GeometryNodeAttributeDomainSize", component="MESH")
+    links.new(g_in.outputs["Geometry"], size_in.inputs["Geometry"])
+    links.new(info.outputs["Geometry"], size_result.inputs["Geometry"])
+    same = {
+        name: equal(node, links, size_in.outputs[name], size_result.outputs[name], "INT")
+        for name in ("Point Count", "Edge Count", "Face Count", "Face Corner Count")
+    }
+    same_topology = boolean(node, links, "AND", same["Point Count"], same["Edge Count"])
+    same_topology = boolean(node, links, "AND", same_topology, same["Face Count"])
+    same_topology = boolean(node, links, "AND", same_topology, same["Face Corner Count"])
+    use_replace = boolean(node, links, "AND", is_replace, same_topology)
+    use_positions = boolean(node, links, "AND", is_positions, same["Point Count"])
+
+    index = node("GeometryNodeInputIndex")
+    sample = node("GeometryNodeSampleIndex", data_type="FLOAT_VECTOR", domain="POINT")
     links.new(info.outputs["Geometry"], sample.inputs["Geometry"])
     links.new(position.outputs["Position"], sample.inputs["Value"])
     links.new(index.outputs["Index"], sample.inputs["Index"])
-    # Pass-through unless the result has exactly as many points as the input.
-    count_in = nodes.new("GeometryNodeAttributeDomainSize")
-    count_res = nodes.new("GeometryNodeAttributeDomainSize")
-    links.new(store.outputs["Geometry"], count_in.inputs["Geometry"])
-    links.new(info.outputs["Geometry"], count_res.inputs["Geometry"])
-    same = nodes.new("FunctionNodeCompare")
-    same.data_type = "INT"
-    same.operation = "EQUAL"
-    links.new(count_in.outputs["Point Count"], same.inputs[2])
-    links.new(count_res.outputs["Point Count"], same.inputs[3])
-    set_position = nodes.new("GeometryNodeSetPosition")
-    links.new(store.outputs["Geometry"], set_position.inputs["Geometry"])
-    links.new(same.outputs["Result"], set_position.inputs["Selection"])
+    set_position = node("GeometryNodeSetPosition")
+    links.new(captured, set_position.inputs["Geometry"])
     links.new(sample.outputs["Value"], set_position.inputs["Position"])
-    links.new(set_position.outputs["Geometry"], g_out.inputs["Geometry"])
-    for i, node in enumerate((g_in, position, store, info, index, sample, count_in, count_res, same, set_position, switch, g_out)):
-        node.location = (200 * (i % 6), -220 * (i // 6))
+
+    out = geometry_switch(node, links, use_positions, captured, set_position.outputs["Geometry"])
+    out = geometry_switch(node, links, use_replace, out, info.outputs["Geometry"])
+    out = geometry_switch(node, links, is_pending, out, None)  # nothing while pending
+    if compat.HAS_WARNING_NODE:
+        active = boolean(node, links, "OR", use_replace, use_positions)
+        active = boolean(node, links, "OR", active, is_pending)
+        inactive = boolean(node, links, "NOT", active)
+        warning = node("GeometryNodeWarning", warning_type="WARNING")
+        links.new(inactive, warning.inputs["Show"])
+        warning.inputs["Message"].default_value = WARNING
+        # A Warning node only shows when its output is used.
+        out = geometry_switch(node, links, warning.outputs["Show"], out, out)
+    links.new(out, g_out.inputs["Geometry"])
+    for i, n in enumerate(nodes):
+        n.location = (180 * (i % 8), -200 * (i // 8))
     return group
+
+
+def geometry_switch(node, links, condition, if_false, if_true):
+    s = node("GeometryNodeSwitch", input_type="GEOMETRY")
+    links.new(condition, s.inputs["Switch"])
+    if if_false is not None:
+        links.new(if_false, s.inputs["False"])
+    if if_true is not None:
+        links.new(if_true, s.inputs["True"])
+    return s.outputs[0]
+
+
+def equal(node, links, a, b, socket_type: str):
+    data_type = {"VALUE": "FLOAT", "INT": "INT"}[socket_type]
+    c = node("FunctionNodeCompare", data_type=data_type, operation="EQUAL")
+    sa, sb = compat.compare_sockets(c, socket_type)
+    links.new(a, sa)
+    if isinstance(b, float):
+        sb.default_value = b
+    else:
+        links.new(b, sb)
+    return c.outputs["Result"]
+
+
+def boolean(node, links, operation: str, a, b=None):
+    m = node("FunctionNodeBooleanMath", operation=operation)
+    links.new(a, m.inputs[0])
+    if b is not None:
+        links.new(b, m.inputs[1])
+    return m.outputs[0]

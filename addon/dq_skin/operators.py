@@ -5,11 +5,8 @@ from __future__ import annotations
 
 import bpy
 
-from . import modifier, nodes
-
-# Custom properties on the DQ Skin modifier's object remembering what `dq_skin_add` changed, so
-# that removal puts it back: {armature modifier name: [show_viewport, show_render]}.
-REPLACED = "dq_skin_replaced"
+from . import companion, compat, modifier, nodes, results
+from .registry import REGISTRY
 
 METHOD_ITEMS = (
     ("AUTO", "From Armature Modifier", "Dual Quaternion if its Preserve Volume is on, else Linear"),
@@ -21,17 +18,21 @@ MENU_NAME = {"LINEAR": "Linear", "DUAL_QUATERNION": "Dual Quaternion", "BLEND": 
 
 
 def set_input(mod, name: str, value) -> None:
-    mod[nodes.socket_ids(mod.node_group)[name]] = value
+    """Sets a DQ Skin setting by name ("Method" takes an item name: 'Linear', 'Dual Quaternion',
+    'Blend')."""
+    if name == "Method":
+        nodes.put_method(mod, value if isinstance(value, str) else nodes.menu_values(mod.node_group)[value])
+    else:
+        nodes.put(mod, name, value)
 
 
 def set_attribute(mod, name: str, group: str) -> None:
-    key = nodes.socket_ids(mod.node_group)[name]
-    mod[key + "_use_attribute"] = bool(group)
-    mod[key + "_attribute_name"] = group
+    nodes.put_attribute(mod, name, group)
 
 
-def menu_value(group, item: str) -> int:
-    return next(v for v, name in nodes.menu_values(group).items() if name == item)
+def menu_value(group, item: str) -> str:
+    """Kept for scripts written for DQ Skin 0.1: the method item itself."""
+    return item
 
 
 class ActiveMeshOperator(bpy.types.Operator):
@@ -43,9 +44,37 @@ class ActiveMeshOperator(bpy.types.Operator):
         return obj is not None and obj.type == "MESH"
 
 
+def add(obj, source, method: str = "AUTO"):
+    """Adds a DQ Skin modifier configured from the Armature modifier `source`, right before it,
+    and keeps `source` as its companion. Returns the new modifier."""
+    group = nodes.ensure_group()
+    index = list(obj.modifiers).index(source)
+    mod = obj.modifiers.new("DQ Skin", "NODES")
+    mod.node_group = group
+    if method == "AUTO":
+        method = "DUAL_QUATERNION" if source.use_deform_preserve_volume else "LINEAR"
+    nodes.put_companion(mod, {"name": source.name, "original": companion.snapshot(source)})
+    nodes.put(mod, "Armature", source.object)
+    nodes.put_method(mod, MENU_NAME[method])
+    nodes.put(mod, "Use Vertex Groups", source.use_vertex_groups)
+    nodes.put(mod, "Use Envelopes", source.use_bone_envelopes)
+    nodes.put_attribute(mod, "Mask", source.vertex_group)
+    nodes.put(mod, "Invert Mask", source.invert_vertex_group)
+    mod.show_viewport = source.show_viewport
+    mod.show_render = source.show_render
+    mod.show_in_editmode = source.show_in_editmode
+    mod.show_on_cage = source.show_on_cage
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.modifier_move_to_index(modifier=mod.name, index=index)
+    # Until DQ Skin has its first result, the companion deforms as Blender would.
+    companion.activate(source, mod, modifier.settings(mod))
+    return mod
+
+
 class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
-    """Add a DQ Skin modifier configured from the Armature modifier, in its place, and disable
-    the Armature modifier (it is kept, so removing DQ Skin restores it)"""
+    """Add a DQ Skin modifier configured from the Armature modifier, in its place; the Armature
+    modifier stays right after it, switched off while DQ Skin deforms, for Blender without DQ
+    Skin (render farms) and linked data"""
 
     bl_idname = "object.dq_skin_add"
     bl_label = "Add DQ Skin"
@@ -55,7 +84,11 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
 
     def execute(self, context):
         obj = context.active_object
-        armature_mods = [m for m in obj.modifiers if m.type == "ARMATURE"]
+        if obj.library is not None:
+            self.report({"ERROR"}, f"{obj.name} is linked from a library: make a Library Override first")
+            return {"CANCELLED"}
+        taken = {nodes.get_companion(m).get("name") for m in modifier.dq_skin_modifiers(obj)}
+        armature_mods = [m for m in obj.modifiers if m.type == "ARMATURE" and m.name not in taken]
         if not armature_mods:
             self.report({"ERROR"}, f"{obj.name} has no Armature modifier to replace")
             return {"CANCELLED"}
@@ -63,61 +96,43 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
         if source.object is None:
             self.report({"ERROR"}, f"The Armature modifier {source.name!r} has no armature object")
             return {"CANCELLED"}
-        group = nodes.ensure_group()
-        index = list(obj.modifiers).index(source)
-        mod = obj.modifiers.new("DQ Skin", "NODES")
-        mod.node_group = group
-        method = self.method
-        if method == "AUTO":
-            method = "DUAL_QUATERNION" if source.use_deform_preserve_volume else "LINEAR"
-        set_input(mod, "Armature", source.object)
-        set_input(mod, "Method", menu_value(group, MENU_NAME[method]))
-        set_input(mod, "Use Vertex Groups", source.use_vertex_groups)
-        set_input(mod, "Use Envelopes", source.use_bone_envelopes)
-        set_attribute(mod, "Mask", source.vertex_group)
-        set_input(mod, "Invert Mask", source.invert_vertex_group)
-        modifier.ensure_result(obj, mod)
-        with context.temp_override(object=obj, active_object=obj):
-            bpy.ops.object.modifier_move_to_index(modifier=mod.name, index=index)
-        replaced = dict(obj.get(REPLACED, {}))
-        replaced[source.name] = [source.show_viewport, source.show_render]
-        obj[REPLACED] = replaced
-        source.show_viewport = False
-        source.show_render = False
-        modifier.forget({obj.name_full})
-        self.report({"INFO"}, f"DQ Skin ({MENU_NAME[method]}) replaces {source.name!r} on {obj.name}")
+        with REGISTRY.suspend():
+            mod = add(obj, source, self.method)
+        # Skin right away, so the first frame is already DQ Skin's (and binding errors show).
+        REGISTRY.ensure()
+        rec = REGISTRY.records.get(obj.session_uid) or REGISTRY._add(obj)
+        REGISTRY._describe(rec)
+        REGISTRY.evaluate(rec, context.evaluated_depsgraph_get())
+        shown = nodes.get_method(mod)
+        self.report({"INFO"}, f"DQ Skin ({shown}) replaces {source.name!r} on {obj.name}")
         return {"FINISHED"}
 
 
-def restore_armature_modifiers(obj) -> None:
-    """Re-enables the Armature modifiers `dq_skin_add` disabled and forgets that it did."""
-    replaced = obj.get(REPLACED)
-    if replaced is None:
-        return
-    for name, (viewport, render) in dict(replaced).items():
-        arm_mod = obj.modifiers.get(name)
-        if arm_mod is not None:
-            arm_mod.show_viewport = bool(viewport)
-            arm_mod.show_render = bool(render)
-    del obj[REPLACED]
-
-
 def remove_modifier(obj, mod) -> None:
-    """Removes a DQ Skin modifier and its result data; restores what `dq_skin_add` changed once
-    no DQ Skin modifier is left."""
-    result = mod.get(nodes.socket_ids(mod.node_group)["Result"])
+    """Removes a DQ Skin modifier and its result, and puts its companion Armature modifier back
+    as it was before `dq_skin_add`."""
+    info = nodes.get_companion(mod) if nodes.version_of(mod.node_group) == nodes.VERSION else {}
+    c = companion.find(obj, mod, info) if info else None
+    result = nodes.get(mod, "Result") if info else None
+    uid = compat.modifier_uid(mod)
+    attr = obj.data.attributes.get(modifier.capture_name(mod))
     obj.modifiers.remove(mod)
-    if result is not None and result.users == 0:
-        mesh = result.data
-        bpy.data.objects.remove(result)
-        if mesh is not None and mesh.users == 0:
-            bpy.data.meshes.remove(mesh)
-    if not modifier.dq_skin_modifiers(obj):
-        restore_armature_modifiers(obj)
+    if attr is not None:
+        obj.data.attributes.remove(attr)
+    if c is not None:
+        companion.restore(c, info.get("original", {}))
+    if result is not None and results.is_result(result):
+        REGISTRY.claimed.pop(result.session_uid, None)
+        results.remove(result)
+    modifier.drop_state((obj.session_uid, uid))
+    rec = REGISTRY.records.get(obj.session_uid)
+    if rec is not None:
+        rec.mods.pop(uid, None)
+        REGISTRY.refresh(rec)
 
 
 class OBJECT_OT_dq_skin_remove(ActiveMeshOperator):
-    """Remove the DQ Skin modifier and re-enable the Armature modifier it replaced"""
+    """Remove the DQ Skin modifier and put back the Armature modifier it replaced"""
 
     bl_idname = "object.dq_skin_remove"
     bl_label = "Remove DQ Skin"
@@ -132,6 +147,9 @@ class OBJECT_OT_dq_skin_remove(ActiveMeshOperator):
             mods = [m for m in mods if m.name == self.modifier]
         if not mods:
             self.report({"ERROR"}, f"{obj.name} has no DQ Skin modifier" + (f" named {self.modifier!r}" if self.modifier else ""))
+            return {"CANCELLED"}
+        if obj.library is not None:
+            self.report({"ERROR"}, f"{obj.name} is linked from a library and cannot be changed")
             return {"CANCELLED"}
         remove_modifier(obj, mods[0])
         return {"FINISHED"}

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import dqskin
+from . import dqskin, meshdata
 
 
 @dataclass
@@ -30,6 +30,8 @@ class Binding:
     mask: np.ndarray | None
     """Per-vertex strength from the modifier's vertex group (inverted if asked), or None."""
     vertex_count: int
+    rest: np.ndarray | None = None
+    """`(B, 4, 4)` rest matrices of the bound bones (`Bone.matrix_local`)."""
 
 
 def deforming_bones(armature) -> list:
@@ -38,58 +40,42 @@ def deforming_bones(armature) -> list:
 
 
 def bind(
-    mesh_object, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True
+    mesh_object, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True, data=None
 ) -> Binding:
     """Influences of `mesh_object`'s vertex groups on `armature`'s deforming bones. The bone
     indices run over every deforming pose bone in Blender's order (what envelopes need too);
-    zero weights are kept, since a vertex with any group mapped to a bone never uses envelopes."""
-    mesh = mesh_object.data
-    pose_bones = armature.pose.bones
-    bone_names: list[str] = []
-    bone_indices: list[int] = []
-    for i, pb in enumerate(pose_bones):
-        if pb.bone.use_deform:
-            bone_names.append(pb.name)
-            bone_indices.append(i)
+    zero weights are kept, since a vertex with any group mapped to a bone never uses envelopes.
+    `data`: the mesh's `meshdata.MeshData` (read if not given)."""
+    if data is None:
+        data = meshdata.get(mesh_object)
+    deform = np.empty(len(armature.data.bones), bool)
+    armature.data.bones.foreach_get("use_deform", deform)
+    # data.bones and pose.bones share their order.
+    bone_indices = np.flatnonzero(deform)
+    bone_names = [armature.pose.bones[int(i)].name for i in bone_indices] if len(bone_indices) < len(deform) else [
+        pb.name for pb in armature.pose.bones
+    ]
     ours = {name: k for k, name in enumerate(bone_names)}
     # Vertex group index -> our bone index, for groups naming a deforming bone.
-    group_to_bone: dict[int, int] = {}
+    group_to_bone = np.full(max(len(data.group_names), 1), -1, np.int32)
     if use_vertex_groups:
-        for group in mesh_object.vertex_groups:
-            if group.name in ours:
-                group_to_bone[group.index] = ours[group.name]
-
-    vertex_count = len(mesh.vertices)
-    offsets = np.zeros(vertex_count + 1, np.int64)
-    bones: list[int] = []
-    weights: list[float] = []
-    mask_index = mesh_object.vertex_groups.find(mask_group) if mask_group else -1
+        for g, name in enumerate(data.group_names):
+            group_to_bone[g] = ours.get(name, -1)
+    n = data.vertex_count
+    groups = data.groups
+    if groups is None:
+        influences = dqskin.Influences(np.zeros(n + 1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float32), len(bone_names))
+    else:
+        influences = dqskin.influences_from_deform_groups(groups.offsets, groups.groups, groups.weights, group_to_bone, len(bone_names))
     # Outside the mask group a vertex's weight in it is 0. Blender applies the mask only to
     # meshes that have vertex weights at all.
-    mask = np.zeros(vertex_count, np.float32) if mask_index >= 0 else None
-    any_weights = False
-    for v in mesh.vertices:
-        for g in v.groups:
-            any_weights = True
-            b = group_to_bone.get(g.group)
-            if b is not None:
-                bones.append(b)
-                weights.append(g.weight)
-            if g.group == mask_index:
-                mask[v.index] = g.weight
-        offsets[v.index + 1] = len(bones)
-    if mask is not None:
-        if not any_weights:
-            mask = None
-        elif invert_mask:
+    mask = None
+    if mask_group and groups is not None:
+        mask = data.group_weights(mask_group)
+        if mask is not None and invert_mask:
             mask = (1.0 - mask).astype(np.float32)
-    influences = dqskin.Influences(
-        offsets,
-        np.asarray(bones, np.int64),
-        np.asarray(weights, np.float32),
-        len(bone_names),
-    )
-    return Binding(influences, bone_names, np.asarray(bone_indices, np.int64), mask, vertex_count)
+    rest = _pose_matrices(armature.data.bones, "matrix_local")[bone_indices]
+    return Binding(influences, bone_names, bone_indices.astype(np.int64), mask, n, np.ascontiguousarray(rest))
 
 
 def _pose_matrices(collection, prop: str) -> np.ndarray:
@@ -101,19 +87,24 @@ def _pose_matrices(collection, prop: str) -> np.ndarray:
 
 def bone_matrices(armature, binding: Binding) -> tuple[np.ndarray, np.ndarray]:
     """`(deform, rest)` matrices of the bound bones for the current pose."""
-    deform = _pose_matrices(armature.pose.bones, "matrix_channel")[binding.bone_indices]
-    rest = _pose_matrices(armature.data.bones, "matrix_local")
-    # data.bones and pose.bones share their order.
-    rest = rest[binding.bone_indices]
+    deform = _pose_matrices(armature.pose.bones, "matrix_channel")
+    if len(binding.bone_indices) != len(deform):
+        deform = deform[binding.bone_indices]
+    rest = binding.rest
+    if rest is None:
+        # data.bones and pose.bones share their order.
+        rest = _pose_matrices(armature.data.bones, "matrix_local")[binding.bone_indices]
     return np.ascontiguousarray(deform), np.ascontiguousarray(rest)
+
+
+def world(obj) -> np.ndarray:
+    """An object's world matrix as row-major `(4, 4)` float32."""
+    return np.array(obj.matrix_world, np.float32)
 
 
 def spaces(mesh_object, armature) -> tuple[np.ndarray, np.ndarray]:
     """`(premat, postmat)`: mesh space to armature space and back, as Blender computes them."""
-    obmat = np.linalg.inv(np.array(mesh_object.matrix_world, np.float32))
-    postmat = (obmat @ np.array(armature.matrix_world, np.float32)).astype(np.float32)
-    premat = np.linalg.inv(postmat).astype(np.float32)
-    return premat, postmat
+    return dqskin.armature_spaces(world(mesh_object), world(armature))
 
 
 def envelopes(armature, binding: Binding) -> np.ndarray:

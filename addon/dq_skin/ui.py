@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import modifier
+from . import modifier, nodes
 
 
 class OBJECT_PT_dq_skin(bpy.types.Panel):
@@ -31,16 +31,25 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
             box = layout.box()
             st = modifier.state(obj, mod)
             try:
-                s = modifier.settings(mod)
-                box.label(text=f"{mod.name}: {s.method.replace('_', ' ').title()}", icon="MOD_ARMATURE")
+                method = nodes.get_method(mod)
+                box.label(text=f"{mod.name}: {method}", icon="MOD_ARMATURE")
             except Exception:  # a damaged modifier should not break the panel
                 box.label(text=mod.name, icon="MOD_ARMATURE")
             if st.error:
                 box.label(text=st.error, icon="ERROR")
-            elif st.status:
-                box.label(text=st.status, icon="INFO")
-            op = box.operator("object.dq_skin_remove", icon="X")
-            op.modifier = mod.name
+            if st.status:
+                box.label(text=st.status, icon="INFO" if st.live or st.mode in ("off", "linked") else "ERROR")
+            elif not st.error:
+                box.label(text=_waiting(obj, mod), icon="TIME")
+            if obj.library is None:
+                op = box.operator("object.dq_skin_remove", icon="X")
+                op.modifier = mod.name
+
+
+def _waiting(obj, mod) -> str:
+    if obj.library is not None:
+        return "Linked data: Blender's Armature modifier deforms it (make a Library Override to use DQ Skin)"
+    return "Not evaluated yet (the next frame change or update skins it)"
 
 
 class VIEW3D_MT_dq_skin_animation(bpy.types.Menu):

@@ -235,3 +235,37 @@ def curvature_energy(rotations: ArrayLike) -> float:
     """Summed squared discrete curvature of evenly spaced rotations."""
 
 def _panic_for_tests() -> None: ...
+
+def influences_from_deform_groups(
+    offsets: npt.NDArray[np.uint32],
+    groups: npt.NDArray[np.uint32],
+    weights: F32Array,
+    group_to_bone: npt.NDArray[np.int32],
+    bone_count: int,
+) -> Influences:
+    """Influences from vertex groups in CSR form (stored order), with each group index mapped to
+    a bone index (or -1), as Blender's Armature modifier maps them."""
+
+def deform_group_weights(
+    offsets: npt.NDArray[np.uint32], groups: npt.NDArray[np.uint32], weights: F32Array, group: int
+) -> F32Array:
+    """Each vertex's weight in one vertex group (0 outside it); ``(V,)``."""
+
+def shape_key_mix(
+    keys: list[tuple[F32Array, int, float, bool, F32Array | None]],
+    reference: int,
+    out: F32Array,
+    shown: int | None = None,
+) -> None:
+    """Blender's relative shape-key mix into ``out`` ``(V, 3)``; keys are
+    ``(data, relative_to, value, muted, weights)`` in block order; ``shown`` for Shape Key Lock."""
+
+def armature_spaces(object_world: ArrayLike, armature_world: ArrayLike) -> tuple[F32Array, F32Array]:
+    """``(premat, postmat)`` of the Armature modifier from the two world matrices."""
+
+class _MeshMemory:
+    """Internal to the Blender extension: reads vertex-group weights from Blender's memory."""
+    def __init__(self, blend_file: bytes) -> None: ...
+    def deform_verts(
+        self, mesh_pointer: int, vertex_count: int
+    ) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], F32Array] | None: ...

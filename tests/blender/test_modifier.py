@@ -15,13 +15,24 @@ from test_exactness import REL_TOL, evaluated_positions, import_character
 
 
 def reference_copy(obj, preserve_volume: bool):
-    """A copy of `obj` sharing its mesh, deformed by a plain Armature modifier."""
+    """A copy of `obj` sharing its mesh, deformed by a plain Armature modifier (set up as before
+    DQ Skin was added, if it was)."""
+    import json
+
+    original = {}
+    for m in obj.modifiers:
+        if m.type == "NODES" and m.node_group is not None and m.node_group.get("dq_skin_version"):
+            ident = next(i.identifier for i in m.node_group.interface.items_tree if getattr(i, "name", "") == "Companion")
+            original = json.loads(m[ident] or "{}").get("original", {})
     copy = obj.copy()
     bpy.context.scene.collection.objects.link(copy)
     for m in list(copy.modifiers):
         if m.type == "NODES":
             copy.modifiers.remove(m)
     arm_mod = next(m for m in copy.modifiers if m.type == "ARMATURE")
+    for name in ("use_vertex_groups", "use_bone_envelopes", "vertex_group", "invert_vertex_group"):
+        if name in original:
+            setattr(arm_mod, name, original[name])
     arm_mod.show_viewport = True
     arm_mod.show_render = True
     arm_mod.use_deform_preserve_volume = preserve_volume

@@ -9,6 +9,7 @@
 //! - [`hierarchy`]: forward kinematics with dual quaternions (Kenwright 2012).
 //! - [`skin`]: LBS, DQS (exactly Blender's Armature modifier) and their per-vertex blend.
 //! - [`pool`]: the thread pool the kernels run on.
+//! - [`shape_keys`]: Blender's relative shape-key mix.
 //! - [`tracks`]: keyed rotation and transform tracks (Slerp, Squad in time, ScLERP, Spring).
 //! - [`rigs`]: procedural test rigs (the twisted cylinder) and mesh measurements.
 
@@ -24,6 +25,7 @@ pub mod pool;
 pub mod quat_interp;
 pub mod rigs;
 mod scalar;
+pub mod shape_keys;
 pub mod skin;
 pub mod tracks;
 #[cfg(test)]
@@ -34,4 +36,4 @@ pub use dual_quat::{DualNumber, DualQuat, NotRigid, Screw};
 pub use glam;
 pub use hierarchy::{forward_kinematics, HierarchyError};
 pub use quat_interp::{make_signs_continuous, slerp, Squad};
-pub use skin::{skin, BBone, Effective, Envelope, Influence, Influences, Method, Pose, SkinError, SkinOptions};
+pub use skin::{armature_spaces, deform_group_weights, skin, BBone, DeformGroups, Effective, Envelope, Influence, Influences, Method, Pose, SkinError, SkinOptions};

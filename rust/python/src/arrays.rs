@@ -128,6 +128,18 @@ pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<u32>> {
 /// A small input (a transform, a few weights): anything numpy can turn into float32, copied.
 /// Must be finite.
 pub fn small(obj: &Bound<'_, PyAny>, name: &str, shape: Shape<'_>, names: &[&str]) -> PyResult<(Vec<f32>, Vec<usize>)> {
+    // Fast path (per-frame matrices): already a C-contiguous float32 array.
+    if let Ok(arr) = obj.cast::<PyArrayDyn<f32>>() {
+        if arr.is_c_contiguous() {
+            if let Ok(ro) = arr.try_readonly() {
+                let dims = ro.shape().to_vec();
+                check_shape(name, &dims, shape, names)?;
+                let data = ro.as_slice()?.to_vec();
+                check_finite(name, &data)?;
+                return Ok((data, dims));
+            }
+        }
+    }
     let np = obj.py().import("numpy")?;
     let kwargs = PyDict::new(obj.py());
     kwargs.set_item("dtype", np.getattr("float32")?)?;

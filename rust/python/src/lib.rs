@@ -9,6 +9,7 @@
 #![allow(clippy::wrong_self_convention)]
 
 mod arrays;
+mod blender;
 mod blending;
 mod dual_quat;
 mod rigs;
@@ -65,6 +66,7 @@ fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_panic_for_tests, m)?)?;
     dual_quat::register(m)?;
     blending::register(m)?;
+    blender::register(m)?;
     skinning::register(m)?;
     rigs::register(m)?;
     tracks::register(m)?;

@@ -35,7 +35,7 @@ pub(crate) struct Job<'a> {
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
 /// A multiple of [`LANES`], so tasks start on batch boundaries.
-const CHUNK: usize = 4096;
+pub(crate) const CHUNK: usize = 4096;
 const _: () = assert!(CHUNK.is_multiple_of(LANES));
 
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {

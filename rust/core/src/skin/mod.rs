@@ -19,11 +19,13 @@ mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 mod envelope;
+mod groups;
 mod influences;
 mod kernels;
 mod pose;
 
 pub use envelope::{bbone_segment_matrices, distance_factor, BBone, Effective, Envelope};
+pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
 pub use influences::{Influence, Influences};
 pub use pose::{affine_problem, Pose};
 
@@ -176,7 +178,13 @@ fn skin_with(
         blend_amount,
         blend_factor,
     };
-    crate::pool::run(|| kernels::run(&job, out, simd));
+    if n <= kernels::CHUNK {
+        // One task's worth: run it here. Handing it to the pool would cost more than the work
+        // (a thread wake-up), which matters for scenes with many small meshes.
+        kernels::run(&job, out, simd);
+    } else {
+        crate::pool::run(|| kernels::run(&job, out, simd));
+    }
     Ok(())
 }
 

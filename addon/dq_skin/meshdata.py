@@ -1,0 +1,217 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""What DQ Skin reads from a mesh datablock, read once and kept until the mesh changes.
+
+Per mesh (shared by every object using it, e.g. a crowd of linked duplicates): the vertex
+positions, the vertex-group weights in stored order, the element counts, and the shape keys'
+coordinates. Weights are read straight from Blender's memory through `dqskin._MeshMemory`
+(the layout comes from the SDNA of a tiny .blend this Blender writes once per session), which
+takes milliseconds where `MeshVertex.groups` takes about a second per 250,000 vertices; if that
+reader cannot be built, the slow path is used and the panel says nothing is wrong.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from . import dqskin
+
+
+@dataclass
+class Groups:
+    """Vertex-group weights in CSR form, in stored order (`dqskin.influences_from_deform_groups`)."""
+
+    offsets: np.ndarray
+    groups: np.ndarray
+    weights: np.ndarray
+
+    def weights_of(self, index: int) -> np.ndarray:
+        return dqskin.deform_group_weights(self.offsets, self.groups, self.weights, index)
+
+
+@dataclass
+class KeyData:
+    """A mesh's shape keys: their coordinates and how they mix (values come per frame)."""
+
+    relative: bool
+    reference: int
+    data: list  # (V, 3) float32 per key block, in block order
+    relative_to: list  # index of each block's relative key
+    vertex_groups: list  # vertex group name per block ("" for none)
+
+
+@dataclass
+class MeshData:
+    uid: int
+    version: int
+    counts: tuple  # vertices, edges, faces, corners
+    positions: np.ndarray  # (V, 3) float32
+    groups: Groups | None  # None: the mesh has no vertex-group data at all
+    group_names: tuple
+    keys: KeyData | None
+    _group_weights: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def vertex_count(self) -> int:
+        return self.counts[0]
+
+    def group_weights(self, name: str) -> np.ndarray | None:
+        """Per-vertex weights of a vertex group by name (None if there is no such group)."""
+        if name not in self._group_weights:
+            if name not in self.group_names:
+                self._group_weights[name] = None
+            elif self.groups is None:
+                self._group_weights[name] = np.zeros(self.vertex_count, np.float32)
+            else:
+                self._group_weights[name] = self.groups.weights_of(self.group_names.index(name))
+        return self._group_weights[name]
+
+
+_cache: dict[int, MeshData] = {}
+_stale: set[int] = set()
+_versions = iter(range(1, 1 << 62))
+_reader = None
+_reader_error = ""
+
+
+def forget() -> None:
+    _cache.clear()
+    _stale.clear()
+
+
+def mark_stale(mesh_uid: int) -> None:
+    """Blender says the mesh may have changed: compare it on its next use."""
+    _stale.add(mesh_uid)
+
+
+def reader():
+    """The memory reader for this Blender, or None (then `reader_error` says why)."""
+    global _reader, _reader_error
+    if _reader is None and not _reader_error:
+        fd, path = tempfile.mkstemp(prefix="dq_skin_dna_", suffix=".blend")
+        os.close(fd)
+        try:
+            bpy.data.libraries.write(path, set(), compress=False)
+            with open(path, "rb") as f:
+                _reader = dqskin._MeshMemory(f.read())
+        except Exception as e:  # any failure: fall back to the slow, safe path
+            _reader_error = f"{type(e).__name__}: {e}"
+        finally:
+            try:
+                os.remove(path)
+            except OSError:
+                pass
+    return _reader
+
+
+def read_groups(mesh) -> Groups | None:
+    """The mesh's vertex-group weights (None if it has no vertex-group data)."""
+    n = len(mesh.vertices)
+    r = reader()
+    if r is not None and not mesh.is_editmode:
+        try:
+            got = r.deform_verts(mesh.as_pointer(), n)
+        except ValueError:
+            got = False
+        if got is not False:
+            return None if got is None else Groups(*got)
+    return _read_groups_slowly(mesh)
+
+
+def _read_groups_slowly(mesh) -> Groups | None:
+    # Without the memory reader an empty weight layer cannot be told from none; a mesh whose
+    # vertices are in no group counts as having none (only the mask group depends on it).
+    if not any(len(v.groups) for v in mesh.vertices):
+        return None
+    offsets = np.zeros(len(mesh.vertices) + 1, np.uint32)
+    groups: list[int] = []
+    weights: list[float] = []
+    for v in mesh.vertices:
+        for g in v.groups:
+            groups.append(g.group)
+            weights.append(g.weight)
+        offsets[v.index + 1] = len(groups)
+    return Groups(offsets, np.asarray(groups, np.uint32), np.asarray(weights, np.float32))
+
+
+def _positions(mesh) -> np.ndarray:
+    flat = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.attributes["position"].data.foreach_get("vector", flat)
+    return flat.reshape(-1, 3)
+
+
+def _keys(mesh) -> KeyData | None:
+    key = mesh.shape_keys
+    if key is None or not len(key.key_blocks):
+        return None
+    blocks = list(key.key_blocks)
+    data = []
+    for kb in blocks:
+        flat = np.empty(len(kb.data) * 3, np.float32)
+        points = getattr(kb, "points", None)  # the fast path (Blender 4.1+)
+        (points if points is not None else kb.data).foreach_get("co", flat)
+        data.append(flat.reshape(-1, 3))
+    index = {kb.name: i for i, kb in enumerate(blocks)}
+    reference = index.get(key.reference_key.name, 0) if key.reference_key is not None else 0
+    relative_to = [index.get(kb.relative_key.name, -1) if kb.relative_key is not None else -1 for kb in blocks]
+    return KeyData(key.use_relative, reference, data, relative_to, [kb.vertex_group for kb in blocks])
+
+
+def _read(mesh, uid: int, group_names: tuple) -> MeshData:
+    counts = (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops))
+    return MeshData(
+        uid=uid,
+        version=next(_versions),
+        counts=counts,
+        positions=_positions(mesh),
+        groups=read_groups(mesh),
+        group_names=group_names,
+        keys=_keys(mesh),
+    )
+
+
+def _same(a: MeshData, b: MeshData) -> bool:
+    if a.counts != b.counts or a.group_names != b.group_names or not np.array_equal(a.positions, b.positions):
+        return False
+    if (a.groups is None) != (b.groups is None):
+        return False
+    if a.groups is not None and not (
+        np.array_equal(a.groups.offsets, b.groups.offsets)
+        and np.array_equal(a.groups.groups, b.groups.groups)
+        and np.array_equal(a.groups.weights, b.groups.weights)
+    ):
+        return False
+    if (a.keys is None) != (b.keys is None):
+        return False
+    if a.keys is not None:
+        ka, kb = a.keys, b.keys
+        if (ka.relative, ka.reference, ka.relative_to, ka.vertex_groups) != (kb.relative, kb.reference, kb.relative_to, kb.vertex_groups):
+            return False
+        if len(ka.data) != len(kb.data) or not all(np.array_equal(x, y) for x, y in zip(ka.data, kb.data)):
+            return False
+    return True
+
+
+def get(obj, verify: bool = False) -> MeshData:
+    """The data of `obj`'s mesh, read if unknown, or re-read and compared with `verify` (after
+    Blender said the mesh may have changed); the version only changes when something did."""
+    mesh = obj.data
+    uid = mesh.session_uid
+    old = _cache.get(uid)
+    if uid in _stale:
+        _stale.discard(uid)
+        verify = True
+    if old is not None and not verify:
+        return old
+    # Vertex group names live on the mesh since Blender 3.0 but Python reaches them through
+    # any of its objects.
+    new = _read(mesh, uid, tuple(g.name for g in obj.vertex_groups))
+    if old is not None and _same(old, new):
+        return old
+    _cache[uid] = new
+    return new
+

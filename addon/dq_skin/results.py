@@ -1,0 +1,115 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Result objects: where the add-on puts what a DQ Skin modifier outputs.
+
+One per object and modifier (two DQ Skins on one object, or a duplicate of a character, never
+share one), local to the current file even when the character is a library override, linked to
+no scene (the modifier's reference keeps it evaluated), and never saved: files are written
+without them (see `handlers.on_save_pre`), so a file opened anywhere shows either a result the
+add-on just computed or Blender's own deformation through the companion.
+
+Each result records its owner; a duplicated object or copied modifier that still points at
+another modifier's result gets a new one of its own.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from . import nodes
+
+TAG = "dq_skin_result"
+OWNER = "dq_skin_owner"
+
+
+def owner_key(obj, mod_uid: str) -> str:
+    return f"{obj.name_full}\x1f{mod_uid}"
+
+
+def is_result(obj) -> bool:
+    return obj is not None and obj.get(TAG) is not None
+
+
+def usable(result, owner: str, claimed: set) -> bool:
+    """Whether `result` can be written for `owner`: ours, local, a mesh object, not claimed by
+    another modifier in this session."""
+    return (
+        result is not None
+        and result.type == "MESH"
+        and result.library is None
+        and result.override_library is None
+        and is_result(result)
+        and result.session_uid not in claimed
+    )
+
+
+def create(obj, mod, owner: str):
+    """A new, empty result object for `mod` on `obj` (its location says "pass through")."""
+    name = f".DQ Skin result {obj.name} {mod.name}"
+    mesh = bpy.data.meshes.new(name)
+    result = bpy.data.objects.new(name, mesh)
+    result[TAG] = 1
+    result[OWNER] = owner
+    return result
+
+
+def remove(result) -> None:
+    """Deletes a result object and its mesh (if nothing else uses them)."""
+    if result is None or not is_result(result) or result.library is not None:
+        return
+    mesh = result.data
+    try:
+        bpy.data.objects.remove(result)
+    except ReferenceError:
+        return
+    if mesh is not None and mesh.users == 0:
+        bpy.data.meshes.remove(mesh)
+
+
+def set_mode(result, mode: float) -> None:
+    if result.location.x != mode:
+        result.location.x = mode
+
+
+def mode_of(result) -> float:
+    return result.location.x if result is not None else 0.0
+
+
+def replace_mesh(result, source_mesh) -> None:
+    """Makes the result's mesh a copy of `source_mesh` (its attributes, groups, topology, shared
+    with it until written) without shape keys."""
+    old = result.data
+    mesh = source_mesh.copy()
+    mesh.name = result.name
+    result.data = mesh
+    if mesh.shape_keys is not None:
+        result.shape_key_clear()
+    if old is not None and old.users == 0:
+        bpy.data.meshes.remove(old)
+
+
+def points_mesh(result, count: int) -> None:
+    """Makes the result's mesh `count` loose points (positions mode)."""
+    mesh = result.data
+    if len(mesh.vertices) == count and not len(mesh.polygons) and not len(mesh.edges):
+        return
+    old = mesh
+    mesh = bpy.data.meshes.new(result.name)
+    mesh.vertices.add(count)
+    result.data = mesh
+    if old is not None and old.users == 0:
+        bpy.data.meshes.remove(old)
+
+
+def write_positions(result, positions) -> None:
+    mesh = result.data
+    mesh.attributes["position"].data.foreach_set("vector", positions.ravel())
+    mesh.update()
+
+
+def orphans() -> list:
+    """Result objects nothing uses any more (e.g. after their modifier or object was deleted)."""
+    return [o for o in bpy.data.objects if is_result(o) and o.users == 0 and o.library is None]
+
+
+def referenced(mod):
+    return nodes.get(mod, "Result")

@@ -1,0 +1,25 @@
+//! # dqskin-blend
+//!
+//! Blender keeps vertex-group weights in per-vertex arrays of `(group, weight)` pairs that its
+//! Python API only exposes one vertex at a time (`MeshVertex.groups`), which costs about a
+//! second per 250,000 vertices. This crate reads them straight from the running Blender's
+//! memory instead, in their stored order (dual quaternion skinning depends on it), using the
+//! struct layout that Blender itself describes in its SDNA: every `.blend` file carries the
+//! SDNA of the Blender that wrote it, so writing an empty file gives the layout of the structs
+//! in memory, whatever the version.
+//!
+//! - [`Sdna`]: parses the `DNA1` block of a `.blend` file (both the 4.x and the 5.x headers)
+//!   and answers field offsets and struct sizes.
+//! - [`MeshLayout`]: the offsets needed to reach a mesh's deform vertices, checked against the
+//!   sizes the SDNA states.
+//! - [`read_deform_verts`]: copies the weights of a `Mesh` out of memory into CSR arrays, with
+//!   every count checked for sanity before it is used.
+//!
+//! No Python and no Blender headers: the only unsafe code is the raw reads in
+//! [`read_deform_verts`], whose caller guarantees the pointer.
+
+mod mesh;
+mod sdna;
+
+pub use mesh::{read_deform_verts, DeformVerts, MeshLayout, ReadError};
+pub use sdna::{DnaError, Field, Sdna};

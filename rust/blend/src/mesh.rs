@@ -1,0 +1,354 @@
+//! Reading a mesh's vertex-group weights (`MDeformVert` arrays) out of Blender's memory.
+//!
+//! A `Mesh` keeps its per-vertex data in `CustomData vert_data` (stored name `vdata`): an array
+//! of `CustomDataLayer`s, each with a `type` and a `data` pointer. The layer of type
+//! `CD_MDEFORMVERT` (2) holds one `MDeformVert { MDeformWeight *dw; int totweight; int flag; }`
+//! per vertex, and `dw` points to `totweight` pairs `MDeformWeight { int def_nr; float weight; }`
+//! in the order Blender stores (and deforms) them.
+
+use crate::sdna::{DnaError, Sdna};
+
+/// `eCustomDataType::CD_MDEFORMVERT`, unchanged since Blender 2.5.
+const CD_MDEFORMVERT: i32 = 2;
+/// Sanity bounds: beyond these the memory cannot be a mesh of this layout.
+const MAX_LAYERS: i32 = 1 << 16;
+const MAX_WEIGHTS_PER_VERTEX: i32 = 1 << 16;
+
+/// Byte offsets of everything [`read_deform_verts`] touches, from an [`Sdna`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MeshLayout {
+    verts_num: usize,
+    vert_data: usize,
+    layers: usize,
+    totlayer: usize,
+    layer_size: usize,
+    layer_type: usize,
+    layer_data: usize,
+    dvert_size: usize,
+    dvert_dw: usize,
+    dvert_totweight: usize,
+    weight_size: usize,
+    weight_def_nr: usize,
+    weight_weight: usize,
+}
+
+impl MeshLayout {
+    /// The layout of this Blender's meshes, checked for the field sizes the reader assumes.
+    pub fn new(sdna: &Sdna) -> Result<Self, DnaError> {
+        let int = |s: &str, names: &[&str]| -> Result<usize, DnaError> {
+            let f = sdna.field(s, names)?;
+            if f.size != 4 || f.pointer {
+                return Err(DnaError::Inconsistent(format!("{s}.{} is not a 4-byte number", names[0])));
+            }
+            Ok(f.offset)
+        };
+        let ptr = |s: &str, names: &[&str]| -> Result<usize, DnaError> {
+            let f = sdna.field(s, names)?;
+            if f.size != 8 || !f.pointer {
+                return Err(DnaError::Inconsistent(format!("{s}.{} is not a pointer", names[0])));
+            }
+            Ok(f.offset)
+        };
+        let vert_data = sdna.field("Mesh", &["vert_data", "vdata"])?;
+        if vert_data.pointer || vert_data.size != sdna.struct_size("CustomData")? {
+            return Err(DnaError::Inconsistent("Mesh.vert_data is not a CustomData".into()));
+        }
+        Ok(Self {
+            verts_num: int("Mesh", &["verts_num", "totvert"])?,
+            vert_data: vert_data.offset,
+            layers: ptr("CustomData", &["layers"])?,
+            totlayer: int("CustomData", &["totlayer"])?,
+            layer_size: sdna.struct_size("CustomDataLayer")?,
+            layer_type: int("CustomDataLayer", &["type"])?,
+            layer_data: ptr("CustomDataLayer", &["data"])?,
+            dvert_size: sdna.struct_size("MDeformVert")?,
+            dvert_dw: ptr("MDeformVert", &["dw"])?,
+            dvert_totweight: int("MDeformVert", &["totweight"])?,
+            weight_size: sdna.struct_size("MDeformWeight")?,
+            weight_def_nr: int("MDeformWeight", &["def_nr"])?,
+            weight_weight: int("MDeformWeight", &["weight"])?,
+        })
+    }
+}
+
+/// A mesh's vertex-group weights in CSR form: vertex `v` has the pairs
+/// `(groups[i], weights[i])` for `i` in `offsets[v]..offsets[v+1]`, in stored order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DeformVerts {
+    pub offsets: Vec<u32>,
+    pub groups: Vec<u32>,
+    pub weights: Vec<f32>,
+}
+
+/// Why the memory was not read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ReadError {
+    /// The pointer is null.
+    Null,
+    /// The mesh does not have the number of vertices the caller expects (stale pointer or a
+    /// mesh being edited).
+    VertexCount { expected: usize, found: i64 },
+    /// A count read from memory is out of any sane range: the layout does not fit this memory.
+    Implausible(&'static str),
+}
+
+impl core::fmt::Display for ReadError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ReadError::Null => write!(f, "the mesh pointer is null"),
+            ReadError::VertexCount { expected, found } => {
+                write!(f, "the mesh in memory has {found} vertices, expected {expected}")
+            }
+            ReadError::Implausible(what) => write!(f, "implausible {what} in memory: the mesh layout does not match"),
+        }
+    }
+}
+
+impl std::error::Error for ReadError {}
+
+#[inline]
+unsafe fn read<T: Copy>(address: usize) -> T {
+    // SAFETY: the caller guarantees `address` is inside a live object of the layout.
+    unsafe { core::ptr::read_unaligned(address as *const T) }
+}
+
+/// Reads the vertex-group weights of the `Mesh` at `mesh` (`bpy.types.Mesh.as_pointer()`).
+/// `Ok(None)` when the mesh has no weight layer at all (Blender then skips the Armature
+/// modifier's vertex-group mask).
+///
+/// # Safety
+/// `mesh` must be the address of a live `Mesh` of the Blender whose SDNA built `layout`, not
+/// changed by another thread during the call (Python handlers and operators run while nothing
+/// else touches it). Every count is checked against `expected_vertices` and sanity bounds
+/// before it is used, so a mismatched layout is reported rather than followed far.
+pub unsafe fn read_deform_verts(
+    layout: &MeshLayout,
+    mesh: usize,
+    expected_vertices: usize,
+) -> Result<Option<DeformVerts>, ReadError> {
+    if mesh == 0 {
+        return Err(ReadError::Null);
+    }
+    // SAFETY (all reads below): offsets come from the SDNA of this Blender, the mesh pointer is
+    // live (caller), and the layer and vertex pointers are read from that mesh after their
+    // counts passed the checks.
+    unsafe {
+        let verts: i32 = read(mesh + layout.verts_num);
+        if verts < 0 || verts as usize != expected_vertices {
+            return Err(ReadError::VertexCount { expected: expected_vertices, found: verts as i64 });
+        }
+        let data = mesh + layout.vert_data;
+        let layers: usize = read(data + layout.layers);
+        let totlayer: i32 = read(data + layout.totlayer);
+        if !(0..MAX_LAYERS).contains(&totlayer) || (totlayer > 0 && layers == 0) {
+            return Err(ReadError::Implausible("layer count"));
+        }
+        let mut dverts = 0usize;
+        for i in 0..totlayer as usize {
+            let layer = layers + i * layout.layer_size;
+            if read::<i32>(layer + layout.layer_type) == CD_MDEFORMVERT {
+                dverts = read(layer + layout.layer_data);
+                break;
+            }
+        }
+        if dverts == 0 {
+            return Ok(None);
+        }
+        let n = expected_vertices;
+        let mut out = DeformVerts { offsets: Vec::with_capacity(n + 1), groups: Vec::new(), weights: Vec::new() };
+        out.offsets.push(0);
+        // Two passes: count first, so the arrays are allocated once and every count is checked
+        // before anything is followed.
+        let mut total = 0usize;
+        for v in 0..n {
+            let dv = dverts + v * layout.dvert_size;
+            let count: i32 = read(dv + layout.dvert_totweight);
+            if !(0..MAX_WEIGHTS_PER_VERTEX).contains(&count) || (count > 0 && read::<usize>(dv + layout.dvert_dw) == 0) {
+                return Err(ReadError::Implausible("weights per vertex"));
+            }
+            total += count as usize;
+        }
+        if u32::try_from(total).is_err() {
+            return Err(ReadError::Implausible("total weight count"));
+        }
+        out.groups.reserve_exact(total);
+        out.weights.reserve_exact(total);
+        for v in 0..n {
+            let dv = dverts + v * layout.dvert_size;
+            let count = read::<i32>(dv + layout.dvert_totweight) as usize;
+            let dw: usize = read(dv + layout.dvert_dw);
+            for k in 0..count {
+                let w = dw + k * layout.weight_size;
+                out.groups.push(read::<u32>(w + layout.weight_def_nr));
+                out.weights.push(read::<f32>(w + layout.weight_weight));
+            }
+            out.offsets.push(out.groups.len() as u32);
+        }
+        Ok(Some(out))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An SDNA with the structs the reader needs, laid out as in Blender 4.2-5.0.
+    fn mesh_sdna(renamed: bool) -> Sdna {
+        let mut names: Vec<&str> = vec!["*layers", "typemap[53]", "totlayer", "maxlayer", "totsize", "*pool", "*external"];
+        names.extend(["type", "offset", "flag", "active", "active_rnd", "active_clone", "active_mask", "uid", "name[68]", "_pad1[4]", "*data", "*sharing_info"]);
+        names.extend(["*dw", "totweight"]);
+        names.extend(["def_nr", "weight"]);
+        let (verts, vdata) = if renamed { ("verts_num", "vert_data") } else { ("totvert", "vdata") };
+        names.extend(["_pad0[8]", verts, vdata]);
+        let types = ["char", "int", "float", "void", "CustomDataLayer", "CustomData", "MDeformWeight", "MDeformVert", "Mesh", "BLI_mempool", "CustomDataExternal", "ImplicitSharingInfoHandle"];
+        let tlen: [u16; 12] = [1, 4, 4, 0, 120, 248, 8, 16, 264, 0, 0, 0];
+        let idx = |n: &str| names.iter().position(|x| *x == n).unwrap() as u16;
+        let ty = |n: &str| types.iter().position(|x| *x == n).unwrap() as u16;
+        let structs: Vec<(u16, Vec<(u16, u16)>)> = vec![
+            (ty("CustomDataLayer"), vec![(ty("int"), idx("type")), (ty("int"), idx("offset")), (ty("int"), idx("flag")), (ty("int"), idx("active")), (ty("int"), idx("active_rnd")), (ty("int"), idx("active_clone")), (ty("int"), idx("active_mask")), (ty("int"), idx("uid")), (ty("char"), idx("name[68]")), (ty("char"), idx("_pad1[4]")), (ty("void"), idx("*data")), (ty("ImplicitSharingInfoHandle"), idx("*sharing_info"))]),
+            (ty("CustomData"), vec![(ty("CustomDataLayer"), idx("*layers")), (ty("int"), idx("typemap[53]")), (ty("int"), idx("totlayer")), (ty("int"), idx("maxlayer")), (ty("int"), idx("totsize")), (ty("BLI_mempool"), idx("*pool")), (ty("CustomDataExternal"), idx("*external"))]),
+            (ty("MDeformWeight"), vec![(ty("int"), idx("def_nr")), (ty("float"), idx("weight"))]),
+            (ty("MDeformVert"), vec![(ty("MDeformWeight"), idx("*dw")), (ty("int"), idx("totweight")), (ty("int"), idx("flag"))]),
+            (ty("Mesh"), vec![(ty("char"), idx("_pad0[8]")), (ty("int"), idx(verts)), (ty("int"), idx("flag")), (ty("CustomData"), idx(vdata))]),
+        ];
+        let mut d = Vec::new();
+        let pad = |d: &mut Vec<u8>| {
+            while d.len() % 4 != 0 {
+                d.push(0)
+            }
+        };
+        d.extend_from_slice(b"SDNANAME");
+        d.extend_from_slice(&(names.len() as i32).to_le_bytes());
+        for n in &names {
+            d.extend_from_slice(n.as_bytes());
+            d.push(0);
+        }
+        pad(&mut d);
+        d.extend_from_slice(b"TYPE");
+        d.extend_from_slice(&(types.len() as i32).to_le_bytes());
+        for t in types {
+            d.extend_from_slice(t.as_bytes());
+            d.push(0);
+        }
+        pad(&mut d);
+        d.extend_from_slice(b"TLEN");
+        for s in tlen {
+            d.extend_from_slice(&s.to_le_bytes());
+        }
+        pad(&mut d);
+        d.extend_from_slice(b"STRC");
+        d.extend_from_slice(&(structs.len() as i32).to_le_bytes());
+        for (t, fields) in structs {
+            d.extend_from_slice(&t.to_le_bytes());
+            d.extend_from_slice(&(fields.len() as u16).to_le_bytes());
+            for (a, b) in fields {
+                d.extend_from_slice(&a.to_le_bytes());
+                d.extend_from_slice(&b.to_le_bytes());
+            }
+        }
+        Sdna::parse(&d).unwrap()
+    }
+
+    #[repr(C)]
+    struct Weight {
+        def_nr: u32,
+        weight: f32,
+    }
+    #[repr(C)]
+    struct DVert {
+        dw: *const Weight,
+        totweight: i32,
+        flag: i32,
+    }
+    #[repr(C)]
+    struct Layer {
+        ty: i32,
+        rest: [u8; 100],
+        data: *const DVert,
+        sharing: usize,
+    }
+    #[repr(C)]
+    struct CData {
+        layers: *const Layer,
+        typemap: [i32; 53],
+        totlayer: i32,
+        maxlayer: i32,
+        totsize: i32,
+        pool: usize,
+        external: usize,
+    }
+    #[repr(C)]
+    struct FakeMesh {
+        pad: [u8; 8],
+        verts: i32,
+        flag: i32,
+        vdata: CData,
+    }
+
+    fn fake(weights: &[Vec<(u32, f32)>], with_layer: bool) -> (FakeMesh, Vec<Layer>, Vec<DVert>, Vec<Vec<Weight>>) {
+        let lists: Vec<Vec<Weight>> = weights.iter().map(|l| l.iter().map(|&(g, w)| Weight { def_nr: g, weight: w }).collect()).collect();
+        let dverts: Vec<DVert> = lists.iter().map(|l| DVert { dw: if l.is_empty() { core::ptr::null() } else { l.as_ptr() }, totweight: l.len() as i32, flag: 0 }).collect();
+        let mut layers = vec![Layer { ty: 49, rest: [0; 100], data: core::ptr::null(), sharing: 0 }];
+        if with_layer {
+            layers.push(Layer { ty: CD_MDEFORMVERT, rest: [0; 100], data: dverts.as_ptr(), sharing: 0 });
+        }
+        let mesh = FakeMesh {
+            pad: [0; 8],
+            verts: weights.len() as i32,
+            flag: 0,
+            vdata: CData { layers: layers.as_ptr(), typemap: [0; 53], totlayer: layers.len() as i32, maxlayer: 0, totsize: 0, pool: 0, external: 0 },
+        };
+        (mesh, layers, dverts, lists)
+    }
+
+    #[test]
+    fn layout_matches_the_c_structs() {
+        assert_eq!(core::mem::size_of::<Layer>(), 120);
+        assert_eq!(core::mem::size_of::<CData>(), 248);
+        for renamed in [false, true] {
+            let layout = MeshLayout::new(&mesh_sdna(renamed)).unwrap();
+            assert_eq!(layout.verts_num, 8);
+            assert_eq!(layout.vert_data, 16);
+            assert_eq!(layout.totlayer, 8 + 53 * 4);
+            assert_eq!(layout.layer_data, 104);
+        }
+    }
+
+    #[test]
+    fn reads_weights_in_stored_order() {
+        let layout = MeshLayout::new(&mesh_sdna(false)).unwrap();
+        let lists = vec![vec![(2, 0.5), (0, 0.25)], vec![], vec![(1, 1.0)], vec![(0, 0.0), (3, 0.75), (1, 0.125)]];
+        let (mesh, _l, _d, _w) = fake(&lists, true);
+        let got = unsafe { read_deform_verts(&layout, &mesh as *const _ as usize, 4) }.unwrap().unwrap();
+        assert_eq!(got.offsets, vec![0, 2, 2, 3, 6]);
+        assert_eq!(got.groups, vec![2, 0, 1, 0, 3, 1]);
+        assert_eq!(got.weights, vec![0.5, 0.25, 1.0, 0.0, 0.75, 0.125]);
+    }
+
+    #[test]
+    fn no_weight_layer_is_none_and_checks_hold() {
+        let layout = MeshLayout::new(&mesh_sdna(true)).unwrap();
+        let (mesh, _l, _d, _w) = fake(&[vec![(0, 1.0)]], false);
+        let p = &mesh as *const _ as usize;
+        assert_eq!(unsafe { read_deform_verts(&layout, p, 1) }, Ok(None));
+        assert_eq!(unsafe { read_deform_verts(&layout, p, 2) }, Err(ReadError::VertexCount { expected: 2, found: 1 }));
+        assert_eq!(unsafe { read_deform_verts(&layout, 0, 2) }, Err(ReadError::Null));
+        let (mut bad, _l, _d, _w) = fake(&[vec![(0, 1.0)]], true);
+        bad.vdata.totlayer = -3;
+        assert_eq!(unsafe { read_deform_verts(&layout, &bad as *const _ as usize, 1) }, Err(ReadError::Implausible("layer count")));
+    }
+
+    #[test]
+    fn implausible_vertex_data_is_refused() {
+        let layout = MeshLayout::new(&mesh_sdna(true)).unwrap();
+        let (mesh, _l, mut dverts, _w) = fake(&[vec![(0, 1.0)], vec![(1, 0.5)]], true);
+        dverts[1].totweight = -1;
+        let (mesh2, _l2, _d2, _w2) = (mesh, (), (), ());
+        // Point the layer at the modified vertices.
+        let layers = [Layer { ty: CD_MDEFORMVERT, rest: [0; 100], data: dverts.as_ptr(), sharing: 0 }];
+        let mut m = mesh2;
+        m.vdata.layers = layers.as_ptr();
+        m.vdata.totlayer = 1;
+        assert_eq!(unsafe { read_deform_verts(&layout, &m as *const _ as usize, 2) }, Err(ReadError::Implausible("weights per vertex")));
+    }
+}

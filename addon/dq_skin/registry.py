@@ -35,6 +35,7 @@ class Record:
     watched: set = field(default_factory=set)
     volatile: bool = False  # evaluated by Blender before the frame handler (see `frame_pre`)
     pending: bool = False
+    modifier_count: int = 0
 
 
 class Registry:
@@ -110,6 +111,7 @@ class Registry:
                         watched.add(arm.data.session_uid)
         rec.mods = mods
         rec.watched = watched
+        rec.modifier_count = len(obj.modifiers)
         for uid in watched:
             self.watch.setdefault(uid, set()).add(obj.session_uid)
 
@@ -266,8 +268,16 @@ class Registry:
             if orig is None:
                 continue
             if isinstance(orig, bpy.types.Object):
+                uid = orig.session_uid
                 if update.is_updated_geometry:
-                    updated.add(orig.session_uid)
+                    updated.add(uid)
+                rec = self.records.get(uid)
+                if rec is None:
+                    # New since the last update (a script duplicated or linked it).
+                    if orig.type == "MESH" and any(nodes.is_dq_skin(m) for m in orig.modifiers):
+                        self._add(orig)
+                elif len(orig.modifiers) != rec.modifier_count:
+                    self.refresh(rec)
             elif isinstance(orig, bpy.types.Mesh) and update.is_updated_geometry and orig.session_uid in self.watch:
                 # A script edited the mesh before changing frames (animated shape keys also
                 # flag it; then comparing costs a read, but nothing is recomputed).
@@ -275,7 +285,7 @@ class Registry:
                 if key is None or not (key.animation_data is not None):
                     meshdata.mark_stale(orig.session_uid)
         for uid, rec in list(self.records.items()):
-            if not _in(rec.obj, depsgraph):
+            if uid not in self.records or not _in(rec.obj, depsgraph):
                 continue
             if uid in updated and not rec.pending:
                 rec.volatile = True

@@ -1,0 +1,761 @@
+"""DQ Skin in the scenes artists and pipelines actually have, each compared with the same scene
+under Blender's own Armature modifier (its *twin*, see `twins`), frame by frame, Linear and
+Dual Quaternion: duplicates, crowds, append, library overrides, linked instances, files opened
+without the add-on, Apply, several DQ Skins, any modifier after DQ Skin, viewport off and render
+on, and the panel's status in each case.
+
+Bar: ≤ 1e-5 × the bounding-box diagonal (`twins.REL_TOL`).
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Quaternion
+
+from scenes import armature_chain, chain_weights, rig_tube, tube
+from twins import REL_TOL, assert_same, deviation, dq_skin_mods, evaluated_positions, get_input, moved, plain_twin, twin
+
+ROOT = Path(__file__).resolve().parents[2]
+FRAMES = (1, 4, 9, 13, 20, 2)
+METHODS = ["LINEAR", "DUAL_QUATERNION"]
+
+
+def animate(arm, seed: float = 0.0):
+    """Keys on every bone over frames 1-20: bends and twists beyond 90° (where LBS and DQS
+    differ a lot)."""
+    for i, pb in enumerate(arm.pose.bones):
+        pb.rotation_mode = "QUATERNION"
+        for frame, angle in ((1, 0.0), (10, 1.4 + seed), (20, 2.6 - seed)):
+            axis = (1.0, 0.3 * i, 0.2) if i % 2 else (0.1, 1.0, 0.4 + seed)
+            pb.rotation_quaternion = Quaternion(axis, angle * (0.5 if i == 0 else 1.0))
+            pb.keyframe_insert("rotation_quaternion", frame=frame)
+    return arm
+
+
+def animated_tube(seed: float = 0.0, **kw):
+    obj, arm, mod = rig_tube(**kw)
+    obj.parent = arm
+    animate(arm, seed)
+    return obj, arm, mod
+
+
+def add(obj, method: str = "AUTO"):
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_add(method=method) == {"FINISHED"}
+    return dq_skin_mods(obj)[-1]
+
+
+def select_only(*objs):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in objs)
+    bpy.context.view_layer.objects.active = objs[0]
+
+
+def check_frames(pairs, frames=FRAMES):
+    """Every (ours, twin) pair equal at every frame; returns the worst deviation."""
+    worst = 0.0
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        for ours, ref in pairs:
+            worst = max(worst, assert_same(ours, ref, f"{ours.name} at frame {f}"))
+    return worst
+
+
+def state(dq_skin, obj, mod=None):
+    return dq_skin.modifier.state(obj, mod or dq_skin_mods(obj)[0])
+
+
+# -- duplicates and crowds ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("how", ["mesh and armature (Shift+D)", "mesh and armature (Alt+D)", "mesh only (Shift+D)"])
+def test_duplicates_follow_their_own_armature(dq_skin, method, how):
+    obj, arm, _ = animated_tube()
+    add(obj, method)
+    bpy.context.scene.frame_set(5)
+    linked = "Alt+D" in how
+    if "armature" in how:
+        select_only(obj, arm)
+    else:
+        select_only(obj)
+    assert bpy.ops.object.duplicate_move(OBJECT_OT_duplicate={"linked": linked}) == {"FINISHED"}
+    dup = bpy.context.view_layer.objects.active
+    assert dup is not obj and dq_skin_mods(dup)
+    dup.location.x += 3.0
+    if "armature" in how:
+        dup_arm = dup.parent
+        assert dup_arm is not arm and get_input(dq_skin_mods(dup)[0], "Armature") == dup_arm
+        # The duplicate armature gets its own animation, so one pose showing on the other fails.
+        dup_arm.animation_data_clear()
+        animate(dup_arm, seed=0.7)
+    pairs = [(obj, twin(obj)), (dup, twin(dup))]
+    check_frames(pairs)
+    assert moved(dup) > 0.1
+    results = {get_input(m, "Result").session_uid for o in (obj, dup) for m in dq_skin_mods(o)}
+    assert len(results) == 2, "each copy has its own result"
+
+
+def test_copy_modifiers_to_selected(dq_skin):
+    obj, arm, _ = animated_tube()
+    add(obj, "DUAL_QUATERNION")
+    other = tube("Other", 24, 16, 4.0, 0.4)
+    other.location.x = 2.0
+    chain_weights(other, arm, 4.0)
+    other.parent = arm
+    select_only(obj, other)
+    with bpy.context.temp_override(object=obj, active_object=obj, selected_objects=[obj, other]):
+        for m in list(obj.modifiers):
+            assert bpy.ops.object.modifier_copy_to_selected(modifier=m.name) == {"FINISHED"}
+    assert [m.type for m in other.modifiers] == ["NODES", "ARMATURE"]
+    check_frames([(obj, twin(obj)), (other, twin(other))])
+    assert get_input(dq_skin_mods(other)[0], "Result") != get_input(dq_skin_mods(obj)[0], "Result")
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method):
+    """One mesh, many objects, each deformed by its own armature (a crowd)."""
+    obj, arm, _ = animated_tube()
+    add(obj, method)
+    pairs = [(obj, twin(obj))]
+    for i in range(1, 5):
+        a = arm.copy()
+        a.data = arm.data
+        a.animation_data_clear()
+        bpy.context.scene.collection.objects.link(a)
+        animate(a, seed=0.2 * i)
+        a.location.x = 2.5 * i
+        o = obj.copy()  # shares the mesh
+        bpy.context.scene.collection.objects.link(o)
+        o.parent = a
+        mod = dq_skin_mods(o)[0]
+        dq_skin.nodes.put(mod, "Armature", a)
+        o.modifiers[dq_skin.nodes.get_companion(mod)["name"]].object = a
+        assert o.data is obj.data
+        pairs.append((o, twin(o)))
+    check_frames(pairs)
+    assert len({get_input(dq_skin_mods(o)[0], "Result").session_uid for o, _ in pairs}) == len(pairs)
+
+
+# -- files: append, link, override, without the add-on ------------------------------------------
+
+def character_file(path: Path, method: str = "DUAL_QUATERNION", frame: int = 7) -> None:
+    """A library file with one character in the collection "Character", DQ Skin on, saved at
+    `frame`."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    obj, arm, _ = animated_tube()
+    coll = bpy.data.collections.new("Character")
+    bpy.context.scene.collection.children.link(coll)
+    for o in (obj, arm):
+        bpy.context.scene.collection.objects.unlink(o)
+        coll.objects.link(o)
+    obj.name, arm.name = "Body", "Skeleton"
+    add(obj, method)
+    bpy.context.scene.frame_set(frame)
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+
+
+def test_appended_character(dq_skin, tmp_path):
+    lib = tmp_path / "char.blend"
+    character_file(lib)
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    with bpy.data.libraries.load(str(lib), link=False) as (src, dst):
+        dst.collections = ["Character"]
+    bpy.context.scene.collection.children.link(dst.collections[0])
+    body = bpy.data.objects["Body"]
+    check_frames([(body, twin(body))])
+    assert state(dq_skin, body).live
+
+
+def override(lib: Path, name: str = "Character"):
+    """Links the character collection and makes a library override of it (the standard way a
+    character gets into a shot); returns the overridden mesh and armature."""
+    with bpy.data.libraries.load(str(lib), link=True) as (src, dst):
+        dst.collections = ["Character"]
+    coll = dst.collections[0]
+    inst = bpy.data.objects.new(name, None)
+    inst.instance_type = "COLLECTION"
+    inst.instance_collection = coll
+    bpy.context.scene.collection.objects.link(inst)
+    ov = coll.override_hierarchy_create(bpy.context.scene, bpy.context.view_layer, reference=inst, do_fully_editable=True)
+    objs = list(ov.all_objects)
+    body = next(o for o in objs if o.type == "MESH")
+    skel = next(o for o in objs if o.type == "ARMATURE")
+    return body, skel
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_library_overrides_one_and_two_with_different_actions_saved_and_reopened(dq_skin, tmp_path, method):
+    lib = tmp_path / "char.blend"
+    character_file(lib, method)
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    a_body, a_skel = override(lib, "A")
+    b_body, b_skel = override(lib, "B")
+    assert a_body.override_library is not None and a_body is not b_body
+    # Give B its own action: the same keys, half the angles.
+    action = b_skel.animation_data.action.copy()
+    for fc in _fcurves(action):
+        for kp in fc.keyframe_points:
+            for point in (kp.co, kp.handle_left, kp.handle_right):
+                point.y = point.y if "rotation_quaternion" in fc.data_path and fc.array_index == 0 else point.y * 0.5
+    b_skel.animation_data.action = action
+    b_body.location.x = 3.0
+    pairs = [(a_body, plain_twin(a_body, "A twin")), (b_body, plain_twin(b_body, "B twin"))]
+    check_frames(pairs)
+    assert state(dq_skin, a_body).live and state(dq_skin, b_body).live
+    path = tmp_path / "shot.blend"
+    names = [o.name for o, _ in pairs] + [r.name for _, r in pairs]
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    objs = [bpy.data.objects[n] for n in names]
+    check_frames([(objs[0], objs[2]), (objs[1], objs[3])])
+    assert state(dq_skin, objs[0]).live and state(dq_skin, objs[1]).live
+    assert moved(objs[1]) > 0.1
+
+
+def _fcurves(action):
+    """F-curves of an action (channel bags of slotted actions in Blender 4.4+)."""
+    if hasattr(action, "layers") and action.layers:
+        for layer in action.layers:
+            for strip in layer.strips:
+                for bag in strip.channelbags:
+                    yield from bag.fcurves
+    else:
+        yield from action.fcurves
+
+
+def test_plain_linked_instance_plays_the_library_animation(dq_skin, tmp_path):
+    """Linked without override nothing can be changed: Blender's Armature modifier (the
+    companion, saved active) deforms it, and the panel says so."""
+    lib = tmp_path / "char.blend"
+    character_file(lib)
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    with bpy.data.libraries.load(str(lib), link=True) as (src, dst):
+        dst.collections = ["Character"]
+    inst = bpy.data.objects.new("Instance", None)
+    inst.instance_type = "COLLECTION"
+    inst.instance_collection = dst.collections[0]
+    bpy.context.scene.collection.objects.link(inst)
+    body = bpy.data.objects["Body", str(lib)] if ("Body", str(lib)) in bpy.data.objects else next(o for o in bpy.data.objects if o.name == "Body")
+    assert body.library is not None
+    # Reference: the same mesh and armature through a local object with a plain Armature modifier.
+    ref = bpy.data.objects.new("Reference", body.data)
+    bpy.context.scene.collection.objects.link(ref)
+    ref.parent = body.parent
+    m = ref.modifiers.new("Armature", "ARMATURE")
+    m.object = body.parent
+    m.use_deform_preserve_volume = True
+    worst = check_frames([(body, ref)])
+    assert worst <= REL_TOL
+    assert moved(body) > 0.1
+    st = state(dq_skin, body)
+    assert st.mode == "linked" and "Library Override" in st.status
+
+
+WITHOUT_ADDON = """
+import sys, json, bpy, numpy as np
+bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
+assert not any(m.startswith("bl_ext.user_default.dq_skin") for m in sys.modules), "the add-on must not be loaded here"
+scene = bpy.context.scene
+out = {}
+for frame in (3, 12, 19):
+    scene.frame_set(frame)
+    dg = bpy.context.evaluated_depsgraph_get()
+    def pos(name):
+        me = bpy.data.objects[name].evaluated_get(dg).to_mesh()
+        a = np.empty(len(me.vertices) * 3, np.float32); me.vertices.foreach_get("co", a)
+        return a.reshape(-1, 3)
+    a, b = pos("Body"), pos("Twin")
+    out[frame] = float(np.abs(a - b).max() / np.linalg.norm(b.max(0) - b.min(0)))
+mod = bpy.data.objects["Body"].modifiers["DQ Skin"]
+warnings = [w.message for w in getattr(mod, "node_warnings", [])]
+print("RESULT", json.dumps({"dev": out, "warnings": warnings}))
+"""
+
+
+def farm_env(tmp_path: Path) -> dict:
+    """The environment of a machine without DQ Skin: an empty Blender user folder."""
+    import os
+
+    env = dict(os.environ)
+    empty = tmp_path / "farm_user"
+    empty.mkdir(exist_ok=True)
+    env["BLENDER_USER_RESOURCES"] = str(empty)
+    return env
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_file_opened_without_the_add_on_shows_blenders_deformation_every_frame(dq_skin, tmp_path, method):
+    """A render node without DQ Skin: every frame is Blender's own deformation (not the pose
+    of the frame the file was saved on), and the modifier says DQ Skin is not running."""
+    import json
+
+    path = tmp_path / "shot.blend"
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    obj, arm, _ = animated_tube()
+    obj.name = "Body"
+    add(obj, method)
+    tw = twin(obj, "Twin")
+    bpy.context.scene.frame_set(7)
+    check_frames([(obj, tw)], frames=(7,))
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    # The open session is untouched by saving.
+    assert state(dq_skin, obj).live or bpy.context.scene.frame_set(8) is None
+    bpy.context.scene.frame_set(8)
+    assert state(dq_skin, obj).live
+    script = tmp_path / "without.py"
+    script.write_text(WITHOUT_ADDON)
+    r = subprocess.run([sys.executable, str(script), str(path)], capture_output=True, text=True, timeout=300, env=farm_env(tmp_path))
+    assert r.returncode == 0, r.stderr
+    line = next(l for l in r.stdout.splitlines() if l.startswith("RESULT "))
+    got = json.loads(line[7:])
+    assert all(d <= REL_TOL for d in got["dev"].values()), got
+    if bpy.app.version >= (4, 3, 0):
+        assert any("not deforming" in w for w in got["warnings"]), got["warnings"]
+
+
+def test_saved_file_has_no_results_and_active_companions(dq_skin, tmp_path):
+    obj, arm, _ = animated_tube()
+    add(obj)
+    bpy.context.scene.frame_set(6)
+    path = tmp_path / "a.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path), copy=True)
+    with bpy.data.libraries.load(str(path), link=True) as (src, dst):
+        names = list(src.objects)
+        dst.objects = [obj.name]
+    assert not any(n.startswith(".DQ Skin result") for n in names), names
+    saved = dst.objects[0]
+    assert saved.library is not None
+    c = saved.modifiers["Armature"]
+    assert c.show_viewport and c.show_render and c.use_vertex_groups  # Blender's deformation
+    assert get_input(dq_skin_mods(saved)[0], "Result") is None
+    # Still live here after saving.
+    bpy.context.scene.frame_set(9)
+    assert state(dq_skin, obj).live and not obj.modifiers["Armature"].show_viewport
+
+
+# -- Apply, remove, several DQ Skins ------------------------------------------------------------
+
+@pytest.mark.parametrize("method", METHODS)
+def test_apply_gives_the_builtin_applied_mesh_and_leaves_nothing_behind(dq_skin, method):
+    obj, arm, _ = animated_tube()
+    obj.modifiers.new("Subdivision", "SUBSURF")
+    ref = obj.copy()
+    ref.data = obj.data.copy()
+    bpy.context.scene.collection.objects.link(ref)
+    ref.modifiers["Armature"].use_deform_preserve_volume = method == "DUAL_QUATERNION"
+    mod = add(obj, method)
+    bpy.context.scene.frame_set(13)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.modifier_apply(modifier=mod.name) == {"FINISHED"}
+    with bpy.context.temp_override(object=ref, active_object=ref):
+        assert bpy.ops.object.modifier_apply(modifier="Armature") == {"FINISHED"}
+    bpy.context.view_layer.update()
+    a, b = (np.array([v.co for v in o.data.vertices], np.float32) for o in (obj, ref))
+    assert deviation(a, b) <= REL_TOL
+    assert [m.type for m in obj.modifiers] == [m.type for m in ref.modifiers] == ["SUBSURF"]
+    assert not [x for x in obj.data.attributes if x.name.startswith("dq_skin")]
+    assert not [o for o in bpy.data.objects if o.get("dq_skin_result")]
+    assert not [k for k in obj.keys() if k.startswith("dq_skin")]
+
+
+def two_armature_rig():
+    """A tube deformed by two armatures: the lower half by one, the upper by the other, each
+    Armature modifier with a mask group."""
+    obj, arm, mod = rig_tube(bones=2)
+    arm2 = armature_chain("Rig2", 2, 4.0)
+    arm2.location.x = 0.0
+    for a, seed in ((arm, 0.0), (arm2, 0.9)):
+        animate(a, seed)
+    upper = obj.vertex_groups.new(name="Upper")
+    for v in obj.data.vertices:
+        upper.add([v.index], min(1.0, max(0.0, (v.co.z - 1.5) / 1.0)), "REPLACE")
+    mod.vertex_group = "Upper"
+    mod.invert_vertex_group = True
+    mod2 = obj.modifiers.new("Armature.001", "ARMATURE")
+    mod2.object = arm2
+    mod2.vertex_group = "Upper"
+    return obj, arm, arm2
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_two_dq_skins_equal_two_armature_modifiers(dq_skin, method):
+    obj, arm, arm2 = two_armature_rig()
+    first = add(obj, method)
+    second = add(obj, method)
+    assert [m.type for m in obj.modifiers] == ["NODES", "ARMATURE", "NODES", "ARMATURE"]
+    assert get_input(second, "Armature") == arm2
+    tw = twin(obj)
+    check_frames([(obj, tw)])
+    assert state(dq_skin, obj, first).live and state(dq_skin, obj, second).live
+    assert state(dq_skin, obj, second).source == "chain"
+
+
+def test_removing_one_of_two_restores_only_its_own_armature_modifier(dq_skin):
+    obj, arm, arm2 = two_armature_rig()
+    before = [(m.name, m.show_viewport, m.show_render, m.use_vertex_groups) for m in obj.modifiers]
+    add(obj)
+    second = add(obj)
+    bpy.context.scene.frame_set(9)
+    obj.modifiers.remove(second)  # the X button
+    bpy.context.view_layer.update()
+    mods = [(m.name, m.type) for m in obj.modifiers]
+    assert mods == [("DQ Skin", "NODES"), ("Armature", "ARMATURE"), ("Armature.001", "ARMATURE")]
+    a2 = obj.modifiers["Armature.001"]
+    assert (a2.name, a2.show_viewport, a2.show_render, a2.use_vertex_groups) == before[1]
+    assert not obj.modifiers["Armature"].show_viewport  # still the first DQ Skin's companion, parked
+    ref = obj.copy()
+    bpy.context.scene.collection.objects.link(ref)
+    ref.modifiers.remove(ref.modifiers["DQ Skin"])
+    for k in ("show_viewport", "show_render", "use_vertex_groups"):
+        setattr(ref.modifiers["Armature"], k, True)
+    ref.modifiers["Armature"].use_deform_preserve_volume = False
+    check_frames([(obj, ref)])
+
+
+# -- any modifier after DQ Skin ------------------------------------------------------------------
+
+def later_modifier(obj, kind: str):
+    if kind == "SUBSURF":
+        m = obj.modifiers.new(kind, "SUBSURF")
+        m.levels = 2
+    elif kind == "SOLIDIFY":
+        m = obj.modifiers.new(kind, "SOLIDIFY")
+        m.thickness = 0.05
+    elif kind == "MIRROR":
+        m = obj.modifiers.new(kind, "MIRROR")
+        m.use_axis = (False, True, False)
+        m.use_mirror_merge = False
+    elif kind == "DECIMATE":
+        m = obj.modifiers.new(kind, "DECIMATE")
+        m.decimate_type = "UNSUBDIV"
+        m.iterations = 1
+    elif kind == "WELD":
+        m = obj.modifiers.new(kind, "WELD")
+        m.merge_threshold = 1e-4
+    elif kind == "EDGE_SPLIT":
+        m = obj.modifiers.new(kind, "EDGE_SPLIT")
+        m.use_edge_angle = False
+        for e in list(obj.data.edges)[::7]:
+            e.use_edge_sharp = True
+    elif kind == "TRIANGULATE":
+        m = obj.modifiers.new(kind, "TRIANGULATE")
+        m.quad_method = "FIXED"
+    elif kind == "NODES":
+        group = bpy.data.node_groups.new("Subdivide and offset", "GeometryNodeTree")
+        group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+        group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+        gi, go = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+        sub = group.nodes.new("GeometryNodeSubdivideMesh")
+        off = group.nodes.new("GeometryNodeSetPosition")
+        off.inputs["Offset"].default_value = (0.0, 0.0, 0.1)
+        group.links.new(gi.outputs[0], sub.inputs[0])
+        group.links.new(sub.outputs[0], off.inputs["Geometry"])
+        group.links.new(off.outputs[0], go.inputs[0])
+        m = obj.modifiers.new(kind, "NODES")
+        m.node_group = group
+    elif kind == "CORRECTIVE_SMOOTH":
+        m = obj.modifiers.new(kind, "CORRECTIVE_SMOOTH")
+        m.iterations = 10
+    elif kind == "SMOOTH":
+        m = obj.modifiers.new(kind, "SMOOTH")
+        m.iterations = 5
+    elif kind == "DISPLACE":
+        m = obj.modifiers.new(kind, "DISPLACE")
+        m.strength = 0.2
+        m.direction = "NORMAL"
+    return m
+
+
+LATER = ["SUBSURF", "SOLIDIFY", "MIRROR", "DECIMATE", "WELD", "EDGE_SPLIT", "TRIANGULATE", "NODES", "CORRECTIVE_SMOOTH", "SMOOTH", "DISPLACE"]
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("kind", LATER)
+def test_any_modifier_after_dq_skin(dq_skin, kind, method):
+    obj, arm, _ = animated_tube(rings=16, segments=12)
+    later_modifier(obj, kind)
+    add(obj, method)
+    names = [m.type for m in obj.modifiers]
+    assert names[0] == "NODES" and names[1] == "ARMATURE"
+    tw = twin(obj)
+    check_frames([(obj, tw)])
+    st = state(dq_skin, obj)
+    assert st.live and st.error == "", st.error
+
+
+def test_later_modifiers_run_once_per_frame(dq_skin):
+    """Blender evaluates a frame, runs the frame handlers, then evaluates what they changed. The
+    first evaluation must not run the stack after DQ Skin on a real mesh: either the object is
+    not evaluated at all, or DQ Skin outputs nothing there."""
+    obj, arm, _ = animated_tube()
+    later_modifier(obj, "SUBSURF")
+    add(obj)
+    # Shape keys driven by a bone make the object change in the first evaluation too.
+    other, arm2, _ = animated_tube(seed=0.5)
+    other.location.x = 3
+    basis = other.shape_key_add(name="Basis")
+    key = other.shape_key_add(name="Corrective")
+    for i, p in enumerate(key.data):
+        p.co = basis.data[i].co * 1.2
+    fc = key.driver_add("value")
+    var = fc.driver.variables.new()
+    var.type = "TRANSFORMS"
+    var.targets[0].id = arm2
+    var.targets[0].bone_target = "Bone1"
+    var.targets[0].transform_type = "ROT_X"
+    var.targets[0].rotation_mode = "SWING_TWIST_X"
+    fc.driver.expression = "abs(var)"
+    later_modifier(other, "SUBSURF")
+    add(other)
+    seen = []
+
+    def after_dq_skin(scene, depsgraph):
+        # Runs after DQ Skin's own handler, before Blender's second evaluation: what the first
+        # evaluation produced for each object.
+        updated = {u.id.original.name for u in depsgraph.updates if isinstance(u.id, bpy.types.Object) and u.is_updated_geometry}
+        for o in (obj, other):
+            if o.name in updated:
+                seen.append((o.name, len(o.evaluated_get(depsgraph).data.vertices)))
+            else:
+                seen.append((o.name, None))
+
+    bpy.app.handlers.frame_change_post.append(after_dq_skin)
+    try:
+        tw, tw2 = twin(obj, share_mesh=False), twin(other, share_mesh=False)
+        for f in (2, 3, 5, 8, 11, 15):
+            bpy.context.scene.frame_set(f)
+            assert_same(obj, tw)
+            assert_same(other, tw2)
+    finally:
+        bpy.app.handlers.frame_change_post.remove(after_dq_skin)
+    # After the first frames, neither object's later modifiers ran on a real mesh first.
+    late = seen[4:]
+    assert all(n is None or n == 0 for _, n in late), seen
+    assert any(name == other.name and n == 0 for name, n in late), "the keyed object is evaluated, empty"
+    assert all(n is None for name, n in late if name == obj.name), "the plain object is not evaluated first"
+
+
+# -- shape keys, render, viewport ------------------------------------------------------------------
+
+@pytest.mark.parametrize("method", METHODS)
+def test_driven_corrective_shape_keys(dq_skin, method):
+    obj, arm, _ = animated_tube()
+    basis = obj.shape_key_add(name="Basis")
+    bulge = obj.shape_key_add(name="Bulge")
+    for i, p in enumerate(bulge.data):
+        co = basis.data[i].co
+        p.co = (co.x * 1.3, co.y * 1.3, co.z)
+    group = obj.vertex_groups.new(name="BulgeArea")
+    group.add([v.index for v in obj.data.vertices if 1.5 < v.co.z < 2.5], 0.7, "REPLACE")
+    bulge.vertex_group = "BulgeArea"
+    side = obj.shape_key_add(name="Side")
+    for i, p in enumerate(side.data):
+        p.co = basis.data[i].co + basis.data[i].co.normalized() * 0.0
+        p.co.x += 0.2
+    side.relative_key = bulge
+    side.value = 0.4
+    fc = bulge.driver_add("value")
+    var = fc.driver.variables.new()
+    var.type = "TRANSFORMS"
+    var.targets[0].id = arm
+    var.targets[0].bone_target = "Bone1"
+    var.targets[0].transform_type = "ROT_W"
+    fc.driver.expression = "1 - var"
+    add(obj, method)
+    check_frames([(obj, twin(obj))])
+    assert state(dq_skin, obj).source == "mesh"
+
+
+def render_image(path: Path, frame: int, hide) -> np.ndarray:
+    """An animation render (Cycles, CPU, small) of the single frame `frame`, started from
+    another frame, with `hide` hidden; the tube rigs fill the picture."""
+    scene = bpy.context.scene
+    if scene.camera is None:
+        cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+        cam.data.type = "ORTHO"
+        cam.data.ortho_scale = 9.0
+        cam.location = (0.0, -12.0, 1.5)
+        cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
+        scene.collection.objects.link(cam)
+        scene.camera = cam
+        sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+        sun.data.energy = 4.0
+        sun.rotation_euler = (0.6, 0.2, 0.4)
+        scene.collection.objects.link(sun)
+        scene.render.engine = "CYCLES"
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = 2
+        scene.cycles.seed = 7
+        scene.render.resolution_x = scene.render.resolution_y = 80
+        scene.render.resolution_percentage = 100
+        scene.render.image_settings.file_format = "PNG"
+    hidden = [(o, o.hide_render) for o in hide]
+    for o in hide:
+        o.hide_render = True
+    try:
+        scene.frame_set(1)
+        scene.frame_start = scene.frame_end = frame
+        scene.render.filepath = str(path) + "_####"
+        bpy.ops.render.render(animation=True)
+    finally:
+        for o, h in hidden:
+            o.hide_render = h
+    image = bpy.data.images.load(f"{path}_{frame:04d}.png")
+    try:
+        return np.array(image.pixels[:], np.float32).reshape(-1, 4)
+    finally:
+        bpy.data.images.remove(image)
+
+
+def test_viewport_off_render_on(dq_skin, tmp_path):
+    """Off in the viewport, on in renders: the panel says so and the render is DQ Skin's."""
+    obj, arm, _ = animated_tube()
+    mod = add(obj, "DUAL_QUATERNION")
+    mod.show_viewport = False
+    bpy.context.scene.frame_set(3)
+    st = state(dq_skin, obj)
+    assert st.mode == "off" and "Off in the viewport" in st.status and "Waiting" not in st.status
+    tw = twin(obj)
+    tw.location.x = 0.0
+    # Render ours alone, then the twin alone, at the same frame: the same picture.
+    ours = render_image(tmp_path / "ours", frame=12, hide=[tw])
+    theirs = render_image(tmp_path / "theirs", frame=12, hide=[obj])
+    other = render_image(tmp_path / "other", frame=3, hide=[obj])
+    assert same_picture(ours, theirs) and not same_picture(theirs, other)
+
+
+def test_panel_status_says_what_is_wrong_and_where(dq_skin):
+    from test_modifier import draw_panel
+
+    obj, arm, _ = animated_tube()
+    mod = add(obj)
+    bpy.context.scene.frame_set(3)
+    lines = draw_panel(dq_skin, obj)
+    assert any("bones" in l and "influences" in l for l in lines), lines
+    # Deforming modifier before DQ Skin and a topology change after it: DQ Skin cannot see what
+    # reaches it; the panel names the modifier and Blender's Armature modifier takes over.
+    smooth = obj.modifiers.new("Smooth Before", "SMOOTH")
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.modifier_move_to_index(modifier=smooth.name, index=0)
+    sub = later_modifier(obj, "SUBSURF")
+    bpy.context.scene.frame_set(4)
+    bpy.context.scene.frame_set(5)
+    lines = draw_panel(dq_skin, obj)
+    st = state(dq_skin, obj, mod)
+    assert st.mode == "fallback" and sub.name in st.error, st.error
+    assert any("Armature" in l and "instead" in l for l in lines), lines
+    tw = twin(obj)
+    # The twin has Blender's own Armature modifier; ours falls back to exactly that.
+    assert_same(obj, tw)
+    # Without the later subdivision it reads the coordinates and skins again.
+    sub_name = sub.name
+    obj.modifiers.remove(sub)
+    tw.modifiers.remove(tw.modifiers[sub_name])
+    bpy.context.scene.frame_set(6)
+    bpy.context.scene.frame_set(7)
+    assert state(dq_skin, obj, mod).live and state(dq_skin, obj, mod).source == "capture"
+    assert_same(obj, tw)
+
+
+# -- what already worked and must keep working ----------------------------------------------------
+
+def test_two_scenes_renames_nla_and_method_changes(dq_skin):
+    obj, arm, _ = animated_tube()
+    mod = add(obj, "LINEAR")
+    tw = twin(obj)
+    check_frames([(obj, tw)], frames=(3, 8))
+    # Renames of the object, the modifier and the armature.
+    obj.name, mod.name, arm.name = "Renamed", "Skin It", "Skeleton"
+    check_frames([(obj, tw)], frames=(9, 4))
+    # Method change.
+    dq_skin.nodes.put_method(mod, "Dual Quaternion")
+    tw.modifiers["Armature"].use_deform_preserve_volume = True
+    check_frames([(obj, tw)], frames=(10, 12))
+    # NLA: the action in a strip, played from the NLA.
+    action = arm.animation_data.action
+    track = arm.animation_data.nla_tracks.new()
+    track.strips.new("Strip", 1, action)
+    arm.animation_data.action = None
+    check_frames([(obj, tw)], frames=(5, 15))
+    # A second scene linking the same objects, at another frame.
+    scene2 = bpy.data.scenes.new("Other")
+    scene2.collection.objects.link(obj)
+    scene2.collection.objects.link(arm)
+    scene2.collection.objects.link(tw)
+    window_scene = bpy.context.window.scene if bpy.context.window else None
+    scene2.frame_set(17)
+    dg2 = scene2.view_layers[0].depsgraph
+    dev = deviation(evaluated_positions(obj, dg2), evaluated_positions(tw, dg2))
+    assert dev <= REL_TOL, dev
+    del window_scene
+
+
+@pytest.mark.parametrize("fmt", ["ALEMBIC", "USD"])
+def test_export_writes_the_skinned_animation(dq_skin, tmp_path, fmt):
+    """Exporters step through frames themselves: the file holds DQ Skin's animation, equal to
+    what Blender's Armature modifier gives (recorded from the twin before exporting)."""
+    obj, arm, _ = animated_tube()
+    obj.name = "Body"
+    add(obj, "DUAL_QUATERNION")
+    tw = twin(obj, "Twin")
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 12
+    frames = (2, 6, 11)
+    expected = {}
+    for f in frames:
+        scene.frame_set(f)
+        expected[f] = _world(tw)
+    tw.hide_render = tw.hide_viewport = True
+    bpy.data.objects.remove(tw)
+    path = tmp_path / ("out.abc" if fmt == "ALEMBIC" else "out.usdc")
+    if fmt == "ALEMBIC":
+        assert bpy.ops.wm.alembic_export(filepath=str(path), start=1, end=12) == {"FINISHED"}
+    else:
+        assert bpy.ops.wm.usd_export(filepath=str(path), export_animation=True) == {"FINISHED"}
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    if fmt == "ALEMBIC":
+        bpy.ops.wm.alembic_import(filepath=str(path))
+    else:
+        bpy.ops.wm.usd_import(filepath=str(path))
+    # The skinned mesh comes back as a mesh played by a cache modifier.
+    body = next(o for o in bpy.data.objects if o.type == "MESH" and any(m.type == "MESH_SEQUENCE_CACHE" for m in o.modifiers))
+    scene = bpy.context.scene
+    for f in frames:
+        scene.frame_set(f)
+        dev = deviation(_world(body), expected[f])
+        assert dev <= REL_TOL, (f, dev)
+    assert np.abs(expected[2] - expected[11]).max() > 0.1  # animated, not frozen
+
+
+def _world(obj) -> np.ndarray:
+    p = evaluated_positions(obj)
+    m = np.array(obj.matrix_world, np.float32)
+    return (p @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+
+
+def test_motion_blur_render_matches_the_armature_modifier(dq_skin, tmp_path):
+    obj, arm, _ = animated_tube()
+    add(obj, "DUAL_QUATERNION")
+    tw = twin(obj)
+    scene = bpy.context.scene
+    scene.render.use_motion_blur = True
+    ours = render_image(tmp_path / "ours", frame=9, hide=[tw])
+    theirs = render_image(tmp_path / "theirs", frame=9, hide=[obj])
+    scene.render.use_motion_blur = False
+    sharp = render_image(tmp_path / "sharp", frame=9, hide=[obj])
+    assert same_picture(ours, theirs), "motion-blurred DQ Skin differs from the Armature modifier"
+    assert not same_picture(theirs, sharp), "motion blur should show"
+
+
+def same_picture(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal up to rounding: at most 0.1 % of pixels differ by more than 2.5/255."""
+    return float((np.abs(a - b).max(axis=-1) > 2.5 / 255).mean()) < 1e-3

@@ -1,19 +1,27 @@
-"""Per-frame cost of Blender's Armature modifier and of DQ Skin, in one Blender session on the
-same meshes: CesiumMan subdivided to about 50k and 250k vertices, and a 1M-vertex synthetic rig.
+"""DQ Skin against Blender's Armature modifier, end to end, in one Blender session.
 
-For each mesh and method it measures
-- end to end: a frame change (the pose changes) until the evaluated mesh is there, the
-  depsgraph evaluation, DQ Skin's handler and its Geometry Nodes pass included;
-- the kernel alone: one `dqskin.skin` call on the same inputs.
-Writes the figures as JSON (default: target/bench-blender.json). A benchmark, not a test.
+Every case builds the same scene three times (each object with its own copy of the mesh):
+with the Armature modifier, with DQ Skin in its place, and without skinning. Only one of them is
+in the depsgraph at a time (the others are hidden from the viewport); rounds alternate between
+them and each keeps its median. A benchmark, not a test: it prints a table and writes JSON
+(default: target/bench-blender.json).
 
-Usage: python bench/blender_bench.py [--out FILE] [--quick]
+Cases (as in the issues): a grid with 64 bones and 4 influences per vertex at 250k and 1M
+vertices, plain stack and with Smooth (5 iterations) or Subdivision Surface (level 2) after the
+skinning modifier, Linear and Dual Quaternion; `dq_skin_add` to the first skinned frame; a
+weight change; 200 characters of 3,273 vertices (CesiumMan) and an edit elsewhere in that scene;
+a 3k-vertex mesh. For DQ Skin it also reports where the time of a frame goes: Blender's first
+evaluation (animation, pose), DQ Skin's frame handler, and Blender's second evaluation (DQ Skin
+result, modifiers after it).
+
+Usage: python bench/blender_bench.py [--out FILE] [--quick] [--only NAME...]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -23,121 +31,390 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 os.environ.setdefault("BLENDER_USER_RESOURCES", str(ROOT / ".blender_user"))
-sys.path.insert(0, str(ROOT / "tests" / "blender"))
 
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
 import addon_utils  # noqa: E402  (importable once bpy is)
 
-
-def evaluated(obj):
-    dg = bpy.context.evaluated_depsgraph_get()
-    ev = obj.evaluated_get(dg)
-    return len(ev.data.vertices)
+ADDON = "bl_ext.user_default.dq_skin"
 
 
-def subdivide_to(obj, target: int) -> None:
-    """One subdivision with as many cuts as bring the mesh closest to `target` vertices (each cut
-    level multiplies the faces by (cuts + 1)²)."""
-    cuts = max(1, round((target / len(obj.data.vertices)) ** 0.5) - 1)
-    bpy.context.view_layer.objects.active = obj
+# -- scenes ---------------------------------------------------------------------------------------
+
+def grid_rig(vertices: int, bones_per_side: int = 8, influences: int = 4, seed: int = 1):
+    """A square grid of about `vertices` vertices with an 8×8 grid of bones above it, each
+    vertex weighted to its 4 nearest bones (weights quantized to 16 levels so that vertex groups
+    can be filled with few calls); every bone keyed to bend and twist over frames 1-40."""
+    side = max(2, int(round(math.sqrt(vertices))))
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=side - 1, y_subdivisions=side - 1, size=8.0)
+    grid = bpy.context.active_object
+    grid.name = "Grid"
+    arm_data = bpy.data.armatures.new("Rig")
+    arm = bpy.data.objects.new("Rig", arm_data)
+    bpy.context.scene.collection.objects.link(arm)
+    bpy.context.view_layer.objects.active = arm
     bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.select_all(action="SELECT")
-    bpy.ops.mesh.subdivide(number_cuts=cuts)
+    heads = []
+    for i in range(bones_per_side):
+        for j in range(bones_per_side):
+            b = arm_data.edit_bones.new(f"B{i}_{j}")
+            x = -4.0 + 8.0 * (i + 0.5) / bones_per_side
+            y = -4.0 + 8.0 * (j + 0.5) / bones_per_side
+            b.head = (x, y, 0.0)
+            b.tail = (x, y + 0.5, 0.0)
+            heads.append((x, y))
     bpy.ops.object.mode_set(mode="OBJECT")
+    heads = np.array(heads, np.float32)
+    co = np.empty(len(grid.data.vertices) * 3, np.float32)
+    grid.data.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)[:, :2]
+    d2 = ((co[:, None, :] - heads[None, :, :]) ** 2).sum(-1)
+    nearest = np.argsort(d2, axis=1)[:, :influences]
+    w = 1.0 / (np.take_along_axis(d2, nearest, 1) + 0.05)
+    w /= w.sum(1, keepdims=True)
+    levels = np.clip(np.round(w * 15), 1, 15).astype(np.int64)
+    groups = [grid.vertex_groups.new(name=f"B{i}_{j}") for i in range(bones_per_side) for j in range(bones_per_side)]
+    for k in range(influences):
+        for b in range(len(groups)):
+            sel = nearest[:, k] == b
+            for level in np.unique(levels[sel, k]):
+                idx = np.flatnonzero(sel & (levels[:, k] == level))
+                groups[b].add(idx.tolist(), float(level) / 15.0, "REPLACE")
+    rng = np.random.default_rng(seed)
+    for pb in arm.pose.bones:
+        pb.rotation_mode = "QUATERNION"
+        axis = rng.normal(size=3)
+        for frame, angle in ((1, 0.0), (20, 1.2), (40, 2.4)):
+            pb.rotation_quaternion = (math.cos(angle / 2), *(math.sin(angle / 2) * axis / np.linalg.norm(axis)))
+            pb.keyframe_insert("rotation_quaternion", frame=frame)
+    m = grid.modifiers.new("Armature", "ARMATURE")
+    m.object = arm
+    return grid, arm
 
 
-def cesium_man(target: int):
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    bpy.ops.import_scene.gltf(filepath=str(ROOT.parent / "shared" / "assets" / "CesiumMan.glb"))
-    obj = next(o for o in bpy.data.objects if o.type == "MESH" and any(m.type == "ARMATURE" for m in o.modifiers))
-    subdivide_to(obj, target)
-    return obj, [2, 20]
+def three_ways(obj, method: str, later: str = ""):
+    """`obj` (with its Armature modifier) plus two copies with their own mesh copies: one with
+    DQ Skin in place of the Armature modifier, one without skinning; `later` adds the same
+    modifier after the skinning modifier in each."""
+    for o in [obj]:
+        _later(o, later)
+    obj.modifiers["Armature"].use_deform_preserve_volume = method == "DUAL_QUATERNION"
+    dq = obj.copy()
+    dq.data = obj.data.copy()
+    dq.name = obj.name + " DQ Skin"
+    bpy.context.scene.collection.objects.link(dq)
+    none = obj.copy()
+    none.data = obj.data.copy()
+    none.name = obj.name + " none"
+    bpy.context.scene.collection.objects.link(none)
+    none.modifiers.remove(none.modifiers["Armature"])
+    show_only(dq)
+    t = time.perf_counter()
+    add_dq_skin(dq, method)
+    dq.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    bind_seconds = time.perf_counter() - t
+    return {"armature": obj, "dq_skin": dq, "none": none}, bind_seconds
 
 
-def synthetic(target: int):
-    from scenes import rig_tube
-
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    segments = 256
-    obj, arm, mod = rig_tube(rings=max(2, target // segments), segments=segments, length=8.0, bones=16)
-    for i, pb in enumerate(arm.pose.bones):
-        pb.rotation_quaternion = (1, 0, 0, 0)
-        pb.keyframe_insert("rotation_quaternion", frame=1)
-        pb.rotation_quaternion = (0.9, 0.1 * (i % 3), 0.3, 0.1)
-        pb.keyframe_insert("rotation_quaternion", frame=20)
-    return obj, [2, 19]
+def _later(obj, later: str) -> None:
+    if later == "smooth5":
+        m = obj.modifiers.new("Smooth", "SMOOTH")
+        m.iterations = 5
+    elif later == "subsurf2":
+        m = obj.modifiers.new("Subdivision", "SUBSURF")
+        m.levels = 2
 
 
-def per_frame(frames, obj, runs: int) -> float:
-    scene = bpy.context.scene
-    times = []
-    for k in range(runs + 1):
-        f = frames[k % 2]
-        start = time.perf_counter()
-        scene.frame_set(f)
-        evaluated(obj)
-        if k:
-            times.append(time.perf_counter() - start)
-    return float(np.median(times))
-
-
-def measure(name: str, obj, frames, runs: int, dq_skin) -> dict:
-    arm_mod = next(m for m in obj.modifiers if m.type == "ARMATURE")
-    row = {"mesh": name, "vertices": len(obj.data.vertices)}
-    for pv in (False, True):
-        arm_mod.use_deform_preserve_volume = pv
-        row[f"armature_{'dqs' if pv else 'lbs'}_ms"] = 1e3 * per_frame(frames, obj, runs)
+def add_dq_skin(obj, method: str):
     bpy.context.view_layer.objects.active = obj
     with bpy.context.temp_override(object=obj, active_object=obj):
-        bpy.ops.object.dq_skin_add(method="LINEAR")
-    mod = next(m for m in obj.modifiers if m.type == "NODES")
-    from bl_ext.user_default.dq_skin import nodes, operators, rig
+        assert bpy.ops.object.dq_skin_add(method=method) == {"FINISHED"}
 
-    for method, item in (("lbs", "Linear"), ("dqs", "Dual Quaternion")):
-        operators.set_input(mod, "Method", operators.menu_value(mod.node_group, item))
-        bpy.context.scene.frame_set(frames[0])
-        row[f"dq_skin_{method}_ms"] = 1e3 * per_frame(frames, obj, runs)
-        # The kernel alone, on what the modifier used.
-        st = dq_skin.modifier.state(obj, mod)
-        assert not st.error, st.error
-        positions = rig.mesh_positions(obj.data)
-        arm = mod[nodes.socket_ids(mod.node_group)["Armature"]]
-        matrices = rig.frame(st.binding, obj, arm)
-        out = np.empty_like(positions)
-        kernel = []
+
+def show_only(*objs) -> None:
+    keep = set(objs)
+    for o in bpy.context.scene.objects:
+        if o.type == "MESH":
+            o.hide_viewport = o not in keep
+    bpy.context.view_layer.update()
+
+
+# -- timing ---------------------------------------------------------------------------------------
+
+class Phases:
+    """Timestamps around DQ Skin's frame handler: Blender's first evaluation ends where the
+    frame_change_post handlers start; the second evaluation starts where they end."""
+
+    def __init__(self):
+        self.t = {}
+        self.rows = []
+
+    def pre(self, *_):
+        self.t["pre"] = time.perf_counter()
+
+    def post_first(self, *_):
+        self.t["post"] = time.perf_counter()
+
+    def post_last(self, *_):
+        self.t["handled"] = time.perf_counter()
+
+    def install(self):
+        h = bpy.app.handlers
+        h.frame_change_pre.append(self.pre)
+        h.frame_change_post.insert(0, self.post_first)
+        h.frame_change_post.append(self.post_last)
+
+    def remove(self):
+        h = bpy.app.handlers
+        for lst, fn in ((h.frame_change_pre, self.pre), (h.frame_change_post, self.post_first), (h.frame_change_post, self.post_last)):
+            while fn in lst:
+                lst.remove(fn)
+
+
+def frames_ms(objs, frames, runs: int, phases: Phases | None = None) -> tuple[float, dict]:
+    """Median ms of a frame change until every object's evaluated mesh is there."""
+    scene = bpy.context.scene
+    times, parts = [], []
+    scene.frame_set(frames[-1])
+    for k in range(runs):
+        f = frames[k % len(frames)]
+        if phases:
+            phases.t.clear()
+        start = time.perf_counter()
+        scene.frame_set(f)
+        dg = bpy.context.evaluated_depsgraph_get()
+        for o in objs:
+            o.evaluated_get(dg).data
+        end = time.perf_counter()
+        times.append(end - start)
+        if phases and "post" in phases.t:
+            t = phases.t
+            parts.append((t["pre"] - start, t["post"] - t["pre"], t["handled"] - t["post"], end - t["handled"]))
+    out = {}
+    if parts:
+        p = np.median(np.array(parts), axis=0) * 1e3
+        out = {"before_ms": p[0], "first_evaluation_ms": p[1], "dq_skin_handler_ms": p[2], "second_evaluation_ms": p[3]}
+    return 1e3 * float(np.median(times)), out
+
+
+def alternate(variants: dict, frames, rounds: int, per_round: int, phases: Phases) -> dict:
+    """Rounds alternating the variants; median per variant over all rounds."""
+    all_times = {k: [] for k in variants}
+    parts = {}
+    for _ in range(rounds):
+        for name, objs in variants.items():
+            show_only(*objs)
+            bpy.context.scene.frame_set(frames[0])  # warm up after the switch
+            bpy.context.scene.frame_set(frames[1])
+            ms, p = frames_ms(objs, frames, per_round, phases if name == "dq_skin" else None)
+            all_times[name].append(ms)
+            if p:
+                parts.setdefault(name, []).append(p)
+    out = {f"{k}_ms": float(np.median(v)) for k, v in all_times.items()}
+    for name, ps in parts.items():
+        for key in ps[0]:
+            out[f"{name}_{key}"] = float(np.median([p[key] for p in ps]))
+    return out
+
+
+def kernel_ms(obj, runs: int) -> dict:
+    """`dqskin.skin` alone on the same inputs the modifier used (Linear and DQS)."""
+    mod_ = sys.modules[ADDON]
+    mod = next(m for m in obj.modifiers if m.type == "NODES")
+    st = mod_.modifier.state(obj, mod)
+    arm = mod_.nodes.get(mod, "Armature")
+    positions = mod_.meshdata.get(obj).positions
+    matrices = mod_.rig.frame(st.binding, obj, arm)
+    out = np.empty_like(positions)
+    res = {}
+    for method in ("linear", "dual_quaternion"):
+        ts = []
         for _ in range(runs):
-            start = time.perf_counter()
-            rig.skin(st.binding, obj, arm, positions, {"lbs": "linear", "dqs": "dual_quaternion"}[method], out=out, matrices=matrices)
-            kernel.append(time.perf_counter() - start)
-        row[f"kernel_{method}_ms"] = 1e3 * float(np.median(kernel))
-    for method in ("lbs", "dqs"):
-        row[f"ratio_{method}"] = row[f"dq_skin_{method}_ms"] / row[f"armature_{method}_ms"]
+            t = time.perf_counter()
+            mod_.rig.skin(st.binding, obj, arm, positions, method, out=out, matrices=matrices)
+            ts.append(time.perf_counter() - t)
+        res[f"kernel_{method}_ms"] = 1e3 * float(np.median(ts))
+    return res
+
+
+# -- cases ----------------------------------------------------------------------------------------
+
+def case_grid(vertices: int, later: str, method: str, quick: bool) -> dict:
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    grid, arm = grid_rig(vertices)
+    variants, bind_s = three_ways(grid, method, later)
+    phases = Phases()
+    phases.install()
+    try:
+        row = alternate({k: [v] for k, v in variants.items()}, (5, 12, 19, 26, 33), 2 if quick else 5, 5 if quick else 9, phases)
+    finally:
+        phases.remove()
+    show_only(variants["dq_skin"])
+    row.update(kernel_ms(variants["dq_skin"], 5 if quick else 15))
+    row.update(
+        case=f"grid {len(grid.data.vertices) // 1000}k{' + ' + later if later else ''} {method.lower()}",
+        vertices=len(grid.data.vertices),
+        later=later,
+        method=method,
+        first_frame_s=bind_s,
+        speedup=row["armature_ms"] / row["dq_skin_ms"],
+    )
+    return row
+
+
+def case_binding(vertices: int) -> dict:
+    """`dq_skin_add` until the first skinned frame is evaluated."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    grid, arm = grid_rig(vertices)
+    bpy.context.scene.frame_set(9)
+    t = time.perf_counter()
+    add_dq_skin(grid, "DUAL_QUATERNION")
+    grid.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    seconds = time.perf_counter() - t
+    return {"case": f"dq_skin_add + first frame, {len(grid.data.vertices) // 1000}k", "vertices": len(grid.data.vertices), "seconds": seconds}
+
+
+def case_weights(vertices: int, quick: bool) -> dict:
+    """A weight change (`VertexGroup.add` on 1,000 vertices, like a brush stroke) until the
+    evaluated mesh shows it, Armature modifier vs DQ Skin."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    grid, arm = grid_rig(vertices)
+    bpy.context.scene.frame_set(9)
+    variants, _ = three_ways(grid, "DUAL_QUATERNION")
+    out = {"case": f"weight change, {len(grid.data.vertices) // 1000}k", "vertices": len(grid.data.vertices)}
+    rng = np.random.default_rng(3)
+    for rnd in range(2 if quick else 4):
+        for name in ("armature", "dq_skin"):
+            obj = variants[name]
+            show_only(obj)
+            ts = []
+            for k in range(3 if quick else 7):
+                idx = rng.choice(len(obj.data.vertices), 1000, replace=False).tolist()
+                group = obj.vertex_groups[(k + rnd) % len(obj.vertex_groups)]
+                t = time.perf_counter()
+                group.add(idx, 0.3 + 0.05 * k, "REPLACE")
+                bpy.context.view_layer.update()  # Blender evaluates, handlers run
+                obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data  # and what they changed
+                ts.append(time.perf_counter() - t)
+            out.setdefault(f"{name}_ms", []).append(1e3 * float(np.median(ts)))
+    for name in ("armature", "dq_skin"):
+        out[f"{name}_ms"] = float(np.median(out[f"{name}_ms"]))
+    out["ratio"] = out["dq_skin_ms"] / out["armature_ms"]
+    return out
+
+
+def crowd(count: int):
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    bpy.ops.import_scene.gltf(filepath=str(ROOT.parent / "shared" / "assets" / "CesiumMan.glb"))
+    src = next(o for o in bpy.data.objects if o.type == "MESH" and any(m.type == "ARMATURE" for m in o.modifiers))
+    arm0 = next(m for m in src.modifiers if m.type == "ARMATURE").object
+    scene = bpy.context.scene
+    pairs = [(src, arm0)]
+    for i in range(count - 1):
+        a = arm0.copy()
+        scene.collection.objects.link(a)
+        a.location.x += 1.0 + i
+        m = src.copy()
+        m.data = src.data.copy()
+        scene.collection.objects.link(m)
+        m.parent = a
+        next(x for x in m.modifiers if x.type == "ARMATURE").object = a
+        pairs.append((m, a))
+    return pairs
+
+
+def case_crowd(count: int, quick: bool) -> dict:
+    """`count` CesiumMen, each with its own armature playing the walk: all with the Armature
+    modifier, then all with DQ Skin (in the same session, alternating); then a move of an
+    unrelated Empty in the DQ Skin scene, and DQ Skin's share of it."""
+    pairs = crowd(count)
+    meshes = [m for m, _ in pairs]
+    dq = []
+    for m in meshes:
+        c = m.copy()
+        c.data = m.data.copy()
+        bpy.context.scene.collection.objects.link(c)
+        dq.append(c)
+    show_only(*dq)
+    t = time.perf_counter()
+    for c in dq:
+        add_dq_skin(c, "DUAL_QUATERNION")
+    add_all_s = time.perf_counter() - t
+    phases = Phases()
+    phases.install()
+    try:
+        row = alternate({"armature": meshes, "dq_skin": dq}, (3, 9, 15, 21), 2 if quick else 4, 5 if quick else 9, phases)
+    finally:
+        phases.remove()
+    # An edit elsewhere: move an Empty, in each scene.
+    empty = bpy.data.objects.new("Elsewhere", None)
+    bpy.context.scene.collection.objects.link(empty)
+    handler_time = []
+
+    def timed(fn):
+        def run(scene, depsgraph):
+            t = time.perf_counter()
+            fn(scene, depsgraph)
+            handler_time.append(time.perf_counter() - t)
+
+        return run
+
+    dq_handler = next(h for h in bpy.app.handlers.depsgraph_update_post if h.__name__ == "on_depsgraph_update_post")
+    wrapped = timed(dq_handler)
+    for name, objs in (("armature", meshes), ("dq_skin", dq)):
+        show_only(*objs)
+        if name == "dq_skin":
+            idx = bpy.app.handlers.depsgraph_update_post.index(dq_handler)
+            bpy.app.handlers.depsgraph_update_post[idx] = wrapped
+        ts = []
+        for k in range(10 if quick else 30):
+            t = time.perf_counter()
+            empty.location.x = 0.01 * k
+            bpy.context.view_layer.update()
+            ts.append(time.perf_counter() - t)
+        row[f"{name}_unrelated_edit_ms"] = 1e3 * float(np.median(ts))
+    idx = bpy.app.handlers.depsgraph_update_post.index(wrapped)
+    bpy.app.handlers.depsgraph_update_post[idx] = dq_handler
+    row["dq_skin_unrelated_edit_handler_ms"] = 1e3 * float(np.median(handler_time)) if handler_time else 0.0
+    row.update(case=f"{count} characters x {len(meshes[0].data.vertices)} vertices", objects=count, dq_skin_add_each_ms=1e3 * add_all_s / count)
+    row["speedup"] = row["armature_ms"] / row["dq_skin_ms"]
     return row
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "target" / "bench-blender.json")
-    parser.add_argument("--quick", action="store_true", help="smaller meshes, fewer runs")
+    parser.add_argument("--quick", action="store_true", help="smaller meshes, fewer rounds")
+    parser.add_argument("--only", nargs="*", default=None, help="case groups: grid, later, binding, weights, crowd, small")
     args = parser.parse_args()
-    dq_skin = addon_utils.enable("bl_ext.user_default.dq_skin", default_set=True)
-    if dq_skin is None:
+    if addon_utils.enable(ADDON, default_set=True) is None:
         raise SystemExit("the DQ Skin extension is not installed: run make setup")
-    runs = 5 if args.quick else 15
-    cases = [("CesiumMan 50k", lambda: cesium_man(50_000)), ("CesiumMan 250k", lambda: cesium_man(250_000)), ("synthetic 1M", lambda: synthetic(1_000_000))]
-    if args.quick:
-        cases = [("CesiumMan 50k", lambda: cesium_man(50_000))]
+    only = set(args.only) if args.only else {"grid", "later", "binding", "weights", "crowd", "small"}
+    q = args.quick
+    big = [250_000] if q else [250_000, 1_000_000]
     rows = []
-    print(f"{'mesh':<16} {'verts':>9} | {'Armature LBS':>12} {'DQ Skin LBS':>12} {'ratio':>6} | {'Armature DQS':>12} {'DQ Skin DQS':>12} {'ratio':>6} | {'kernel LBS':>10} {'kernel DQS':>10}")
-    for name, build in cases:
-        obj, frames = build()
-        row = measure(name, obj, frames, runs, dq_skin)
+
+    def report(row):
         rows.append(row)
-        print(
-            f"{name:<16} {row['vertices']:>9} | {row['armature_lbs_ms']:>10.2f}ms {row['dq_skin_lbs_ms']:>10.2f}ms {row['ratio_lbs']:>6.2f} | "
-            f"{row['armature_dqs_ms']:>10.2f}ms {row['dq_skin_dqs_ms']:>10.2f}ms {row['ratio_dqs']:>6.2f} | "
-            f"{row['kernel_lbs_ms']:>8.2f}ms {row['kernel_dqs_ms']:>8.2f}ms"
-        )
+        print(json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()}), flush=True)
+
+    if "grid" in only:
+        for n in big:
+            for method in ("LINEAR", "DUAL_QUATERNION"):
+                report(case_grid(n, "", method, q))
+    if "later" in only:
+        for later in ("smooth5", "subsurf2"):
+            for n in ([250_000] if later == "subsurf2" or q else big):
+                report(case_grid(n, later, "DUAL_QUATERNION", q))
+    if "small" in only:
+        for method in ("LINEAR", "DUAL_QUATERNION"):
+            report(case_grid(3_000, "", method, q))
+    if "binding" in only:
+        for n in big:
+            report(case_binding(n))
+    if "weights" in only:
+        report(case_weights(250_000, q))
+    if "crowd" in only:
+        report(case_crowd(50 if q else 200, q))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"blender": bpy.app.version_string, "threads": os.cpu_count(), "rows": rows}, indent=2))
     print(f"wrote {args.out}")

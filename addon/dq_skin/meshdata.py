@@ -196,6 +196,12 @@ def _same(a: MeshData, b: MeshData) -> bool:
     return True
 
 
+def peek(obj) -> MeshData | None:
+    """The cached data of `obj`'s mesh if it is current (no read)."""
+    uid = obj.data.session_uid
+    return None if uid in _stale else _cache.get(uid)
+
+
 def get(obj, verify: bool = False) -> MeshData:
     """The data of `obj`'s mesh, read if unknown, or re-read and compared with `verify` (after
     Blender said the mesh may have changed); the version only changes when something did."""

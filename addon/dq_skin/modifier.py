@@ -61,6 +61,16 @@ def settings(mod) -> Settings:
     )
 
 
+def _settings(mod, st: "State") -> Settings:
+    """`settings(mod)`, rebuilt only when the modifier's raw values changed (they can be keyed,
+    so they are read on every evaluation)."""
+    raw = nodes.raw_settings(mod)
+    if st.settings is None or raw != st.raw_settings:
+        st.settings = settings(mod)
+        st.raw_settings = raw
+    return st.settings
+
+
 LIVE = ("replace", "positions")
 
 # Modifiers that never add or remove vertices.
@@ -93,6 +103,27 @@ class State:
     armature_signature: tuple | None = field(default=None, repr=False)
     check_armature: bool = True
     result: object = field(default=None, repr=False)  # the result object last written
+    settings: Settings | None = field(default=None, repr=False)
+    raw_settings: tuple = ()
+    companion: str = ""  # name of the companion Armature modifier, once found
+    needs_effective: bool = False  # envelopes or B-Bones: influences change with the pose
+    segments: np.ndarray | None = field(default=None, repr=False)
+    uses_envelopes: bool = False
+    uses_bbones: bool = False
+    spaces: tuple | None = field(default=None, repr=False)  # (premat, postmat) last computed
+    capture_on: bool | None = None
+    parked: bool = False  # the companion was parked by the last write
+    method: str = ""
+
+    def describe(self) -> str:
+        """The panel's status line."""
+        if self.status or not self.live or self.binding is None:
+            return self.status
+        method = {"linear": "Linear", "dual_quaternion": "Dual Quaternion", "blend": "Blend"}.get(self.method, self.method)
+        line = f"{method}: {len(self.binding.bone_names)} bones, {len(self.binding.influences)} influences, {self.seconds * 1e3:.1f} ms"
+        if not self.companion:
+            line += " · no Armature modifier after it for Blender without DQ Skin"
+        return line
 
     @property
     def live(self) -> bool:
@@ -127,15 +158,47 @@ def dq_skin_modifiers(obj):
 
 # -- one object ---------------------------------------------------------------------------------
 
-def evaluate_object(obj, depsgraph, claimed: dict, force: bool = False) -> bool:
+@dataclass
+class Plan:
+    """One skinning to run: the kernel's inputs and where its result goes."""
+
+    obj: object
+    mod: object
+    st: "State"
+    s: Settings
+    result: object
+    mode: int
+    signature: tuple
+    job: tuple  # the arguments of `dqskin.skin_many`
+    start: float
+    quick: bool = False  # steady playback: only the positions change
+
+
+@dataclass
+class Context:
+    """What one handler call shares between objects."""
+
+    depsgraph: object
+    claimed: dict
+    batch: list | None = None  # plans to run together (see `Registry.frame`)
+    unchanged: set = field(default_factory=set)  # objects Blender did not update: cached settings hold
+    unmoved: set = field(default_factory=set)  # objects whose transform did not change
+    poses: dict = field(default_factory=dict)  # armature uid -> this evaluation's pose matrices
+
+
+def evaluate_object(obj, depsgraph, claimed: dict, force: bool = False, ctx: Context | None = None) -> bool:
     """Evaluates every DQ Skin modifier of `obj` for `depsgraph`, in stack order. `claimed`:
-    result object uid -> owner key, shared by all objects (see `results`). Returns whether a
-    result was written (the object will be evaluated again)."""
+    result object uid -> owner key, shared by all objects (see `results`). With `ctx.batch`, the
+    skinning of an object with one DQ Skin is queued there instead of run (see `run_batch`).
+    Returns whether a result was written or queued (the object will be evaluated again)."""
+    ctx = ctx or Context(depsgraph, claimed)
     render = depsgraph.mode == "RENDER"
     obj_eval = obj.evaluated_get(depsgraph)
     wrote = False
     what_reaches = "mesh"  # mesh, dq (a live DQ Skin's output), other
     previous: State | None = None
+    mods = [m for m in obj.modifiers if nodes.is_dq_skin(m)]
+    batchable = ctx.batch is not None and len(mods) == 1
     for mod in obj.modifiers:
         enabled = mod.show_render if render else mod.show_viewport
         if not nodes.is_dq_skin(mod):
@@ -151,14 +214,14 @@ def evaluate_object(obj, depsgraph, claimed: dict, force: bool = False) -> bool:
             _note(st, "fallback", "Made with an older DQ Skin: remove it and add it again")
             what_reaches = "other"
             continue
-        wrote |= _evaluate(obj, obj_eval, mod, st, depsgraph, source, previous, claimed, force)
+        wrote |= _evaluate(obj, obj_eval, mod, st, ctx, source, previous, force, batchable)
         what_reaches = "dq" if st.live else "other"
         previous = st
     return wrote
 
 
 def _note(st: State, mode: str, message: str = "", status: str = "") -> None:
-    st.mode, st.error, st.status, st.signature = mode, message, status, None
+    st.mode, st.error, st.status, st.signature, st.parked = mode, message, status, None, False
 
 
 def _off(obj, mod, st: State, render: bool) -> None:
@@ -174,26 +237,117 @@ def _off(obj, mod, st: State, render: bool) -> None:
             companion.park(c)
 
 
-def _evaluate(obj, obj_eval, mod, st: State, depsgraph, source: str, previous: State | None, claimed: dict, force: bool) -> bool:
+def _evaluate(obj, obj_eval, mod, st: State, ctx: Context, source: str, previous: State | None, force: bool, batchable: bool) -> bool:
     start = time.perf_counter()
     st.source = source
     if obj.library is not None:
         lib = obj.library.filepath or obj.library.name
         _note(st, "linked", status=f"Linked from {lib}: Blender's Armature modifier deforms it (make a Library Override to use DQ Skin)")
         return False
+    s = None
     try:
-        s = settings(mod)
-    except Exception as e:  # a damaged modifier: say so, let the companion deform
-        return _fallback(obj, mod, st, None, f"Cannot read the settings: {type(e).__name__}: {e}")
-    try:
-        return _skin(obj, obj_eval, mod, st, s, depsgraph, source, previous, claimed, force, start)
+        plan = _quick(obj, mod, st, ctx, source) if batchable and not force else False
+        if plan is None:
+            return False
+        if plan is not False:
+            ctx.batch.append(plan)
+            return True
+        if st.settings is not None and obj.session_uid in ctx.unchanged:
+            s = st.settings
+        else:
+            s = _settings(mod, st)
+        plan = _prepare(obj, obj_eval, mod, st, s, ctx, source, previous, force, start)
+        if plan is None:
+            return False
+        if batchable and not st.needs_effective:
+            ctx.batch.append(plan)
+            return True
+        error = dqskin.skin_many([plan.job])[0]
+        if error is not None:
+            raise SkinError(error)
+        finish(plan)
+        return True
     except SkinError as e:
         return _fallback(obj, mod, st, s, str(e))
     except Exception as e:  # never a traceback in the user's face; say what happened
         return _fallback(obj, mod, st, s, f"{type(e).__name__}: {e}")
 
 
-def _skin(obj, obj_eval, mod, st: State, s: Settings, depsgraph, source, previous, claimed, force, start) -> bool:
+def _quick(obj, mod, st: State, ctx: Context, source: str):
+    """The steady state of playback, cheaply: a live DQ Skin on the mesh's own coordinates
+    (no shape keys), plain vertex groups, nothing about the object or its armature changed but
+    the pose. Returns a plan, None (nothing to do), or False (take the full path)."""
+    s = st.settings
+    if (
+        s is None
+        or st.mode != "replace"
+        or source != "mesh"
+        or st.needs_effective
+        or st.binding is None
+        or st.result is None
+        or st.spaces is None
+        or st.signature is None
+        or obj.session_uid not in ctx.unchanged
+        or obj.session_uid not in ctx.unmoved
+    ):
+        return False
+    arm = s.armature
+    try:
+        uid = arm.session_uid
+        if uid not in ctx.unmoved or arm.mode == "EDIT":
+            return False
+        data = meshdata.peek(obj)
+        if data is None or data.keys is not None or data.version != st.result_version:
+            return False
+        deform = ctx.poses.get(uid)
+        if deform is None:
+            deform = ctx.poses[uid] = rig.pose_matrices(arm.evaluated_get(ctx.depsgraph))
+    except ReferenceError:
+        return False
+    binding = st.binding
+    if len(binding.bone_indices) != len(deform):
+        deform = deform[binding.bone_indices]
+    raw = deform.tobytes()
+    old = st.signature
+    if raw == old[2]:
+        return None  # the pose did not change: the result is already this
+    premat, postmat = st.spaces
+    signature = (old[0], old[1], raw) + old[3:]
+    job = (
+        data.positions,
+        binding.influences,
+        np.ascontiguousarray(deform),
+        binding.rest,
+        s.method,
+        premat,
+        postmat,
+        binding.mask,
+        st.blend if s.method == "blend" else None,
+        s.blend_factor,
+        st.out,
+    )
+    return Plan(obj, mod, st, s, st.result, nodes.RESULT_REPLACE, signature, job, time.perf_counter(), quick=True)
+
+
+def run_batch(plans: list) -> None:
+    """Skins every queued plan in one call (in parallel across objects) and writes the results."""
+    if not plans:
+        return
+    errors = dqskin.skin_many([p.job for p in plans])
+    for plan, error in zip(plans, errors):
+        try:
+            if error is not None:
+                raise SkinError(error)
+            finish(plan)
+        except SkinError as e:
+            _fallback(plan.obj, plan.mod, plan.st, plan.s, str(e))
+        except Exception as e:
+            _fallback(plan.obj, plan.mod, plan.st, plan.s, f"{type(e).__name__}: {e}")
+
+
+def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, previous, force, start) -> Plan | None:
+    """Everything before the kernel: checks, what reaches the modifier, influences, this frame's
+    matrices; None when the result is already this."""
     arm = s.armature
     if arm is None or arm.type != "ARMATURE":
         raise SkinError("No armature object set")
@@ -201,6 +355,7 @@ def _skin(obj, obj_eval, mod, st: State, s: Settings, depsgraph, source, previou
         raise SkinError(f"Armature {arm.name} is in Edit Mode")
     if obj.mode == "EDIT":
         raise SkinError(f"{obj.name} is in Edit Mode: DQ Skin resumes in Object Mode")
+    depsgraph = ctx.depsgraph
     data = meshdata.get(obj)
     arm_eval = arm.evaluated_get(depsgraph)
 
@@ -216,8 +371,9 @@ def _skin(obj, obj_eval, mod, st: State, s: Settings, depsgraph, source, previou
         if previous is None or previous.out is None or len(previous.out) != data.vertex_count:
             raise SkinError("The DQ Skin modifier before this one has no result")
         positions, input_key = previous.out, ("chain", id(previous), previous.generation)
-    if source != "capture":
+    if source != "capture" and st.capture_on is not False:
         _set_capture(mod, False)
+        st.capture_on = False
 
     # What does not change between frames.
     if st.check_armature or st.armature_signature is None:
@@ -230,75 +386,103 @@ def _skin(obj, obj_eval, mod, st: State, s: Settings, depsgraph, source, previou
         st.blend = data.group_weights(s.blend_group) if s.blend_group else None
         st.binding_key = key
         st.signature = None
+        st.segments = rig.bbone_segments(arm, st.binding)
+        st.uses_envelopes = bool(st.envelopes[:, 10].any())
+        st.uses_bbones = bool(st.segments.max(initial=0) > 1)
+    st.needs_effective = s.use_envelopes or st.uses_envelopes or st.uses_bbones
     binding = st.binding
     if len(positions) != binding.vertex_count:
         raise SkinError(
             f"An earlier modifier changed the vertex count ({binding.vertex_count} → {len(positions)}); "
             "put DQ Skin before modifiers that add or remove vertices"
         )
-    matrices = rig.frame(binding, obj_eval, arm_eval)
+    deform = ctx.poses.get(arm.session_uid)
+    if deform is None:
+        deform = ctx.poses[arm.session_uid] = rig.pose_matrices(arm_eval)
+    if len(binding.bone_indices) != len(deform):
+        deform = deform[binding.bone_indices]
+    if st.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
+        st.spaces = rig.spaces(obj_eval, arm_eval)
+    premat, postmat = st.spaces
     mode = nodes.RESULT_POSITIONS if source == "capture" else nodes.RESULT_REPLACE
-    result = _own_result(obj, mod, claimed)
-    signature = (
-        s.key(),
-        input_key,
-        matrices.deform.tobytes(),
-        matrices.premat.tobytes(),
-        result.session_uid,
-        data.version,
-    )
-    pending = results.mode_of(result) == nodes.RESULT_PENDING
-    if not force and not pending and signature == st.signature and st.live and results.mode_of(result) == mode:
-        return False  # the result is already this
+    result = st.result if st.result is not None and _still(st.result, mod, ctx.claimed) else _own_result(obj, mod, ctx.claimed)
+    signature = (s.key(), input_key, deform.tobytes(), premat.tobytes(), result.session_uid, data.version)
+    current = results.mode_of(result)
+    if not force and signature == st.signature and st.live and current == mode:
+        return None  # the result is already this
     if st.out is None or len(st.out) != binding.vertex_count:
         st.out = np.empty((binding.vertex_count, 3), np.float32)
-    segments = rig.bbone_segments(arm_eval, binding)
-    if s.use_envelopes or st.envelopes[:, 10].any() or segments.max(initial=0) > 1:
+    influences, rest = binding.influences, binding.rest
+    if st.needs_effective:
         # Envelopes and B-Bone segments depend on where the vertices are: this frame's
         # influences, over the bones followed by the B-Bones' segment joints.
-        effective = binding.influences.effective(
+        matrices = rig.Frame(np.ascontiguousarray(deform), binding.rest, premat, postmat)
+        influences = binding.influences.effective(
             positions,
-            matrices.premat,
+            premat,
             envelopes=st.envelopes,
             use_vertex_groups=s.use_vertex_groups,
             use_envelopes=s.use_envelopes,
-            bbone_segments=segments,
-            rest=matrices.rest,
+            bbone_segments=st.segments,
+            rest=binding.rest,
             lengths=rig.bone_lengths(arm_eval, binding),
-            bbone_mapping=rig.curved_bbone_mapping(arm_eval, binding, positions, matrices.premat, s.use_envelopes),
+            bbone_mapping=rig.curved_bbone_mapping(arm_eval, binding, positions, premat, s.use_envelopes),
         )
-        binding = rig.Binding(effective, binding.bone_names, binding.bone_indices, binding.mask, binding.vertex_count, binding.rest)
-        matrices = rig.with_bbone_joints(matrices, arm_eval, st.binding, segments)
-    rig.skin(binding, obj_eval, arm_eval, positions, s.method, blend=st.blend, blend_factor=s.blend_factor, out=st.out, matrices=matrices)
-    st.generation += 1
+        matrices = rig.with_bbone_joints(matrices, arm_eval, binding, st.segments)
+        deform, rest = matrices.deform, matrices.rest
+    job = (
+        positions,
+        influences,
+        np.ascontiguousarray(deform),
+        rest,
+        s.method,
+        premat,
+        postmat,
+        binding.mask,
+        st.blend if s.method == "blend" else None,
+        s.blend_factor,
+        st.out,
+    )
+    return Plan(obj, mod, st, s, result, mode, signature, job, start)
 
-    # Write the result, then take the companion out of the way (in this order, so that no
-    # evaluation sees both or neither).
+
+def finish(plan: Plan) -> None:
+    """Writes the result, then takes the companion out of the way (in this order, so that no
+    evaluation sees both or neither)."""
+    obj, mod, st, result, mode = plan.obj, plan.mod, plan.st, plan.result, plan.mode
+    st.generation += 1
+    if plan.quick:
+        results.write_positions(result, st.out)
+        st.signature = plan.signature
+        st.seconds = time.perf_counter() - plan.start
+        return
+    data = meshdata.get(obj)
     if mode == nodes.RESULT_REPLACE:
         mesh = result.data
-        counts = (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops))
-        if st.result_version != data.version or counts != data.counts:
+        if st.result_version != data.version or (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops)) != data.counts:
             results.replace_mesh(result, obj.data)
             st.result_version = data.version
     else:
         results.points_mesh(result, len(st.out))
         st.result_version = 0
     results.write_positions(result, st.out)
+    steady = st.live and st.result is result and st.parked
     results.set_mode(result, mode)
     st.result = result
-    c = companion.find(obj, mod)
-    if c is not None:
-        companion.park(c)
-    st.signature = signature
+    if not steady:
+        c = obj.modifiers.get(st.companion) if st.companion else None
+        if c is None or c.type != "ARMATURE":
+            c = companion.find(obj, mod)
+            st.companion = c.name if c is not None else ""
+        if c is not None and not companion.is_parked(c):
+            companion.park(c)
+        st.parked = True
+    st.signature = plan.signature
     st.mode = "replace" if mode == nodes.RESULT_REPLACE else "positions"
     st.error = ""
-    st.seconds = time.perf_counter() - start
-    method = {"linear": "Linear", "dual_quaternion": "Dual Quaternion", "blend": "Blend"}[s.method]
-    st.status = (
-        f"{method}: {len(st.binding.bone_names)} bones, {len(st.binding.influences)} influences, "
-        f"{st.seconds * 1e3:.1f} ms" + ("" if c is not None else " · no Armature modifier after it for Blender without DQ Skin")
-    )
-    return True
+    st.seconds = time.perf_counter() - plan.start
+    st.method = plan.s.method
+    st.status = ""
 
 
 def _mesh_input(obj, obj_eval, mod, st: State, data, depsgraph):
@@ -348,6 +532,7 @@ def _needs_capture(mod, why: str) -> SkinError:
 
 
 def _set_capture(mod, on: bool) -> None:
+    """Stores the incoming positions (or not) in the node group."""
     if bool(nodes.get(mod, "Capture")) != on:
         nodes.put(mod, "Capture", on)
     if on:
@@ -360,6 +545,7 @@ def capture_name(mod) -> str:
 
 def _captured(obj, obj_eval, mod, data):
     _set_capture(mod, True)
+    state(obj, mod).capture_on = True
     name = capture_name(mod)
     mesh = obj_eval.data
     attribute = mesh.attributes.get(name) if mesh is not None else None
@@ -408,6 +594,14 @@ def _armature_signature(arm) -> tuple:
     return (tuple(b.name for b in bones), deform.tobytes(), rest.tobytes(), envelope.tobytes(), multiply.tobytes(), segments.tobytes())
 
 
+def _still(result, mod, claimed: dict) -> bool:
+    """Whether the result written last time is still this modifier's (the usual case)."""
+    try:
+        return nodes.get(mod, "Result") == result and claimed.get(result.session_uid) is not None
+    except ReferenceError:
+        return False
+
+
 def _own_result(obj, mod, claimed: dict):
     """This modifier's result object: the one it points at if that is ours and not another
     modifier's, else a new one."""
@@ -429,10 +623,10 @@ def _own_result(obj, mod, claimed: dict):
 def _fallback(obj, mod, st: State, s: Settings | None, message: str) -> bool:
     """DQ Skin cannot deform: pass the input through and let the companion deform as Blender
     does; the panel shows why."""
-    st.mode, st.error, st.signature = "fallback", message, None
+    st.mode, st.error, st.signature, st.parked = "fallback", message, None, False
     result = nodes.get(mod, "Result")
     if result is not None and results.is_result(result) and result.library is None:
-        results.set_mode(result, 0.0)
+        results.set_mode(result, nodes.RESULT_OFF)
     c = companion.find(obj, mod)
     if c is None:
         st.status = "No Armature modifier after it: the mesh is not deformed"
@@ -461,11 +655,12 @@ def deactivate(obj, mod, detach: bool) -> None:
             c.show_viewport, c.show_render = mod.show_viewport, mod.show_render
     result = nodes.get(mod, "Result")
     if result is not None and results.is_result(result) and result.library is None:
-        results.set_mode(result, 0.0)
+        results.set_mode(result, nodes.RESULT_OFF)
     if detach and result is not None:
         nodes.put(mod, "Result", None)
     st = _states.get((obj.session_uid, compat.modifier_uid(mod)))
     if st is not None:
         st.signature = None
+        st.parked = False
         if st.live:
             st.mode = ""

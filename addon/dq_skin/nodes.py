@@ -4,17 +4,19 @@
 A DQ Skin modifier is a Geometry Nodes modifier with this group, so it lives in the modifier
 stack like any modifier (order, toggles, name, settings saved per modifier in the .blend).
 What it outputs depends on its hidden *Result* object, which the add-on owns (one per object and
-modifier, never saved in files) and whose X location says what to do:
+modifier, never saved in files) and whose transform says what to do (`results.set_mode`):
 
-- ``RESULT_REPLACE`` (1): the result is a full copy of the object's mesh with skinned positions;
-  it is output as is when its element counts match the input (no per-vertex work at all);
-- ``RESULT_POSITIONS`` (2): the result holds only points; the input gets their positions;
-- ``RESULT_PENDING`` (3): the add-on is about to write this frame's result: output nothing, so
-  the modifiers after this one cost nothing in the evaluation Blender runs before its frame
-  handlers (the add-on's handler always follows with the real result);
-- anything else, or no result object (files opened without the add-on, linked data, errors):
-  the input passes through unchanged and the Armature modifier kept right after DQ Skin (its
-  *companion*) deforms the mesh the way Blender does. A Warning node says so (Blender 4.3+).
+- *replace* (X location 1): the result is a full copy of the object's mesh with skinned
+  positions, output as is (no per-vertex work at all; four nodes evaluated per frame);
+- *positions* (scale 2): the result holds only points; the input gets their positions (when
+  the point counts match);
+- *pending* (Z location 1): the add-on is about to write this frame's result: output
+  nothing, so the modifiers after this one cost nothing in the evaluation Blender runs before
+  its frame handlers (the add-on's handler always follows with the real result);
+- otherwise, or without a result object (files opened without the add-on, linked data,
+  errors): the input passes through unchanged and the Armature modifier kept right after DQ
+  Skin (its *companion*) deforms the mesh the way Blender does. A Warning node says so
+  (Blender 4.3+).
 
 With *Capture* on, the incoming positions are stored in the point attribute named by *Capture
 Name* first: the add-on reads them back when modifiers before DQ Skin deform the mesh.
@@ -32,9 +34,12 @@ GROUP_NAME = "DQ Skin"
 GROUP_TAG = "dq_skin_version"
 VERSION = 2
 
-RESULT_REPLACE = 1.0
-RESULT_POSITIONS = 2.0
-RESULT_PENDING = 3.0
+# What a result object's transform asks the group to do (see `results.set_mode`).
+RESULT_OFF = 0
+RESULT_REPLACE = 1
+RESULT_POSITIONS = 2
+RESULT_PENDING = 3
+RESULT_SCALE_POSITIONS = 2.0
 
 METHODS = ("Linear", "Dual Quaternion", "Blend")
 METHOD_KEYS = {"Linear": "linear", "Dual Quaternion": "dual_quaternion", "Blend": "blend"}
@@ -89,16 +94,42 @@ def socket_ids(group) -> dict[str, str]:
 
 def forget_socket_ids() -> None:
     _socket_ids.clear()
+    _menu_values.clear()
+
+
+_menu_values: dict[int, dict[int, str]] = {}
 
 
 def menu_values(group) -> dict[int, str]:
-    """Menu value stored in a modifier -> method item name (up to Blender 5.1)."""
-    switch = group.nodes.get("Method Items")
-    return {
-        int(sock.identifier.split("_")[1]): sock.name
-        for sock in switch.inputs
-        if sock.identifier.startswith("Item_")
-    }
+    """Menu value stored in a modifier -> method item name (up to Blender 5.1), cached per group."""
+    key = group.session_uid
+    values = _menu_values.get(key)
+    if values is None:
+        switch = group.nodes.get("Method Items")
+        values = {
+            int(sock.identifier.split("_")[1]): sock.name
+            for sock in switch.inputs
+            if sock.identifier.startswith("Item_")
+        }
+        _menu_values[key] = values
+    return values
+
+
+RAW = ("Armature", "Method", "Blend Amount", "Blend Factor", "Use Vertex Groups", "Use Envelopes", "Mask", "Invert Mask")
+
+
+def raw_settings(mod) -> tuple:
+    """The settings' stored values, cheap to read and compare (see `modifier.settings`)."""
+    ids = socket_ids(mod.node_group)
+    if compat.RNA_INPUTS:
+        inputs = mod.properties.inputs
+        return tuple(
+            (s.value, s.type, getattr(s, "attribute_name", "")) for s in (getattr(inputs, ids[n]) for n in RAW)
+        )
+    get = mod.get
+    return tuple(get(ids[n]) for n in RAW) + tuple(
+        (get(ids[n] + "_use_attribute"), get(ids[n] + "_attribute_name")) for n in FIELDS
+    )
 
 
 # -- reading and writing a modifier's settings ---------------------------------------------------
@@ -195,38 +226,31 @@ def build_group():
     # Set after the items exist (and not while iterating the interface: Blender 4.4.0 crashes).
     method_socket.default_value = "Dual Quaternion"
 
-    # Optional capture of the incoming positions.
+    # The result and what it asks for: X location 1 for "replace", Z location 1 for "pending",
+    # scale 2 for "positions" (a number is true when positive, so the per-frame path, replace,
+    # evaluates four nodes).
+    info = node("GeometryNodeObjectInfo", transform_space="ORIGINAL")
+    links.new(g_in.outputs["Result"], info.inputs["Object"])
+    where = node("ShaderNodeSeparateXYZ")
+    links.new(info.outputs["Location"], where.inputs[0])
+
+    # Not replacing: positions mode, or pass through (with the warning), both after the
+    # optional capture of the incoming positions. Evaluated only when needed (switches are lazy).
     position = node("GeometryNodeInputPosition")
     store = node("GeometryNodeStoreNamedAttribute", data_type="FLOAT_VECTOR", domain="POINT")
     links.new(g_in.outputs["Geometry"], store.inputs["Geometry"])
     links.new(g_in.outputs["Capture Name"], store.inputs["Name"])
     links.new(position.outputs["Position"], store.inputs["Value"])
     captured = geometry_switch(node, links, g_in.outputs["Capture"], g_in.outputs["Geometry"], store.outputs["Geometry"])
-
-    # The result and what it asks for.
-    info = node("GeometryNodeObjectInfo", transform_space="ORIGINAL")
-    links.new(g_in.outputs["Result"], info.inputs["Object"])
-    where = node("ShaderNodeSeparateXYZ")
-    links.new(info.outputs["Location"], where.inputs[0])
-    mode = where.outputs["X"]
-    is_replace = equal(node, links, mode, RESULT_REPLACE, "VALUE")
-    is_positions = equal(node, links, mode, RESULT_POSITIONS, "VALUE")
-    is_pending = equal(node, links, mode, RESULT_PENDING, "VALUE")
-
+    scale = node("ShaderNodeSeparateXYZ")
+    links.new(info.outputs["Scale"], scale.inputs[0])
+    is_positions = equal(node, links, scale.outputs["X"], RESULT_SCALE_POSITIONS, "VALUE")
     size_in = node("GeometryNodeAttributeDomainSize", component="MESH")
     size_result = node("GeometryNodeAttributeDomainSize", component="MESH")
     links.new(g_in.outputs["Geometry"], size_in.inputs["Geometry"])
     links.new(info.outputs["Geometry"], size_result.inputs["Geometry"])
-    same = {
-        name: equal(node, links, size_in.outputs[name], size_result.outputs[name], "INT")
-        for name in ("Point Count", "Edge Count", "Face Count", "Face Corner Count")
-    }
-    same_topology = boolean(node, links, "AND", same["Point Count"], same["Edge Count"])
-    same_topology = boolean(node, links, "AND", same_topology, same["Face Count"])
-    same_topology = boolean(node, links, "AND", same_topology, same["Face Corner Count"])
-    use_replace = boolean(node, links, "AND", is_replace, same_topology)
-    use_positions = boolean(node, links, "AND", is_positions, same["Point Count"])
-
+    same_points = equal(node, links, size_in.outputs["Point Count"], size_result.outputs["Point Count"], "INT")
+    use_positions = boolean(node, links, "AND", is_positions, same_points)
     index = node("GeometryNodeInputIndex")
     sample = node("GeometryNodeSampleIndex", data_type="FLOAT_VECTOR", domain="POINT")
     links.new(info.outputs["Geometry"], sample.inputs["Geometry"])
@@ -235,19 +259,17 @@ def build_group():
     set_position = node("GeometryNodeSetPosition")
     links.new(captured, set_position.inputs["Geometry"])
     links.new(sample.outputs["Value"], set_position.inputs["Position"])
-
-    out = geometry_switch(node, links, use_positions, captured, set_position.outputs["Geometry"])
-    out = geometry_switch(node, links, use_replace, out, info.outputs["Geometry"])
-    out = geometry_switch(node, links, is_pending, out, None)  # nothing while pending
+    passed = captured
     if compat.HAS_WARNING_NODE:
-        active = boolean(node, links, "OR", use_replace, use_positions)
-        active = boolean(node, links, "OR", active, is_pending)
-        inactive = boolean(node, links, "NOT", active)
+        # Reached only when DQ Skin is not deforming; a Warning node shows when its output is used.
         warning = node("GeometryNodeWarning", warning_type="WARNING")
-        links.new(inactive, warning.inputs["Show"])
+        warning.inputs["Show"].default_value = True
         warning.inputs["Message"].default_value = WARNING
-        # A Warning node only shows when its output is used.
-        out = geometry_switch(node, links, warning.outputs["Show"], out, out)
+        passed = geometry_switch(node, links, warning.outputs["Show"], captured, captured)
+    not_replacing = geometry_switch(node, links, use_positions, passed, set_position.outputs["Geometry"])
+
+    out = geometry_switch(node, links, where.outputs["X"], not_replacing, info.outputs["Geometry"])
+    out = geometry_switch(node, links, where.outputs["Z"], out, None)  # nothing while pending
     links.new(out, g_out.inputs["Geometry"])
     for i, n in enumerate(nodes):
         n.location = (180 * (i % 8), -200 * (i // 8))

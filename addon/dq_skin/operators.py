@@ -64,8 +64,7 @@ def add(obj, source, method: str = "AUTO"):
     mod.show_render = source.show_render
     mod.show_in_editmode = source.show_in_editmode
     mod.show_on_cage = source.show_on_cage
-    with bpy.context.temp_override(object=obj, active_object=obj):
-        bpy.ops.object.modifier_move_to_index(modifier=mod.name, index=index)
+    obj.modifiers.move(len(obj.modifiers) - 1, index)
     # Until DQ Skin has its first result, the companion deforms as Blender would.
     companion.activate(source, mod, modifier.settings(mod))
     return mod
@@ -102,7 +101,9 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
         REGISTRY.ensure()
         rec = REGISTRY.records.get(obj.session_uid) or REGISTRY._add(obj)
         REGISTRY._describe(rec)
-        REGISTRY.evaluate(rec, context.evaluated_depsgraph_get())
+        # The view layer's depsgraph as last evaluated (the armature's pose is there): forcing an
+        # evaluation here would rebuild the scene's relations once more for nothing.
+        REGISTRY.evaluate(rec, context.view_layer.depsgraph)
         shown = nodes.get_method(mod)
         self.report({"INFO"}, f"DQ Skin ({shown}) replaces {source.name!r} on {obj.name}")
         return {"FINISHED"}

@@ -33,6 +33,7 @@ class Record:
     obj: object
     mods: dict[str, ModInfo] = field(default_factory=dict)  # modifier uid -> info
     watched: set = field(default_factory=set)
+    steady: object = None  # the State of its one DQ Skin while playback needs only the pose
     volatile: bool = False  # evaluated by Blender before the frame handler (see `frame_pre`)
     pending: bool = False
     modifier_count: int = 0
@@ -110,6 +111,7 @@ class Registry:
                     if arm.data is not None:
                         watched.add(arm.data.session_uid)
         rec.mods = mods
+        rec.steady = None
         rec.watched = watched
         rec.modifier_count = len(obj.modifiers)
         for uid in watched:
@@ -178,14 +180,19 @@ class Registry:
             results.remove(r)
 
     # -- evaluation -------------------------------------------------------------------------
-    def evaluate(self, rec: Record, depsgraph, force: bool = False) -> None:
+    def evaluate(self, rec: Record, depsgraph, force: bool = False, ctx=None) -> None:
         try:
             obj = rec.obj
             obj.name
         except ReferenceError:
             self.prune()
             return
-        modifier.evaluate_object(obj, depsgraph, self.claimed, force)
+        modifier.evaluate_object(obj, depsgraph, self.claimed, force, ctx)
+        rec.steady = None
+        if len(rec.mods) == 1:
+            st = modifier._states.get((obj.session_uid, next(iter(rec.mods))))
+            if st is not None and st.mode == "replace" and st.source == "mesh" and not st.needs_effective:
+                rec.steady = st
 
     def updates(self, depsgraph) -> None:
         """After an interactive change: re-evaluate only what it concerns."""
@@ -262,7 +269,7 @@ class Registry:
         if self.suspended:
             return
         self.ensure()
-        updated = set()
+        updated, moved = set(), set()
         for update in depsgraph.updates:
             orig = getattr(update.id, "original", update.id)
             if orig is None:
@@ -271,26 +278,44 @@ class Registry:
                 uid = orig.session_uid
                 if update.is_updated_geometry:
                     updated.add(uid)
+                if update.is_updated_transform:
+                    moved.add(uid)
                 rec = self.records.get(uid)
                 if rec is None:
                     # New since the last update (a script duplicated or linked it).
                     if orig.type == "MESH" and any(nodes.is_dq_skin(m) for m in orig.modifiers):
                         self._add(orig)
+                        moved.add(uid)
                 elif len(orig.modifiers) != rec.modifier_count:
                     self.refresh(rec)
+                    moved.add(uid)
             elif isinstance(orig, bpy.types.Mesh) and update.is_updated_geometry and orig.session_uid in self.watch:
                 # A script edited the mesh before changing frames (animated shape keys also
                 # flag it; then comparing costs a read, but nothing is recomputed).
                 key = orig.shape_keys
                 if key is None or not (key.animation_data is not None):
                     meshdata.mark_stale(orig.session_uid)
+        ctx = modifier.Context(depsgraph, self.claimed, batch=[])
+        # Objects Blender did not update in this evaluation keep their settings; those that did
+        # not move keep their spaces.
+        ctx.unchanged = {uid for uid in self.records if uid not in updated}
+        ctx.unmoved = _unmoved(self, moved)
         for uid, rec in list(self.records.items()):
             if uid not in self.records or not _in(rec.obj, depsgraph):
                 continue
             if uid in updated and not rec.pending:
                 rec.volatile = True
             force, rec.pending = rec.pending, False
-            self.evaluate(rec, depsgraph, force)
+            st = rec.steady
+            if st is not None and not force and uid in ctx.unchanged:
+                plan = modifier._quick(rec.obj, None, st, ctx, "mesh")
+                if plan is None:
+                    continue
+                if plan is not False:
+                    ctx.batch.append(plan)
+                    continue
+            self.evaluate(rec, depsgraph, force, ctx)
+        modifier.run_batch(ctx.batch)
 
     # -- saving -----------------------------------------------------------------------------
     def deactivate_all(self, detach: bool) -> list:
@@ -312,6 +337,12 @@ class Registry:
                 modifier.deactivate(obj, mod, detach)
                 restore.append((obj, mod.name, result))
         return restore
+
+
+def _unmoved(reg: Registry, moved: set) -> set:
+    """Objects (DQ Skin objects and the armatures they watch) whose transform did not change."""
+    ids = set(reg.records) | {uid for uid in reg.watch}
+    return ids - moved
 
 
 def _in(obj, depsgraph) -> bool:

@@ -65,13 +65,37 @@ def remove(result) -> None:
         bpy.data.meshes.remove(mesh)
 
 
-def set_mode(result, mode: float) -> None:
-    if result.location.x != mode:
-        result.location.x = mode
+_TRANSFORMS = {
+    # mode: (location, scale); see `nodes`
+    nodes.RESULT_OFF: ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
+    nodes.RESULT_REPLACE: ((1.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
+    nodes.RESULT_POSITIONS: ((0.0, 0.0, 0.0), (2.0, 2.0, 2.0)),
+}
 
 
-def mode_of(result) -> float:
-    return result.location.x if result is not None else 0.0
+def set_mode(result, mode: int) -> None:
+    """Tells the node group what to do with the result (writes only what changes)."""
+    if mode == nodes.RESULT_PENDING:
+        if result.location.z != 1.0:
+            result.location.z = 1.0
+        return
+    loc, scale = _TRANSFORMS[mode]
+    if tuple(result.location) != loc:
+        result.location = loc
+    if tuple(result.scale) != scale:
+        result.scale = scale
+
+
+def mode_of(result) -> int:
+    if result is None:
+        return nodes.RESULT_OFF
+    if result.location.z > 0:
+        return nodes.RESULT_PENDING
+    if result.location.x > 0:
+        return nodes.RESULT_REPLACE
+    if result.scale.x == 2.0:
+        return nodes.RESULT_POSITIONS
+    return nodes.RESULT_OFF
 
 
 def replace_mesh(result, source_mesh) -> None:
@@ -101,6 +125,8 @@ def points_mesh(result, count: int) -> None:
 
 
 def write_positions(result, positions) -> None:
+    """New positions; `Mesh.update()` tells Blender they changed (normals and bounds are
+    recomputed), which `foreach_set` alone does not."""
     mesh = result.data
     mesh.attributes["position"].data.foreach_set("vector", positions.ravel())
     mesh.update()

@@ -85,6 +85,11 @@ def _pose_matrices(collection, prop: str) -> np.ndarray:
     return np.ascontiguousarray(flat.reshape(-1, 4, 4).transpose(0, 2, 1))
 
 
+def pose_matrices(armature) -> np.ndarray:
+    """`(B, 4, 4)` deform matrices of all pose bones (`PoseBone.matrix_channel`), row-major."""
+    return _pose_matrices(armature.pose.bones, "matrix_channel")
+
+
 def bone_matrices(armature, binding: Binding) -> tuple[np.ndarray, np.ndarray]:
     """`(deform, rest)` matrices of the bound bones for the current pose."""
     deform = _pose_matrices(armature.pose.bones, "matrix_channel")

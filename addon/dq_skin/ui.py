@@ -37,8 +37,9 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
                 box.label(text=mod.name, icon="MOD_ARMATURE")
             if st.error:
                 box.label(text=st.error, icon="ERROR")
-            if st.status:
-                box.label(text=st.status, icon="INFO" if st.live or st.mode in ("off", "linked") else "ERROR")
+            status = st.describe()
+            if status:
+                box.label(text=status, icon="INFO" if st.live or st.mode in ("off", "linked") else "ERROR")
             elif not st.error:
                 box.label(text=_waiting(obj, mod), icon="TIME")
             if obj.library is None:

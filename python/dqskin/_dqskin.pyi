@@ -269,3 +269,15 @@ class _MeshMemory:
     def deform_verts(
         self, mesh_pointer: int, vertex_count: int
     ) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], F32Array] | None: ...
+
+def skin_many(
+    jobs: list[
+        tuple[
+            F32Array, Influences, F32Array, F32Array | None, str, ArrayLike | None, ArrayLike | None,
+            F32Array | None, F32Array | None, float, F32Array,
+        ]
+    ],
+) -> list[str | None]:
+    """Many :func:`skin` calls at once, in parallel across meshes. Each job is ``(positions,
+    influences, deform, rest, method, premat, postmat, mask, blend, blend_factor, out)``; returns
+    None or the error message per job."""

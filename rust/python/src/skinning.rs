@@ -404,6 +404,90 @@ fn skin<'py>(
     })
 }
 
+/// Skins many meshes in one call, in parallel across meshes: for scenes with many small
+/// characters. ``jobs``: a list of tuples ``(positions, influences, deform, rest, method,
+/// premat, postmat, mask, blend, blend_factor, out)`` with the arguments of :func:`skin` (``out``
+/// required). Returns one entry per job: None, or the error message of a job that failed (its
+/// ``out`` untouched). Arguments that are not arrays of the right kind raise at once, naming
+/// the job.
+#[pyfunction]
+fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, pyo3::types::PyList>) -> PyResult<Vec<Option<String>>> {
+    guard(|| {
+        struct Held<'py> {
+            kind: u8,
+            positions: numpy::PyReadonlyArrayDyn<'py, f32>,
+            influences: Bound<'py, PyInfluences>,
+            deform: Vec<Mat4>,
+            rest: Option<Vec<Mat4>>,
+            premat: Option<Mat4>,
+            postmat: Option<Mat4>,
+            mask: Option<numpy::PyReadonlyArrayDyn<'py, f32>>,
+            blend: Option<numpy::PyReadonlyArrayDyn<'py, f32>>,
+            blend_factor: f32,
+            out: numpy::PyReadwriteArrayDyn<'py, f32>,
+        }
+        let mut held = Vec::with_capacity(jobs.len());
+        for (i, item) in jobs.iter().enumerate() {
+            let at = |e: PyErr| -> PyErr {
+                let msg = e.value(py).to_string();
+                if e.is_instance_of::<PyTypeError>(py) {
+                    PyTypeError::new_err(format!("jobs[{i}]: {msg}"))
+                } else {
+                    PyValueError::new_err(format!("jobs[{i}]: {msg}"))
+                }
+            };
+            let t = item.cast::<pyo3::types::PyTuple>().map_err(|_| {
+                PyTypeError::new_err(format!("jobs[{i}] must be a tuple (positions, influences, deform, rest, method, premat, postmat, mask, blend, blend_factor, out)"))
+            })?;
+            if t.len() != 11 {
+                return Err(PyValueError::new_err(format!("jobs[{i}] must have 11 items, got {}", t.len())));
+            }
+            let influences = t.get_item(1)?.cast_into::<PyInfluences>().map_err(|_| {
+                PyTypeError::new_err(format!("jobs[{i}]: influences must be a dqskin.Influences"))
+            })?;
+            let (v, b) = (influences.get().0.vertex_count(), influences.get().0.bone_count());
+            let method: String = t.get_item(4)?.extract().map_err(|_| PyTypeError::new_err(format!("jobs[{i}]: method must be a string")))?;
+            let kind = parse_method(&method).map_err(at)?;
+            let positions = arrays::readonly::<f32>(&t.get_item(0)?, "positions", &[Some(v), Some(3)], &["V"]).map_err(at)?;
+            let deform = matrices(&t.get_item(2)?, "deform", Some(b)).map_err(at)?;
+            let rest_obj = t.get_item(3)?;
+            let rest = if rest_obj.is_none() { None } else { Some(matrices(&rest_obj, "rest", Some(b)).map_err(at)?) };
+            let premat = space(Some(&t.get_item(5)?), "premat").map_err(at)?;
+            let postmat = space(Some(&t.get_item(6)?), "postmat").map_err(at)?;
+            let opt = |k: usize, name: &str| -> PyResult<Option<numpy::PyReadonlyArrayDyn<'py, f32>>> {
+                let o = t.get_item(k)?;
+                if o.is_none() { Ok(None) } else { arrays::readonly::<f32>(&o, name, &[Some(v)], &["V"]).map(Some).map_err(at) }
+            };
+            let mask = opt(7, "mask")?;
+            let blend = opt(8, "blend")?;
+            let blend_factor: f64 = t.get_item(9)?.extract().map_err(|_| PyTypeError::new_err(format!("jobs[{i}]: blend_factor must be a number")))?;
+            let out = arrays::readwrite::<f32>(&t.get_item(10)?, "out", &[Some(v), Some(3)], &["V"]).map_err(at)?;
+            held.push(Held { kind, positions, influences, deform, rest, premat, postmat, mask, blend, blend_factor: blend_factor as f32, out });
+        }
+        let mut many = Vec::with_capacity(held.len());
+        for h in held.iter_mut() {
+            let mask = match &h.mask { Some(m) => Some(m.as_slice()?), None => None };
+            let blend = match &h.blend { Some(m) => Some(m.as_slice()?), None => None };
+            let method = match h.kind {
+                0 => Method::Linear,
+                1 => Method::DualQuaternion,
+                _ => Method::Blend { amount: blend, factor: h.blend_factor },
+            };
+            many.push(dqskin_core::ManyJob {
+                method,
+                positions: as_points(h.positions.as_slice()?),
+                influences: &h.influences.get().0,
+                deform: &h.deform,
+                rest: h.rest.as_deref(),
+                options: SkinOptions { premat: h.premat, postmat: h.postmat, mask },
+                out: as_points_mut(h.out.as_slice_mut()?),
+            });
+        }
+        let results = py.detach(|| dqskin_core::skin_many(&mut many));
+        Ok(results.into_iter().map(|r| r.err().map(|e| e.to_string())).collect())
+    })
+}
+
 fn as_points(flat: &[f32]) -> &[[f32; 3]] {
     let (chunks, rest) = flat.as_chunks::<3>();
     debug_assert!(rest.is_empty());
@@ -471,6 +555,7 @@ fn polygon_area(points: &Bound<'_, PyAny>) -> PyResult<f64> {
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyInfluences>()?;
     m.add_function(wrap_pyfunction!(skin, m)?)?;
+    m.add_function(wrap_pyfunction!(skin_many, m)?)?;
     m.add_function(wrap_pyfunction!(bbone_segment_matrices, m)?)?;
     m.add_function(wrap_pyfunction!(transform_points, m)?)?;
     m.add_function(wrap_pyfunction!(mesh_volume, m)?)?;

@@ -29,6 +29,7 @@ pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
 pub use influences::{Influence, Influences};
 pub use pose::{affine_problem, Pose};
 
+
 use glam::Mat4;
 
 /// Skinning method.
@@ -186,6 +187,33 @@ fn skin_with(
         crate::pool::run(|| kernels::run(&job, out, simd));
     }
     Ok(())
+}
+
+/// One skinning in a batch (see [`skin_many`]).
+pub struct ManyJob<'a> {
+    pub method: Method<'a>,
+    pub positions: &'a [[f32; 3]],
+    pub influences: &'a Influences,
+    pub deform: &'a [Mat4],
+    pub rest: Option<&'a [Mat4]>,
+    pub options: SkinOptions<'a>,
+    pub out: &'a mut [[f32; 3]],
+}
+
+/// Skins many meshes at once, in parallel across meshes (large ones also within), on the
+/// crate's thread pool: for scenes with many small characters, where one call per mesh would
+/// run each on one thread. Returns one result per job; a failed job leaves its `out` untouched.
+pub fn skin_many(jobs: &mut [ManyJob<'_>]) -> Vec<Result<(), SkinError>> {
+    use rayon::prelude::*;
+    let simd = kernels::Simd::detect();
+    let one = move |j: &mut ManyJob<'_>| {
+        let pose = Pose::new(j.deform, j.rest)?;
+        skin_with(simd, j.method, j.positions, j.influences, &pose, &j.options, j.out)
+    };
+    if jobs.len() <= 1 {
+        return jobs.iter_mut().map(one).collect();
+    }
+    crate::pool::run(|| jobs.par_iter_mut().with_max_len(1).map(one).collect())
 }
 
 fn check_len(what: &'static str, expected: usize, got: usize) -> Result<(), SkinError> {

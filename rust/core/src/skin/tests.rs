@@ -538,3 +538,50 @@ fn results_do_not_depend_on_the_thread_count() {
     assert_eq!(a, b);
 }
 
+
+#[test]
+fn skin_many_equals_one_call_per_mesh_and_reports_each_error() {
+    use super::{skin_many, ManyJob};
+    let (positions, influences, deform, rest) = crate::skin::tests::batch_fixture(300, 5, 3);
+    let (p2, i2, d2, r2) = crate::skin::tests::batch_fixture(9000, 7, 4);
+    let mut want1 = vec![[0.0f32; 3]; positions.len()];
+    let mut want2 = vec![[0.0f32; 3]; p2.len()];
+    let pose1 = Pose::new(&deform, Some(&rest)).unwrap();
+    let pose2 = Pose::new(&d2, Some(&r2)).unwrap();
+    skin(Method::DualQuaternion, &positions, &influences, &pose1, &SkinOptions::default(), &mut want1).unwrap();
+    skin(Method::Linear, &p2, &i2, &pose2, &SkinOptions::default(), &mut want2).unwrap();
+    let mut out1 = vec![[9.0f32; 3]; positions.len()];
+    let mut out2 = vec![[9.0f32; 3]; p2.len()];
+    let mut bad_out = vec![[7.0f32; 3]; 4];
+    let mut jobs = vec![
+        ManyJob { method: Method::DualQuaternion, positions: &positions, influences: &influences, deform: &deform, rest: Some(&rest), options: SkinOptions::default(), out: &mut out1 },
+        ManyJob { method: Method::Linear, positions: &p2, influences: &i2, deform: &d2, rest: Some(&r2), options: SkinOptions::default(), out: &mut out2 },
+        ManyJob { method: Method::Linear, positions: &p2, influences: &i2, deform: &d2, rest: None, options: SkinOptions::default(), out: &mut bad_out },
+    ];
+    let results = skin_many(&mut jobs);
+    drop(jobs);
+    assert!(results[0].is_ok() && results[1].is_ok());
+    assert!(matches!(results[2], Err(SkinError::LengthMismatch { what: "out", .. })));
+    assert_eq!(out1, want1);
+    assert_eq!(out2, want2);
+    assert_eq!(bad_out, vec![[7.0f32; 3]; 4]);
+}
+
+/// Random positions, `bones` bones with random rigid deforms, `k` influences per vertex.
+pub(crate) fn batch_fixture(n: usize, bones: usize, k: usize) -> (Vec<[f32; 3]>, Influences, Vec<Mat4>, Vec<Mat4>) {
+    let mut seed = 12345u64 + n as u64;
+    let mut rnd = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed % 10_000) as f32 / 10_000.0
+    };
+    let positions: Vec<[f32; 3]> = (0..n).map(|_| [rnd() * 4.0 - 2.0, rnd() * 4.0 - 2.0, rnd() * 4.0]).collect();
+    let lists: Vec<Vec<(u32, f32)>> = (0..n).map(|_| (0..k).map(|_| (((rnd() * bones as f32) as u32).min(bones as u32 - 1), rnd())).collect()).collect();
+    let influences = Influences::from_lists(&lists, bones).unwrap();
+    let rest: Vec<Mat4> = (0..bones).map(|b| Mat4::from_translation(glam::Vec3::new(0.0, 0.0, b as f32))).collect();
+    let deform: Vec<Mat4> = (0..bones)
+        .map(|_| Mat4::from_rotation_translation(glam::Quat::from_axis_angle(glam::Vec3::new(rnd(), rnd(), rnd() + 0.1).normalize(), rnd() * 3.0), glam::Vec3::new(rnd(), rnd(), rnd())))
+        .collect();
+    (positions, influences, deform, rest)
+}

@@ -112,9 +112,10 @@ def unregister():
     for handlers, fn in HANDLERS:
         while fn in handlers:
             handlers.remove(fn)
-    # Without the add-on, Blender's own deformation takes over (as in a saved file).
+    # Without the add-on, Blender's own deformation takes over (as in a saved file), and the
+    # results are let go (never saved).
     try:
-        REGISTRY.deactivate_all(detach=False)
+        REGISTRY.deactivate_all(detach=True)
     except Exception:
         pass
     REGISTRY.reset()

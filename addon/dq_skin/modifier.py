@@ -466,17 +466,17 @@ def finish(plan: Plan) -> None:
         results.points_mesh(result, len(st.out))
         st.result_version = 0
     results.write_positions(result, st.out)
-    steady = st.live and st.result is result and st.parked
     results.set_mode(result, mode)
     st.result = result
-    if not steady:
-        c = obj.modifiers.get(st.companion) if st.companion else None
-        if c is None or c.type != "ARMATURE":
-            c = companion.find(obj, mod)
-            st.companion = c.name if c is not None else ""
-        if c is not None and not companion.is_parked(c):
-            companion.park(c)
-        st.parked = True
+    # The companion stays parked while DQ Skin deforms (re-parked if someone switched it on:
+    # both deforming would deform the mesh twice).
+    c = obj.modifiers.get(st.companion) if st.companion else None
+    if c is None or c.type != "ARMATURE":
+        c = companion.find(obj, mod)
+        st.companion = c.name if c is not None else ""
+    if c is not None and not companion.is_parked(c):
+        companion.park(c)
+    st.parked = True
     st.signature = plan.signature
     st.mode = "replace" if mode == nodes.RESULT_REPLACE else "positions"
     st.error = ""

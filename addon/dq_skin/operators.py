@@ -80,33 +80,59 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
     bl_options = {"REGISTER", "UNDO"}
 
     method: bpy.props.EnumProperty(name="Method", items=METHOD_ITEMS, default="AUTO")
+    all_selected: bpy.props.BoolProperty(
+        name="All Selected",
+        description="Add DQ Skin to every selected mesh with an Armature modifier, not only the active one "
+        "(one dependency-graph rebuild for all of them)",
+        default=False,
+    )
 
     def execute(self, context):
-        obj = context.active_object
-        if obj.library is not None:
-            self.report({"ERROR"}, f"{obj.name} is linked from a library: make a Library Override first")
+        active = context.active_object
+        targets = [active]
+        if self.all_selected:
+            chosen = [o for o in context.selected_objects if o.type == "MESH" and o is not active]
+            targets = [active, *chosen] if active is not None and active.type == "MESH" else chosen
+        added, problems = [], []
+        with REGISTRY.suspend():
+            for obj in targets:
+                problem = self._add(obj)
+                if problem:
+                    problems.append(problem)
+                else:
+                    added.append(obj)
+        if not added:
+            self.report({"ERROR"}, "; ".join(problems) or "Nothing to add DQ Skin to")
             return {"CANCELLED"}
+        # Skin right away, so the first frame is already DQ Skin's (and binding errors show).
+        # The view layer's depsgraph as last evaluated (the armatures' poses are there): forcing
+        # an evaluation here would rebuild the scene's relations once more for nothing.
+        REGISTRY.ensure()
+        depsgraph = context.view_layer.depsgraph
+        for obj in added:
+            rec = REGISTRY.records.get(obj.session_uid) or REGISTRY._add(obj)
+            REGISTRY._describe(rec)
+            REGISTRY.evaluate(rec, depsgraph)
+        if len(added) == 1:
+            mod = modifier.dq_skin_modifiers(added[0])[-1]
+            self.report({"INFO"}, f"DQ Skin ({nodes.get_method(mod)}) replaces {nodes.get_companion(mod)['name']!r} on {added[0].name}")
+        else:
+            self.report({"INFO"}, f"DQ Skin added to {len(added)} objects" + (f"; skipped: {'; '.join(problems)}" if problems else ""))
+        return {"FINISHED"}
+
+    def _add(self, obj) -> str:
+        """Adds DQ Skin to `obj`; returns what is wrong instead, if anything."""
+        if obj.library is not None:
+            return f"{obj.name} is linked from a library: make a Library Override first"
         taken = {nodes.get_companion(m).get("name") for m in modifier.dq_skin_modifiers(obj)}
         armature_mods = [m for m in obj.modifiers if m.type == "ARMATURE" and m.name not in taken]
         if not armature_mods:
-            self.report({"ERROR"}, f"{obj.name} has no Armature modifier to replace")
-            return {"CANCELLED"}
+            return f"{obj.name} has no Armature modifier to replace"
         source = next((m for m in armature_mods if m.show_viewport or m.show_render), armature_mods[0])
         if source.object is None:
-            self.report({"ERROR"}, f"The Armature modifier {source.name!r} has no armature object")
-            return {"CANCELLED"}
-        with REGISTRY.suspend():
-            mod = add(obj, source, self.method)
-        # Skin right away, so the first frame is already DQ Skin's (and binding errors show).
-        REGISTRY.ensure()
-        rec = REGISTRY.records.get(obj.session_uid) or REGISTRY._add(obj)
-        REGISTRY._describe(rec)
-        # The view layer's depsgraph as last evaluated (the armature's pose is there): forcing an
-        # evaluation here would rebuild the scene's relations once more for nothing.
-        REGISTRY.evaluate(rec, context.view_layer.depsgraph)
-        shown = nodes.get_method(mod)
-        self.report({"INFO"}, f"DQ Skin ({shown}) replaces {source.name!r} on {obj.name}")
-        return {"FINISHED"}
+            return f"The Armature modifier {source.name!r} has no armature object"
+        add(obj, source, self.method)
+        return ""
 
 
 def remove_modifier(obj, mod) -> None:

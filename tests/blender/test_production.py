@@ -759,3 +759,98 @@ def test_motion_blur_render_matches_the_armature_modifier(dq_skin, tmp_path):
 def same_picture(a: np.ndarray, b: np.ndarray) -> bool:
     """Equal up to rounding: at most 0.1 % of pixels differ by more than 2.5/255."""
     return float((np.abs(a - b).max(axis=-1) > 2.5 / 255).mean()) < 1e-3
+
+
+# -- weights: read fast, follow painting ---------------------------------------------------------
+
+@pytest.mark.parametrize("asset", ["RiggedSimple.glb", "RiggedFigure.glb", "CesiumMan.glb", "Fox.glb"])
+def test_weights_read_from_memory_equal_the_python_api(dq_skin, assets, asset):
+    """The vertex-group reader (Blender's memory, through its SDNA) gives exactly what
+    `MeshVertex.groups` gives, in stored order."""
+    from test_exactness import import_character
+
+    obj, _ = import_character(assets / asset)
+    meshdata = dq_skin.meshdata
+    assert meshdata.reader() is not None, meshdata._reader_error
+    fast = meshdata.read_groups(obj.data)
+    slow = meshdata._read_groups_slowly(obj.data)
+    assert fast is not None and slow is not None
+    np.testing.assert_array_equal(fast.offsets, slow.offsets)
+    np.testing.assert_array_equal(fast.groups, slow.groups)
+    np.testing.assert_array_equal(fast.weights, slow.weights)
+    assert len(fast.groups) > len(obj.data.vertices)  # several groups per vertex somewhere
+
+
+def test_weight_changes_show_on_the_next_evaluation(dq_skin):
+    """Painting weights (here `VertexGroup.add`/`remove`, what a brush stroke does to the data)
+    shows up skinned at once, as with the Armature modifier."""
+    obj, arm, _ = animated_tube()
+    add(obj, "DUAL_QUATERNION")
+    tw = twin(obj)
+    bpy.context.scene.frame_set(12)
+    assert_same(obj, tw)
+    before = evaluated_positions(obj)
+    rng = np.random.default_rng(2)
+    for step in range(4):
+        idx = rng.choice(len(obj.data.vertices), 40, replace=False).tolist()
+        group = obj.vertex_groups[step % 2]
+        group.add(idx, 0.9 - 0.2 * step, "REPLACE")
+        if step == 3:
+            obj.vertex_groups[0].remove(idx[:10])
+        bpy.context.view_layer.update()
+        assert_same(obj, tw, f"after weight change {step}")
+    assert np.abs(evaluated_positions(obj) - before).max() > 1e-3  # the weights really changed the result
+    # A new group for a bone that had none, and a mask group added on the DQ Skin modifier.
+    bone = arm.data.bones[0].name
+    obj.vertex_groups[bone].add([0, 1, 2], 1.0, "ADD")
+    bpy.context.view_layer.update()
+    assert_same(obj, tw)
+
+
+def test_add_to_all_selected_objects_at_once(dq_skin):
+    objs = []
+    for i in range(4):
+        obj, arm, _ = animated_tube(seed=0.1 * i)
+        arm.location.x = 2.0 * i
+        objs.append(obj)
+    plain = tube("Plain", 4, 6, 1.0, 0.2)  # no Armature modifier: skipped, said so
+    select_only(objs[0], *objs[1:], plain)
+    with bpy.context.temp_override(active_object=objs[0], selected_objects=[*objs, plain]):
+        assert bpy.ops.object.dq_skin_add(all_selected=True, method="DUAL_QUATERNION") == {"FINISHED"}
+    assert all(len(dq_skin_mods(o)) == 1 for o in objs) and not dq_skin_mods(plain)
+    assert all(state(dq_skin, o).live for o in objs)  # skinned right away
+    check_frames([(o, twin(o)) for o in objs], frames=(4, 15))
+
+
+def test_switching_the_companion_on_does_not_deform_twice(dq_skin):
+    obj, arm, _ = animated_tube()
+    mod = add(obj, "LINEAR")
+    tw = twin(obj)
+    bpy.context.scene.frame_set(8)
+    c = obj.modifiers["Armature"]
+    c.show_viewport = True
+    c.use_vertex_groups = True
+    bpy.context.view_layer.update()
+    bpy.context.scene.frame_set(9)
+    assert not c.show_viewport and not c.use_vertex_groups
+    assert_same(obj, tw)
+    assert state(dq_skin, obj, mod).live
+
+
+def test_disabling_the_add_on_leaves_blenders_deformation(dq_skin):
+    import addon_utils
+
+    obj, arm, _ = animated_tube()
+    add(obj, "DUAL_QUATERNION")
+    tw = twin(obj)
+    bpy.context.scene.frame_set(6)
+    addon_utils.disable("bl_ext.user_default.dq_skin", default_set=False)
+    try:
+        assert obj.modifiers["Armature"].show_viewport
+        assert get_input(dq_skin_mods(obj)[0], "Result") is None
+        check_frames([(obj, tw)], frames=(7, 14))
+    finally:
+        addon_utils.enable("bl_ext.user_default.dq_skin", default_set=False)
+    bpy.context.scene.frame_set(3)
+    assert state(dq_skin, obj).live and not obj.modifiers["Armature"].show_viewport
+    assert_same(obj, tw)

@@ -14,7 +14,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-USER = ROOT / ".blender_user"
+# The Blender user folder with the extension installed (`make setup` fills .blender_user/; the
+# tests of other Blender versions use their own, see the Makefile's test-blenders).
+USER = Path(os.environ.get("DQSKIN_BLENDER_USER", ROOT / ".blender_user"))
 ASSETS = ROOT.parent / "shared" / "assets"
 os.environ["BLENDER_USER_RESOURCES"] = str(USER)
 

@@ -19,11 +19,11 @@ def reference_copy(obj, preserve_volume: bool):
     DQ Skin was added, if it was)."""
     import json
 
+    from twins import dq_skin_mods, get_input
+
     original = {}
-    for m in obj.modifiers:
-        if m.type == "NODES" and m.node_group is not None and m.node_group.get("dq_skin_version"):
-            ident = next(i.identifier for i in m.node_group.interface.items_tree if getattr(i, "name", "") == "Companion")
-            original = json.loads(m[ident] or "{}").get("original", {})
+    for m in dq_skin_mods(obj):
+        original = json.loads(get_input(m, "Companion") or "{}").get("original", {})
     copy = obj.copy()
     bpy.context.scene.collection.objects.link(copy)
     for m in list(copy.modifiers):

@@ -51,10 +51,11 @@ class Progress:
             self.wm.progress_end()
 
 
-def bake(context, obj, mod, path, frame_start: int, frame_end: int) -> pc2.Header:
+def bake(context, obj, mod, path, frame_start: int, frame_end: int, check=None) -> pc2.Header:
     """Writes the modifier's output for every frame of `[frame_start, frame_end]` to `path` (PC2,
     object space). Modifiers after it are muted while baking, so the cache holds exactly what DQ
-    Skin passes on. Nothing is written under `path` if anything fails."""
+    Skin passes on. Nothing is written under `path` if anything fails. `check` is called before
+    every frame and may raise to stop (the command line's Ctrl-C and SIGTERM)."""
     if frame_end < frame_start:
         raise ValueError(f"the frame range {frame_start}–{frame_end} is empty")
     scene = context.scene
@@ -67,7 +68,11 @@ def bake(context, obj, mod, path, frame_start: int, frame_end: int) -> pc2.Heade
             m.show_viewport = False
         with pc2.Writer(path, len(obj.data.vertices), frame_start, 1.0) as writer:
             for frame in range(frame_start, frame_end + 1):
+                if check is not None:
+                    check()
                 scene.frame_set(frame)
+                if check is not None:
+                    check()
                 depsgraph = context.evaluated_depsgraph_get()
                 st = modifier.state(obj, mod)
                 if st.error:

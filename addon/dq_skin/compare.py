@@ -191,9 +191,11 @@ def _closed(mesh) -> bool:
     return bool(counts) and all(c == 2 for c in counts.values())
 
 
-def report(context, scene, rows, frames):
+def report(context, scene, rows, frames, check=None):
     """Per row and variant: max and mean deviation from both built-in methods, volume relative
-    to rest (closed meshes), and the per-frame evaluation time."""
+    to rest (closed meshes), and the per-frame evaluation time. `check` is called every frame and
+    may raise to stop (the command line's Ctrl-C and SIGTERM)."""
+    check = check or (lambda: None)
     result = []
     for row in rows:
         names = list(row)
@@ -205,6 +207,7 @@ def report(context, scene, rows, frames):
         rest_volume = dqskin.mesh_volume(rest_co.reshape(-1, 3), tris) if tris is not None else None
         per = {n: {"positions": [], "seconds": 0.0} for n in names}
         for f in frames:
+            check()
             scene.frame_set(f)
             depsgraph = context.evaluated_depsgraph_get()
             for n in names:
@@ -217,6 +220,7 @@ def report(context, scene, rows, frames):
                 row[o].hide_viewport = True
             start = time.perf_counter()
             for f in frames:
+                check()
                 scene.frame_set(f)
                 _positions(row[n], context.evaluated_depsgraph_get())
             per[n]["seconds"] = time.perf_counter() - start
@@ -266,8 +270,8 @@ def write_report(result, out_dir, source: str, frames, picture: str | None = Non
         "report.md": "\n".join(lines) + "\n",
     }
     for name, text in texts.items():
-        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)
-        with os.fdopen(fd, "w") as f:
+        tmp = out / f".{name}.dqskin-{os.getpid()}.tmp"
+        with open(tmp, "w") as f:
             f.write(text)
         os.replace(tmp, out / name)
 

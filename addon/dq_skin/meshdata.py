@@ -110,12 +110,11 @@ def reader():
 
 def read_groups(mesh) -> Groups | None:
     """The mesh's vertex-group weights (None if it has no vertex-group data)."""
-    n = len(mesh.vertices)
     r = reader()
     if r is not None and not mesh.is_editmode:
         try:
-            got = r.deform_verts(mesh.as_pointer(), n)
-        except ValueError:
+            got = r.deform_verts(mesh)
+        except (ValueError, TypeError):
             got = False
         if got is not False:
             return None if got is None else Groups(*got)
@@ -140,7 +139,8 @@ def _read_groups_slowly(mesh) -> Groups | None:
 
 def _positions(mesh) -> np.ndarray:
     flat = np.empty(len(mesh.vertices) * 3, np.float32)
-    mesh.attributes["position"].data.foreach_get("vector", flat)
+    if len(flat):  # an empty mesh has no position attribute at all
+        mesh.attributes["position"].data.foreach_get("vector", flat)
     return flat.reshape(-1, 3)
 
 

@@ -357,6 +357,8 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
         raise SkinError(f"{obj.name} is in Edit Mode: DQ Skin resumes in Object Mode")
     depsgraph = ctx.depsgraph
     data = meshdata.get(obj)
+    if data.vertex_count == 0:
+        raise SkinError(f"{obj.name}'s mesh has no vertices: nothing to skin")
     arm_eval = arm.evaluated_get(depsgraph)
 
     # What reaches the modifier.

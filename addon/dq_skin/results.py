@@ -45,11 +45,18 @@ def usable(result, owner: str, claimed: set) -> bool:
 def create(obj, mod, owner: str):
     """A new, empty result object for `mod` on `obj` (its location says "pass through")."""
     name = f".DQ Skin result {obj.name} {mod.name}"
-    mesh = bpy.data.meshes.new(name)
-    result = bpy.data.objects.new(name, mesh)
+    mesh = runtime(bpy.data.meshes.new(name))
+    result = runtime(bpy.data.objects.new(name, mesh))
     result[TAG] = 1
     result[OWNER] = owner
     return result
+
+
+def runtime(datablock):
+    """Marks a data-block of ours as runtime data: Blender never writes it to a file, so a saved
+    file holds no copy of a result mesh (whose object is not saved either)."""
+    datablock.is_runtime_data = True
+    return datablock
 
 
 def remove(result) -> None:
@@ -102,7 +109,7 @@ def replace_mesh(result, source_mesh) -> None:
     """Makes the result's mesh a copy of `source_mesh` (its attributes, groups, topology, shared
     with it until written) without shape keys."""
     old = result.data
-    mesh = source_mesh.copy()
+    mesh = runtime(source_mesh.copy())
     mesh.name = result.name
     result.data = mesh
     if mesh.shape_keys is not None:
@@ -117,7 +124,7 @@ def points_mesh(result, count: int) -> None:
     if len(mesh.vertices) == count and not len(mesh.polygons) and not len(mesh.edges):
         return
     old = mesh
-    mesh = bpy.data.meshes.new(result.name)
+    mesh = runtime(bpy.data.meshes.new(result.name))
     mesh.vertices.add(count)
     result.data = mesh
     if old is not None and old.users == 0:

@@ -16,6 +16,7 @@ Skinning matches Blender's Armature modifier: ``method='linear'`` is Preserve Vo
 """
 
 from ._dqskin import (
+    MAX_INFLUENCES_PER_VERTEX,
     angular_speeds,
     continuous_signs,
     curvature_energy,
@@ -53,6 +54,7 @@ from ._dqskin import _panic_for_tests  # noqa: F401  (tests check panics become 
 from ._dqskin import _MeshMemory  # noqa: F401  (the Blender extension's vertex-group reader)
 
 __all__ = [
+    "MAX_INFLUENCES_PER_VERTEX",
     "angular_speeds",
     "continuous_signs",
     "curvature_energy",

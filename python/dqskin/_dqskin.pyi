@@ -6,6 +6,7 @@ import numpy as np
 import numpy.typing as npt
 
 __version__: str
+MAX_INFLUENCES_PER_VERTEX: int  # more influences on one vertex are refused (ValueError)
 
 F32Array = npt.NDArray[np.float32]
 IntArray = npt.NDArray[np.integer]
@@ -226,7 +227,10 @@ def sample_transforms(times: ArrayLike, keys: ArrayLike, at: ArrayLike) -> F32Ar
 def spring(
     times: ArrayLike, keys: ArrayLike, step: float = 1.0, levels: int = 3, iterations: int = 400, key_weight: float = 1.2
 ) -> F32Array:
-    """Dam et al.'s curvature-minimizing Spring through the keys, every ``step``; ``(T, 4)``."""
+    """Dam et al.'s curvature-minimizing Spring through the keys, every ``step``; ``(T, 4)``.
+
+    At most 5,000,000 samples, 20 ``levels`` and 1,000,000 ``iterations`` per level (ValueError
+    beyond); Ctrl-C stops it with KeyboardInterrupt."""
 
 def angular_speeds(rotations: ArrayLike) -> F32Array:
     """Rotation angle (radians) between consecutive rotations; ``(T-1,)``."""
@@ -266,9 +270,8 @@ def armature_spaces(object_world: ArrayLike, armature_world: ArrayLike) -> tuple
 class _MeshMemory:
     """Internal to the Blender extension: reads vertex-group weights from Blender's memory."""
     def __init__(self, blend_file: bytes) -> None: ...
-    def deform_verts(
-        self, mesh_pointer: int, vertex_count: int
-    ) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], F32Array] | None: ...
+    def deform_verts(self, mesh: object) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], F32Array] | None:
+        """The vertex-group weights of a ``bpy.types.Mesh`` in CSR form (None without any)."""
 
 def skin_many(
     jobs: list[

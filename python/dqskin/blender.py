@@ -16,16 +16,21 @@ Commands:
   (Linear, Dual Quaternion, Blend) side by side: ``report.json`` and ``report.md`` (deviations
   from each built-in method, volume relative to rest, per-frame time) and ``comparison.png``.
 
-On failure the exit code is non-zero with a one-line reason, and no output file is written (all
-outputs go to a temporary file that is renamed into place).
+On failure the exit code is 1 with a one-line reason (``DQSKIN_DEBUG=1`` adds the traceback),
+and no output file is written: all outputs go to a temporary file ``.NAME.dqskin-PID.tmp`` that
+is renamed into place. Ctrl-C (SIGINT) and SIGTERM stop any command between two frames (a
+Cycles render in progress finishes its image first), remove the temporary files, leave existing
+outputs untouched and exit with 130 and 143. SIGKILL cannot be caught: the next run writing the
+same output removes the temporaries of processes that no longer run.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
-import tempfile
+import traceback
 from pathlib import Path
 
 EXTENSION = "bl_ext.user_default.dq_skin"
@@ -33,6 +38,55 @@ EXTENSION = "bl_ext.user_default.dq_skin"
 
 class Failure(Exception):
     """A one-line reason to stop with a non-zero exit code."""
+
+
+class Interrupted(BaseException):
+    """Ctrl-C or SIGTERM: stop now (a BaseException, so no `except Exception` swallows it)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+_signalled: list[int] = []
+_deferred = [0]
+
+
+def _on_signal(signum, _frame):
+    _signalled.append(signum)
+    if not _deferred[0]:
+        raise Interrupted(signum)
+
+
+class deferred:
+    """While Blender runs Python callbacks (frame handlers), a signal is only recorded: raised
+    there, Blender would print it as a handler error and go on. `check()` raises it after."""
+
+    def __enter__(self):
+        _deferred[0] += 1
+
+    def __exit__(self, *exc):
+        _deferred[0] -= 1
+
+
+def watch_signals() -> None:
+    """Ctrl-C and SIGTERM raise `Interrupted` (Blender's own handlers would ignore them)."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _on_signal)
+
+
+def check() -> None:
+    """Raises `Interrupted` if a signal came while Blender was running Python handlers (which
+    print exceptions instead of raising them)."""
+    if _signalled:
+        raise Interrupted(_signalled[0])
+
+
+def _temporary(path: Path) -> Path:
+    from . import pc2
+
+    pc2.remove_stale_temporaries(path)
+    return pc2.temporary_path(path)
 
 
 def _frames(text: str | None, scene) -> tuple[int, int]:
@@ -53,6 +107,7 @@ def _bpy(user_resources: str | None):
     import bpy  # noqa: F401  (after BLENDER_USER_RESOURCES)
     import addon_utils
 
+    watch_signals()  # again: importing bpy installs Blender's handlers
     if addon_utils.enable(EXTENSION, default_set=True) is None:
         raise Failure(
             f"the DQ Skin extension is not installed in {os.environ.get('BLENDER_USER_RESOURCES', 'the default user folder')}"
@@ -65,16 +120,25 @@ def _load(bpy, path: str) -> None:
     if not p.is_file():
         raise Failure(f"{path}: no such file")
     ext = p.suffix.lower()
-    if ext == ".blend":
-        bpy.ops.wm.open_mainfile(filepath=str(p))
-        return
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    if ext in (".glb", ".gltf"):
-        bpy.ops.import_scene.gltf(filepath=str(p))
-    elif ext == ".fbx":
-        bpy.ops.import_scene.fbx(filepath=str(p))
-    else:
+    if ext not in (".blend", ".glb", ".gltf", ".fbx"):
         raise Failure(f"{path}: unsupported file type {ext} (use .blend, .glb, .gltf or .fbx)")
+    try:
+        if ext == ".blend":
+            bpy.ops.wm.open_mainfile(filepath=str(p))
+        else:
+            bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+            if ext in (".glb", ".gltf"):
+                bpy.ops.import_scene.gltf(filepath=str(p))
+            else:
+                bpy.ops.import_scene.fbx(filepath=str(p))
+    except (RuntimeError, OSError, ValueError) as e:
+        raise Failure(f"{path}: cannot be read ({_last_line(e)})") from None
+    watch_signals()
+
+
+def _last_line(e: BaseException) -> str:
+    lines = [line.strip() for line in str(e).strip().splitlines() if line.strip()]
+    return lines[-1] if lines else type(e).__name__
 
 
 def _skinned(bpy):
@@ -101,12 +165,16 @@ def cmd_bake(args) -> str:
             raise Failure(f"{obj.name} has neither a DQ Skin nor an Armature modifier")
         _add_dq_skin(bpy, obj, args.method)
     start, end = _frames(args.frames, bpy.context.scene)
-    bpy.context.view_layer.objects.active = obj
-    with bpy.context.temp_override(object=obj, active_object=obj):
-        try:
-            bpy.ops.object.dq_skin_bake(filepath=str(Path(args.out).resolve()), frame_start=start, frame_end=end)
-        except RuntimeError as e:
-            raise Failure(str(e).strip().splitlines()[-1]) from None
+    from bl_ext.user_default.dq_skin import bake
+
+    mod = modifier.dq_skin_modifiers(obj)[0]
+    out = Path(args.out).resolve()
+    try:
+        with deferred():
+            bake.bake(bpy.context, obj, mod, out, start, end, check=check)
+    except (RuntimeError, ValueError, OSError) as e:
+        raise Failure(_last_line(e)) from None
+    bake.add_cache_modifier(obj, mod, out, start)
     return f"baked {obj.name} frames {start}-{end} to {args.out}"
 
 
@@ -117,17 +185,24 @@ def cmd_apply(args) -> str:
     if not objects:
         raise Failure(f"{args.file}: no object has an Armature modifier")
     for obj in objects:
-        _add_dq_skin(bpy, obj, args.method)
+        check()
+        with deferred():
+            _add_dq_skin(bpy, obj, args.method)
     out = Path(args.out).resolve()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=".blend", dir=out.parent)
-    os.close(fd)
     try:
-        bpy.ops.wm.save_as_mainfile(filepath=tmp, copy=True)
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = _temporary(out)
+        try:
+            check()
+            with deferred():
+                bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True)
+            check()
+            os.replace(tmp, out)
+        finally:
+            if tmp.exists():
+                tmp.unlink()
+    except (RuntimeError, OSError) as e:
+        raise Failure(f"{out}: cannot be written ({_last_line(e)})") from None
     return f"replaced {len(objects)} Armature modifier(s) with DQ Skin in {out}"
 
 
@@ -137,7 +212,7 @@ def cmd_merge(args) -> str:
     try:
         header = pc2.merge([Path(p) for p in args.inputs], Path(args.out))
     except (pc2.PC2Error, OSError) as e:
-        raise Failure(str(e)) from None
+        raise Failure(_last_line(e)) from None
     return f"merged {len(args.inputs)} caches into {args.out}: frames {header.start_frame:g}-{header.end_frame:g}"
 
 
@@ -163,18 +238,37 @@ def cmd_compare(args) -> str:
         # The animation's own range rather than the scene's default 1-250.
         scene.frame_start, scene.frame_end = (int(round(f)) for f in action.frame_range)
     start, end = _frames(args.frames, scene)
-    _, rows = compare.build(bpy.context, sources)
-    result = compare.report(bpy.context, scene, rows, list(range(start, end + 1)))
+    with deferred():
+        _, rows = compare.build(bpy.context, sources)
+        result = compare.report(bpy.context, scene, rows, list(range(start, end + 1)), check=check)
+    check()
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise Failure(f"{out}: cannot be written ({_last_line(e)})") from None
     picture = None
     if not args.no_render:
-        scene.frame_set(end)
-        tmp = out / ".comparison.render.png"
-        compare.render(scene, tmp, width=args.width, height=args.height, samples=args.samples)
-        os.replace(tmp, out / "comparison.png")
+        with deferred():
+            scene.frame_set(end)
+        check()
+        tmp = _temporary(out / "comparison.png").with_suffix(".png")
+        try:
+            check()
+            with deferred():
+                compare.render(scene, tmp, width=args.width, height=args.height, samples=args.samples)
+            check()
+            os.replace(tmp, out / "comparison.png")
+        except (RuntimeError, OSError) as e:
+            raise Failure(f"{out}: cannot write the picture ({_last_line(e)})") from None
+        finally:
+            if tmp.exists():
+                tmp.unlink()
         picture = "comparison.png"
-    compare.write_report(result, out, name, [start, end], picture)
+    try:
+        compare.write_report(result, out, name, [start, end], picture)
+    except OSError as e:
+        raise Failure(f"{out}: cannot write the report ({_last_line(e)})") from None
     return f"compared {name} over frames {start}-{end}: {out / 'report.md'}"
 
 
@@ -214,12 +308,21 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     if argv is None:
         argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+    watch_signals()
     args = parser().parse_args(argv)
     try:
         print(args.run(args))
         return 0
+    except Interrupted as e:
+        print(f"dqskin.blender {args.command}: interrupted ({e}); nothing written", file=sys.stderr)
+        return 128 + e.signum
     except Failure as e:
         print(f"dqskin.blender {args.command}: {e}", file=sys.stderr)
+        return 1
+    except Exception as e:  # a bug: one line, the traceback on request
+        if os.environ.get("DQSKIN_DEBUG"):
+            traceback.print_exc()
+        print(f"dqskin.blender {args.command}: {type(e).__name__}: {_last_line(e)} (DQSKIN_DEBUG=1 shows where)", file=sys.stderr)
         return 1
 
 

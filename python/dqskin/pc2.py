@@ -5,14 +5,19 @@ points, float32 start frame, float32 sample rate (frames between samples), int32
 samples, then ``samples × points × 3`` float32 coordinates.
 
 Files are written to a temporary file beside the target and renamed into place when complete,
-so a failed or interrupted bake never leaves a partial cache under the final name.
+so a failed or interrupted bake never leaves a partial cache under the final name. Temporary
+files are named ``.NAME.dqskin-PID.tmp``: one left by a killed process (SIGKILL cannot be
+caught) is removed by the next write of the same file.
+
+Reading is defensive: every count is checked against the file's length before anything is
+allocated or looped over, and the frame numbers must be finite (the sample rate positive).
 """
 
 from __future__ import annotations
 
+import math
 import os
 import struct
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,8 +53,10 @@ def read_header(path) -> Header:
         raise PC2Error(f"{path}: not a PC2 file (bad signature)")
     if version != 1:
         raise PC2Error(f"{path}: unsupported PC2 version {version}")
-    if points < 0 or samples < 0:
-        raise PC2Error(f"{path}: negative point or sample count")
+    if points <= 0 or samples < 0:
+        raise PC2Error(f"{path}: {points} points and {samples} samples (a cache needs at least one point)")
+    if not (math.isfinite(start) and math.isfinite(rate) and rate > 0):
+        raise PC2Error(f"{path}: start frame {start} and sample rate {rate} (both must be finite, the rate positive)")
     size = os.path.getsize(path)
     expected = HEADER.size + points * samples * 12
     if size != expected:
@@ -71,10 +78,10 @@ class Writer:
     """
 
     def __init__(self, path, points: int, start_frame: float, sample_rate: float = 1.0):
-        if points < 0:
-            raise PC2Error("points must be ≥ 0")
-        if not sample_rate > 0:
-            raise PC2Error("sample_rate must be positive")
+        if points <= 0:
+            raise PC2Error("points must be at least 1")
+        if not (math.isfinite(start_frame) and math.isfinite(sample_rate) and sample_rate > 0):
+            raise PC2Error("start_frame must be finite and sample_rate finite and positive")
         self.path = Path(path)
         self.points = int(points)
         self.header = (float(start_frame), float(sample_rate))
@@ -84,9 +91,9 @@ class Writer:
 
     def __enter__(self) -> "Writer":
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
-        self._tmp = Path(tmp)
-        self._file = os.fdopen(fd, "wb")
+        remove_stale_temporaries(self.path)
+        self._tmp = temporary_path(self.path)
+        self._file = open(self._tmp, "xb")
         self._file.write(HEADER.pack(MAGIC, 1, self.points, *self.header, 0))
         return self
 
@@ -96,6 +103,14 @@ class Writer:
             raise PC2Error(f"a sample must have shape ({self.points}, 3), got {a.shape}")
         self._file.write(a.tobytes())
         self.samples += 1
+
+    def add_many(self, samples) -> None:
+        """Several samples ``(n, points, 3)`` in one write."""
+        a = np.ascontiguousarray(samples, dtype="<f4")
+        if a.ndim != 3 or a.shape[1:] != (self.points, 3):
+            raise PC2Error(f"samples must have shape (n, {self.points}, 3), got {a.shape}")
+        self._file.write(a.tobytes())
+        self.samples += a.shape[0]
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
@@ -110,6 +125,48 @@ class Writer:
         finally:
             if self._tmp is not None and self._tmp.exists():
                 self._tmp.unlink()
+
+
+def temporary_path(path) -> Path:
+    """Where a file is written before it is renamed to `path`: recognisable (and this
+    process's), so that one left behind by a killed run can be cleaned up."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.dqskin-{os.getpid()}.tmp")
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
+
+
+def remove_stale_temporaries(path) -> list[Path]:
+    """Removes temporary files for `path` left by processes that no longer run; returns them."""
+    path = Path(path)
+    removed = []
+    prefix, suffix = f".{path.name}.dqskin-", ".tmp"
+    try:
+        entries = list(path.parent.iterdir())
+    except OSError:
+        return removed
+    for p in entries:
+        name = p.name
+        if not (name.startswith(prefix) and name.endswith(suffix)):
+            continue
+        pid_text = name[len(prefix):-len(suffix)]
+        if pid_text.isdigit() and not _alive(int(pid_text)):
+            try:
+                p.unlink()
+                removed.append(p)
+            except OSError:
+                pass
+    return removed
 
 
 def write(path, samples, start_frame: float, sample_rate: float = 1.0) -> Header:
@@ -143,6 +200,5 @@ def merge(paths, out) -> Header:
     with Writer(out, first.points, first.start_frame, first.sample_rate) as w:
         for _, p in headers:
             _, data = read(p)
-            for s in data:
-                w.add(s)
+            w.add_many(data)
     return read_header(out)

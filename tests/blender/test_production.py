@@ -329,8 +329,9 @@ def test_saved_file_has_no_results_and_active_companions(dq_skin, tmp_path):
     path = tmp_path / "a.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path), copy=True)
     with bpy.data.libraries.load(str(path), link=True) as (src, dst):
-        names = list(src.objects)
+        names = list(src.objects) + list(src.meshes)
         dst.objects = [obj.name]
+    # Neither result objects nor their meshes (a copy of the character) are written.
     assert not any(n.startswith(".DQ Skin result") for n in names), names
     saved = dst.objects[0]
     assert saved.library is not None
@@ -340,6 +341,28 @@ def test_saved_file_has_no_results_and_active_companions(dq_skin, tmp_path):
     # Still live here after saving.
     bpy.context.scene.frame_set(9)
     assert state(dq_skin, obj).live and not obj.modifiers["Armature"].show_viewport
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_undo_and_redo_stay_exact_and_leave_no_orphans(dq_skin, method):
+    obj, arm, _ = animated_tube()
+    mod = add(obj, method)
+    ref = twin(obj, "twin", share_mesh=False)
+    names = (obj.name, ref.name, arm.name)
+    bpy.context.scene.frame_set(4)
+    bpy.ops.ed.undo_push(message="frame 4")
+    arm.location.x += 0.5
+    arm.pose.bones[1].rotation_quaternion = Quaternion((0.0, 1.0, 0.0), 1.1)
+    bpy.context.view_layer.update()
+    bpy.ops.ed.undo_push(message="moved")
+    for step in ("undo", "redo", "undo"):
+        assert getattr(bpy.ops.ed, step)() == {"FINISHED"}
+        obj, ref, arm = (bpy.data.objects[n] for n in names)  # undo re-reads data-blocks
+        check_frames([(obj, ref)], frames=(4, 11, 17))
+        results = [o for o in bpy.data.objects if o.get("dq_skin_result")]
+        assert len(results) == 1, [o.name for o in results]
+        assert not [d.name for d in (*bpy.data.meshes, *bpy.data.objects) if d.users == 0]
+        assert state(dq_skin, obj).live
 
 
 # -- Apply, remove, several DQ Skins ------------------------------------------------------------

@@ -115,9 +115,9 @@ SKIN_CASES = [
     ("blend NaN", valid, {"method": "blend", "blend": np.float32([0, 0, 0, np.nan, 0])}, ValueError, r"blend amount\[3\] = NaN"),
     ("blend wrong length", valid, {"method": "blend", "blend": np.zeros(V + 1, np.float32)}, ValueError, r"blend must have shape"),
     ("blend float64", valid, {"method": "blend", "blend": np.zeros(V)}, TypeError, r"blend.*float32"),
-    ("blend_factor above 1", valid, {"method": "blend", "blend_factor": 1.5}, ValueError, r"blend factor = 1.5 is outside \[0, 1\]"),
-    ("blend_factor negative", valid, {"method": "blend", "blend_factor": -0.5}, ValueError, r"blend factor.*outside \[0, 1\]"),
-    ("blend_factor NaN", valid, {"method": "blend", "blend_factor": float("nan")}, ValueError, r"blend factor = NaN"),
+    ("blend_factor above 1", valid, {"method": "blend", "blend_factor": 1.5}, ValueError, r"blend_factor = 1.5 is outside \[0, 1\]"),
+    ("blend_factor negative", valid, {"method": "blend", "blend_factor": -0.5}, ValueError, r"blend_factor.*outside \[0, 1\]"),
+    ("blend_factor NaN", valid, {"method": "blend", "blend_factor": float("nan")}, ValueError, r"blend_factor must be finite"),
     ("mask wrong length", valid, {"mask": np.ones(V - 1, np.float32)}, ValueError, r"mask must have shape"),
     ("mask above 1", valid, {"mask": np.float32([1, 1, 1, 2, 1])}, ValueError, r"mask\[3\] = 2 is outside \[0, 1\]"),
     ("mask negative", valid, {"mask": np.float32([-1, 1, 1, 1, 1])}, ValueError, r"mask\[0\] = -1 is outside \[0, 1\]"),
@@ -237,10 +237,10 @@ F32 = np.float32
         (np.array([0, 1]), np.array([0, 1]), F32([1, 1]), 2, ValueError, r"offsets\[-1\] is 1 but there are 2 influences"),
         (np.array([0, 3]), np.array([0, 1]), F32([1, 1]), 2, ValueError, r"offsets\[-1\] is 3"),
         (np.array([], I32), np.array([], I32), F32([]), 2, ValueError, r"offsets must have one entry per vertex plus one"),
-        (np.array([0, 2]), np.array([0, 4]), F32([1, 1]), 4, ValueError, r"bones\[1\] = 4 is out of range: there are 4 bones"),
+        (np.array([0, 2]), np.array([0, 4]), F32([1, 1]), 4, ValueError, r"bones\[1\] = 4 is out of range: bone_count = 4"),
         (np.array([0, 2]), np.array([0, 2]), F32([1, 1]), 2, ValueError, r"bones\[1\] = 2 is out of range"),
         (np.array([0, 2]), np.array([-1, 0]), F32([1, 1]), 2, ValueError, r"bones\[0\] = -1 is out of range"),
-        (np.array([0, 1]), np.array([0]), F32([1]), 0, ValueError, r"bones\[0\] = 0 is out of range: there are 0 bones"),
+        (np.array([0, 1]), np.array([0]), F32([1]), 0, ValueError, r"bones\[0\] = 0 is out of range: bone_count = 0"),
         (np.array([0, -1]), np.array([], I32), F32([]), 1, ValueError, r"offsets\[1\] = -1 is out of range"),
         (np.array([0, 2]), np.array([0, 1]), F32([1, -0.1]), 2, ValueError, r"weights\[1\] = -0.1 is not a finite non-negative number"),
         (np.array([0, 2]), np.array([0, 1]), F32([np.nan, 1]), 2, ValueError, r"weights\[0\] = NaN is not a finite non-negative number"),
@@ -320,7 +320,7 @@ def test_blend_rejects(fn, transforms, weights, exc, pattern):
 
 @pytest.mark.parametrize("precision", [-1e-6, float("nan"), float("inf")])
 def test_dib_rejects_bad_precision(precision):
-    with pytest.raises(ValueError, match=r"precision must be a finite number"):
+    with pytest.raises(ValueError, match=r"precision must be (a )?finite"):
         dqskin.dib(TWO, F32([1, 1]), precision=precision)
 
 
@@ -329,17 +329,17 @@ def notes(exc):
 
 
 def test_wrong_python_types_for_scalar_arguments_name_the_argument():
-    """pyo3 checks plain Python arguments and names them in a note ("while processing ...")."""
+    """Plain Python arguments of the wrong kind: a TypeError whose message names the argument."""
     a = valid()
-    with pytest.raises(TypeError) as info:
+    with pytest.raises(TypeError, match="method must be a string"):
         call(a, method=3)
-    assert "'method'" in notes(info.value)
-    with pytest.raises(TypeError) as info:
+    with pytest.raises(TypeError, match="blend_factor must be a real number"):
         call(a, method="blend", blend_factor="half")
-    assert "'blend_factor'" in notes(info.value)
-    with pytest.raises(TypeError) as info:
+    with pytest.raises(TypeError, match="bone_count must be an integer"):
         dqskin.Influences(np.array([0, 1]), np.array([0]), F32([1]), "two")
-    assert "'bone_count'" in notes(info.value)
+    # Huge integers: ValueError naming the argument, not OverflowError.
+    with pytest.raises(ValueError, match="bone_count must be between"):
+        dqskin.Influences(np.array([0, 1]), np.array([0]), F32([1]), 10**30)
     # A negative count is bad input like any other: ValueError naming the argument.
     with pytest.raises(ValueError, match="max_iterations"):
         dqskin.dib(TWO, F32([1, 1]), max_iterations=-1)
@@ -506,11 +506,11 @@ def test_set_num_threads_rejects_less_than_one(n):
 
 
 def test_twist_cylinder_rejects_bad_sizes():
-    with pytest.raises(ValueError, match=r"at least 2 rings of 3 segments"):
+    with pytest.raises(ValueError, match=r"rings must be between 2 and"):
         dqskin.TwistCylinder(rings=1)
-    with pytest.raises(ValueError, match=r"length and radius must be positive"):
+    with pytest.raises(ValueError, match=r"radius must be positive"):
         dqskin.TwistCylinder(radius=-1.0)
-    with pytest.raises(IndexError, match=r"ring 33 does not exist"):
+    with pytest.raises(ValueError, match=r"r must be between 0 and 32"):
         dqskin.TwistCylinder().ring(33)
 
 

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import time
+
 import struct
 
 import numpy as np
@@ -63,3 +68,65 @@ def test_bad_files_and_interrupted_writes(tmp_path):
     with pytest.raises(pc2.PC2Error, match="shape"):
         with pc2.Writer(tmp_path / "wrong.pc2", 3, 1) as w:
             w.add(np.zeros((4, 3)))
+
+
+# -- defensive reading and recognisable temporaries ------------------------------------------------
+
+def raw_pc2(path, points, start, rate, samples, data_floats=None):
+    with open(path, "wb") as f:
+        f.write(pc2.HEADER.pack(pc2.MAGIC, 1, points, start, rate, samples))
+        if data_floats is None:
+            data_floats = points * samples * 3
+        f.write(np.zeros(max(data_floats, 0), "<f4").tobytes())
+
+
+@pytest.mark.parametrize(
+    "points, start, rate, samples, words",
+    [
+        (3, 1.0, float("nan"), 2, "sample rate"),
+        (3, 1.0, 0.0, 2, "sample rate"),
+        (3, 1.0, -1.0, 2, "sample rate"),
+        (3, float("nan"), 1.0, 2, "start frame"),
+        (3, float("inf"), 1.0, 2, "start frame"),
+        (0, 1.0, 1.0, 2**31 - 1, "at least one point"),
+        (-1, 1.0, 1.0, 2, "at least one point"),
+    ],
+)
+def test_headers_that_make_no_sense_are_refused(tmp_path, points, start, rate, samples, words):
+    path = tmp_path / "bad.pc2"
+    raw_pc2(path, points, start, rate, samples, data_floats=0 if points <= 0 else None)
+    with pytest.raises(pc2.PC2Error, match=words):
+        pc2.read_header(path)
+
+
+def test_merging_a_zero_point_file_fails_at_once_and_leaves_nothing(tmp_path):
+    good = tmp_path / "a.pc2"
+    pc2.write(good, np.zeros((2, 3, 3), np.float32), 1.0)
+    bad = tmp_path / "b.pc2"
+    raw_pc2(bad, 0, 3.0, 1.0, 2**31 - 1, data_floats=0)
+    out = tmp_path / "out.pc2"
+    t = time.perf_counter()
+    with pytest.raises(pc2.PC2Error):
+        pc2.merge([good, bad], out)
+    assert time.perf_counter() - t < 1.0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.pc2", "b.pc2"]
+
+
+def test_sizes_are_checked_against_the_file_before_reading(tmp_path):
+    path = tmp_path / "short.pc2"
+    raw_pc2(path, 1000, 1.0, 1.0, 2**31 - 1, data_floats=30)
+    with pytest.raises(pc2.PC2Error, match="promises"):
+        pc2.read(path)
+
+
+def test_temporaries_of_dead_processes_are_removed_by_the_next_write(tmp_path):
+    out = tmp_path / "cache.pc2"
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    stale = tmp_path / f".cache.pc2.dqskin-{int(dead.stdout)}.tmp"
+    stale.write_bytes(b"x" * 100)
+    mine = tmp_path / f".cache.pc2.dqskin-{os.getppid()}.tmp"  # a live process: kept
+    mine.write_bytes(b"y")
+    other = tmp_path / ".other.pc2.dqskin-1.tmp"  # another output: kept
+    other.write_bytes(b"z")
+    pc2.write(out, np.zeros((1, 2, 3), np.float32), 1.0)
+    assert not stale.exists() and mine.exists() and other.exists() and out.exists()

@@ -13,6 +13,8 @@ static POOL: RwLock<Option<Arc<ThreadPool>>> = RwLock::new(None);
 pub enum PoolError {
     /// Zero threads were asked for.
     ZeroThreads,
+    /// More threads than [`max_threads`].
+    TooMany { asked: usize, max: usize },
     /// The operating system refused to start the threads.
     Spawn(String),
 }
@@ -21,6 +23,10 @@ impl core::fmt::Display for PoolError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             PoolError::ZeroThreads => write!(f, "the number of threads must be at least 1"),
+            PoolError::TooMany { asked, max } => write!(
+                f,
+                "{asked} threads is more than this machine can use: at most {max} (4 per core, at least 16, at most 1024)"
+            ),
             PoolError::Spawn(e) => write!(f, "could not start the worker threads: {e}"),
         }
     }
@@ -28,12 +34,24 @@ impl core::fmt::Display for PoolError {
 
 impl std::error::Error for PoolError {}
 
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// The most threads [`set_num_threads`] accepts: 4 per core, at least 16, at most 1024. More
+/// only compete for the same cores, and asking the operating system for thousands can fail
+/// halfway.
+pub fn max_threads() -> usize {
+    (4 * cores()).clamp(16, 1024)
+}
+
 fn default_threads() -> usize {
     std::env::var("DQSKIN_NUM_THREADS")
         .ok()
         .and_then(|s| s.trim().parse::<usize>().ok())
         .filter(|&n| n > 0)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .map(|n| n.min(max_threads()))
+        .unwrap_or_else(cores)
 }
 
 fn build(threads: usize) -> Result<ThreadPool, PoolError> {
@@ -63,6 +81,9 @@ fn pool() -> Arc<ThreadPool> {
 pub fn set_num_threads(threads: usize) -> Result<(), PoolError> {
     if threads == 0 {
         return Err(PoolError::ZeroThreads);
+    }
+    if threads > max_threads() {
+        return Err(PoolError::TooMany { asked: threads, max: max_threads() });
     }
     let p = Arc::new(build(threads)?);
     *POOL.write().unwrap_or_else(|e| e.into_inner()) = Some(p);

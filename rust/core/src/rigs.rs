@@ -24,6 +24,11 @@ pub struct TwistCylinder {
     pub radius: f32,
 }
 
+/// Size limits of [`TwistCylinder`] (16M vertices: about 1 GB with its influences).
+pub const MAX_RINGS: usize = 1 << 20;
+pub const MAX_SEGMENTS: usize = 1 << 20;
+pub const MAX_VERTICES: usize = 1 << 24;
+
 impl TwistCylinder {
     /// `rings ≥ 2` rings of `segments ≥ 3` vertices. Weights blend linearly from the lower bone
     /// to the upper one over the middle `blend_zone` fraction of the length.
@@ -37,6 +42,11 @@ impl TwistCylinder {
         let bad = |msg: &str| Err(SkinError::InvalidInfluences(msg.to_string()));
         if rings < 2 || segments < 3 {
             return bad("a cylinder needs at least 2 rings of 3 segments");
+        }
+        if rings > MAX_RINGS || segments > MAX_SEGMENTS || rings * segments > MAX_VERTICES {
+            return Err(SkinError::InvalidInfluences(format!(
+                "rings × segments = {rings} × {segments} is too large (at most {MAX_RINGS} rings, {MAX_SEGMENTS} segments, {MAX_VERTICES} vertices)"
+            )));
         }
         if !(length > 0.0 && radius > 0.0 && length.is_finite() && radius.is_finite()) {
             return bad("length and radius must be positive and finite");

@@ -24,12 +24,15 @@ pub enum TrackError {
     Key(String),
     /// Spring settings out of range.
     Settings(String),
+    /// Stopped by the caller's interrupt check (e.g. Ctrl-C).
+    Interrupted,
 }
 
 impl core::fmt::Display for TrackError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             TrackError::Shape(m) | TrackError::Times(m) | TrackError::Key(m) | TrackError::Settings(m) => f.write_str(m),
+            TrackError::Interrupted => f.write_str("interrupted"),
         }
     }
 }
@@ -218,29 +221,55 @@ impl Default for SpringSettings {
 /// projected gradient descent from Slerp, coarse to fine. Key times must lie on the sample grid.
 /// Returns the samples (unit quaternions) at `times[0] + k·step`.
 pub fn spring(times: &[f32], keys: &[Quat], settings: &SpringSettings) -> Result<Vec<Quat>, TrackError> {
+    spring_with(times, keys, settings, &|| false)
+}
+
+/// The most samples [`spring`] makes (about 80 MB of working memory).
+pub const MAX_SPRING_SAMPLES: usize = 5_000_000;
+/// The most gradient steps per level (the default is 400; more stops improving long before).
+pub const MAX_SPRING_ITERATIONS: u32 = 1_000_000;
+
+/// [`spring`], calling `stop` now and then (about every millisecond of work) and returning
+/// [`TrackError::Interrupted`] as soon as it returns true.
+pub fn spring_with(times: &[f32], keys: &[Quat], settings: &SpringSettings, stop: &dyn Fn() -> bool) -> Result<Vec<Quat>, TrackError> {
     let track = RotationTrack::new(times, keys)?;
     let s = settings;
     if !(s.step > 0.0 && s.step.is_finite()) || s.levels == 0 || !(s.key_weight > 0.0 && s.key_weight.is_finite()) {
         return Err(TrackError::Settings("step and key_weight must be positive and finite, levels at least 1".into()));
     }
+    if s.iterations > MAX_SPRING_ITERATIONS {
+        return Err(TrackError::Settings(format!(
+            "iterations = {} is more than {MAX_SPRING_ITERATIONS}",
+            s.iterations
+        )));
+    }
     // Fine samples per segment; keys must sit on the grid.
     let mut segs = Vec::with_capacity(times.len().saturating_sub(1));
+    let mut total = 0usize;
     for (i, w) in times.windows(2).enumerate() {
-        let n = (w[1] - w[0]) / s.step;
+        let n = (f64::from(w[1]) - f64::from(w[0])) / f64::from(s.step);
         let r = n.round();
+        if !(r <= MAX_SPRING_SAMPLES as f64) || total + r as usize > MAX_SPRING_SAMPLES {
+            return Err(TrackError::Settings(format!(
+                "too many samples: the keys span {} steps of {} (at most {MAX_SPRING_SAMPLES})",
+                (f64::from(times[times.len() - 1]) - f64::from(times[0])) / f64::from(s.step),
+                s.step
+            )));
+        }
+        total += r as usize;
         if (n - r).abs() > 1e-3 * n.max(1.0) || r < 1.0 {
             return Err(TrackError::Times(format!(
-                "key time {} is not on the sample grid (every {} from {})",
-                times[i + 1], s.step, times[0]
+                "times[{}] = {} is not on the sample grid (step = {} from times[0] = {})",
+                i + 1,
+                times[i + 1],
+                s.step,
+                times[0]
             )));
         }
         segs.push(r as usize);
     }
     if keys.len() == 1 {
         return Ok(vec![track.keys()[0]]);
-    }
-    if segs.iter().sum::<usize>() > 5_000_000 {
-        return Err(TrackError::Settings("too many samples (more than 5 million)".into()));
     }
     let keys = track.keys().to_vec();
     // Level 0: Slerp on the coarsest grid.
@@ -255,7 +284,9 @@ pub fn spring(times: &[f32], keys: &[Quat], settings: &SpringSettings) -> Result
             let next: Vec<usize> = segs.iter().map(|&n| coarse(n, s.levels - 1 - level)).collect();
             curve = curve.iter().zip(&next).map(|(c, &n)| resample(c, n)).collect();
         }
-        descend(&mut curve, s.iterations, f64::from(s.key_weight));
+        if !descend(&mut curve, s.iterations, f64::from(s.key_weight), stop) {
+            return Err(TrackError::Interrupted);
+        }
     }
     let mut out = Vec::with_capacity(segs.iter().sum::<usize>() + 1);
     for (i, c) in curve.iter().enumerate() {
@@ -293,7 +324,8 @@ fn resample(c: &[[f64; 4]], n: usize) -> Vec<[f64; 4]> {
 }
 
 /// Projected gradient descent on the curvature energy with the keys (segment ends) fixed.
-fn descend(curve: &mut [Vec<[f64; 4]>], iterations: u32, key_weight: f64) {
+/// Returns false if `stop` asked to stop (checked about every 2^18 sample updates).
+fn descend(curve: &mut [Vec<[f64; 4]>], iterations: u32, key_weight: f64, stop: &dyn Fn() -> bool) -> bool {
     // Flatten to one sequence with key flags (shared segment ends appear once).
     let mut q: Vec<[f64; 4]> = Vec::new();
     let mut is_key: Vec<bool> = Vec::new();
@@ -306,13 +338,17 @@ fn descend(curve: &mut [Vec<[f64; 4]>], iterations: u32, key_weight: f64) {
     }
     let n = q.len();
     if n < 3 {
-        return;
+        return true;
     }
+    let check_every = ((1usize << 18) / n).max(1);
     // Explicit descent on a fourth-difference energy is stable below 2/32 (eigenvalues of
     // 2·ΔᵀΔ reach 32); 0.04 leaves room for the key weight.
     let step = 0.04;
     let mut grad = vec![[0.0f64; 4]; n];
-    for _ in 0..iterations {
+    for iteration in 0..iterations {
+        if (iteration as usize).is_multiple_of(check_every) && stop() {
+            return false;
+        }
         let kappa: Vec<[f64; 4]> = (0..n).map(|i| if i == 0 || i + 1 == n { [0.0; 4] } else { curvature(&q, i) }).collect();
         for i in 1..n - 1 {
             if is_key[i] {
@@ -350,6 +386,7 @@ fn descend(curve: &mut [Vec<[f64; 4]>], iterations: u32, key_weight: f64) {
             k += 1;
         }
     }
+    true
 }
 
 #[cfg(test)]

@@ -68,7 +68,13 @@ fn checked<'a, 'py, T: Element>(
             "{name} must be C-contiguous (use np.ascontiguousarray({name}))"
         )));
     }
-    Ok(obj.cast::<PyArrayDyn<T>>()?)
+    let typed = obj.cast::<PyArrayDyn<T>>()?;
+    if !(typed.data() as usize).is_multiple_of(core::mem::align_of::<T>()) {
+        return Err(PyValueError::new_err(format!(
+            "{name} is not aligned in memory (a view at an odd byte offset; use np.ascontiguousarray({name}).copy())"
+        )));
+    }
+    Ok(typed)
 }
 
 /// A C-contiguous numpy array of `T` with the given shape, borrowed read-only (no copy).
@@ -128,9 +134,9 @@ pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<u32>> {
 /// A small input (a transform, a few weights): anything numpy can turn into float32, copied.
 /// Must be finite.
 pub fn small(obj: &Bound<'_, PyAny>, name: &str, shape: Shape<'_>, names: &[&str]) -> PyResult<(Vec<f32>, Vec<usize>)> {
-    // Fast path (per-frame matrices): already a C-contiguous float32 array.
+    // Fast path (per-frame matrices): already a C-contiguous, aligned float32 array.
     if let Ok(arr) = obj.cast::<PyArrayDyn<f32>>() {
-        if arr.is_c_contiguous() {
+        if arr.is_c_contiguous() && (arr.data() as usize).is_multiple_of(4) {
             if let Ok(ro) = arr.try_readonly() {
                 let dims = ro.shape().to_vec();
                 check_shape(name, &dims, shape, names)?;
@@ -141,20 +147,45 @@ pub fn small(obj: &Bound<'_, PyAny>, name: &str, shape: Shape<'_>, names: &[&str
         }
     }
     let np = obj.py().import("numpy")?;
+    if obj.is_none() {
+        return Err(PyTypeError::new_err(format!("{name} must be an array of numbers, got None")));
+    }
+    if obj.is_instance_of::<pyo3::types::PyString>() || obj.is_instance_of::<pyo3::types::PyBytes>() {
+        return Err(PyTypeError::new_err(format!("{name} must be an array of numbers, got a string")));
+    }
+    // Real numbers only: numpy would silently drop an imaginary part or parse strings.
+    let arr = np.call_method1("asarray", (obj,)).map_err(|e| {
+        PyTypeError::new_err(format!("{name} must be an array of numbers: {}", one_line(&e, obj.py())))
+    })?;
+    let kind: String = arr.getattr("dtype")?.getattr("kind")?.extract()?;
+    if !matches!(kind.as_str(), "i" | "u" | "f" | "b") {
+        let what = match kind.as_str() {
+            "c" => "complex numbers".to_string(),
+            "O" => "Python objects (a ragged list or a list with non-numbers?)".to_string(),
+            "U" | "S" => "strings".to_string(),
+            _ => format!("dtype {}", arr.getattr("dtype")?),
+        };
+        return Err(PyTypeError::new_err(format!("{name} must be an array of real numbers, got {what}")));
+    }
+    let dims: Vec<usize> = arr.getattr("shape")?.extract()?;
+    check_shape(name, &dims, shape, names)?;
     let kwargs = PyDict::new(obj.py());
     kwargs.set_item("dtype", np.getattr("float32")?)?;
-    let arr = np.call_method("ascontiguousarray", (obj,), Some(&kwargs)).map_err(|e| {
-        PyTypeError::new_err(format!("{name} must be an array of numbers: {e}"))
+    let arr = np.call_method("ascontiguousarray", (arr,), Some(&kwargs)).map_err(|e| {
+        PyValueError::new_err(format!("{name} cannot be converted to float32: {}", one_line(&e, obj.py())))
     })?;
     let arr = arr.cast::<PyArrayDyn<f32>>()?;
     let ro = arr.try_readonly()?;
-    let dims = ro.shape().to_vec();
-    check_shape(name, &dims, shape, names)?;
     let data = ro.as_slice()?.to_vec();
     if let Some(i) = data.iter().position(|v| !v.is_finite()) {
         return Err(PyValueError::new_err(format!("{name} contains a NaN or infinite value (flat index {i})")));
     }
     Ok((data, dims))
+}
+
+/// The first line of an exception's message.
+pub fn one_line(e: &PyErr, py: Python<'_>) -> String {
+    e.value(py).to_string().lines().next().unwrap_or("").to_string()
 }
 
 /// Whether a float32 array has a NaN or infinity; names the first flat index.

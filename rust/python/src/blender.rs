@@ -10,6 +10,7 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList, PyTuple};
 
+use crate::args;
 use crate::arrays::{self, mat4_from_row_major, mat4_to_row_major};
 use crate::guard;
 use crate::skinning::{skin_error, PyInfluences};
@@ -25,20 +26,34 @@ pub struct PyMeshMemory(MeshLayout);
 #[pymethods]
 impl PyMeshMemory {
     #[new]
-    fn new(blend_file: &Bound<'_, PyBytes>) -> PyResult<Self> {
+    fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
         guard(|| {
+            let blend_file = blend_file.cast::<PyBytes>().map_err(|_| {
+                let ty = blend_file.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+                PyTypeError::new_err(format!("blend_file must be the bytes of a .blend file, got {ty}"))
+            })?;
             let sdna = Sdna::from_blend_file(blend_file.as_bytes()).map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))?;
             MeshLayout::new(&sdna).map(Self).map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
         })
     }
 
-    /// ``(offsets, groups, weights)`` (``uint32``, ``uint32``, ``float32``): the weights of the
-    /// ``Mesh`` at ``mesh_pointer`` (``Mesh.as_pointer()``) in CSR form and stored order, or
-    /// ``None`` if it has no vertex-group data. ``vertex_count`` must be ``len(mesh.vertices)``.
-    fn deform_verts<'py>(&self, py: Python<'py>, mesh_pointer: u64, vertex_count: i64) -> PyResult<Option<Bound<'py, PyTuple>>> {
+    /// ``(offsets, groups, weights)`` (``uint32``, ``uint32``, ``float32``): the weights of
+    /// ``mesh`` (a ``bpy.types.Mesh``) in CSR form and stored order, or ``None`` if it has no
+    /// vertex-group data.
+    fn deform_verts<'py>(&self, py: Python<'py>, mesh: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyTuple>>> {
         guard(|| {
-            let n = usize::try_from(vertex_count).map_err(|_| PyValueError::new_err("vertex_count must be ≥ 0"))?;
-            let ptr = usize::try_from(mesh_pointer).map_err(|_| PyValueError::new_err("mesh_pointer is out of range"))?;
+            // Only a real Blender mesh: its address comes from Blender itself, never from the caller.
+            let mesh_type = py.import("bpy").and_then(|bpy| bpy.getattr("types")?.getattr("Mesh"));
+            let is_mesh = match mesh_type {
+                Ok(t) => mesh.is_instance(&t)?,
+                Err(_) => false, // not inside Blender
+            };
+            if !is_mesh {
+                let ty = mesh.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+                return Err(PyTypeError::new_err(format!("mesh must be a bpy.types.Mesh, got {ty}")));
+            }
+            let ptr: usize = mesh.call_method0("as_pointer")?.extract()?;
+            let n: usize = mesh.getattr("vertices")?.len()?;
             // SAFETY: the extension passes `Mesh.as_pointer()` of a live mesh from a handler or
             // operator, while Blender is not evaluating (see `read_deform_verts`).
             let read = unsafe { read_deform_verts(&self.0, ptr, n) }.map_err(|e| PyValueError::new_err(format!("mesh_pointer: {e}")))?;
@@ -78,13 +93,19 @@ fn influences_from_deform_groups(
     groups: &Bound<'_, PyAny>,
     weights: &Bound<'_, PyAny>,
     group_to_bone: &Bound<'_, PyAny>,
-    bone_count: i64,
+    bone_count: &Bound<'_, PyAny>,
 ) -> PyResult<PyInfluences> {
     guard(|| {
-        let bone_count = usize::try_from(bone_count).map_err(|_| PyValueError::new_err("bone_count must be ≥ 0"))?;
+        let bone_count = args::int(bone_count, "bone_count", 0, u32::MAX as i64)? as usize;
         let (o, g, w) = groups_arg(offsets, groups, weights)?;
         let map = arrays::readonly::<i32>(group_to_bone, "group_to_bone", &[None], &["G"])?;
         let map: Vec<Option<u32>> = map.as_slice()?.iter().map(|&b| u32::try_from(b).ok()).collect();
+        if let Some(g) = map.iter().position(|b| b.is_some_and(|b| b as usize >= bone_count)) {
+            return Err(PyValueError::new_err(format!(
+                "group_to_bone[{g}] = {} is not below bone_count = {bone_count}",
+                map[g].unwrap()
+            )));
+        }
         let dg = DeformGroups { offsets: o.as_slice()?, groups: g.as_slice()?, weights: w.as_slice()? };
         let py = offsets.py();
         py.detach(|| Influences::from_deform_groups(dg, &map, bone_count)).map(PyInfluences).map_err(skin_error)
@@ -97,10 +118,10 @@ fn deform_group_weights<'py>(
     offsets: &Bound<'py, PyAny>,
     groups: &Bound<'py, PyAny>,
     weights: &Bound<'py, PyAny>,
-    group: i64,
+    group: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyArray1<f32>>> {
     guard(|| {
-        let group = u32::try_from(group).map_err(|_| PyValueError::new_err("group must be a vertex group index ≥ 0"))?;
+        let group = args::int(group, "group", 0, u32::MAX as i64)? as u32;
         let (o, g, w) = groups_arg(offsets, groups, weights)?;
         let dg = DeformGroups { offsets: o.as_slice()?, groups: g.as_slice()?, weights: w.as_slice()? };
         let v = dqskin_core::deform_group_weights(dg, group).map_err(skin_error)?;
@@ -117,9 +138,14 @@ fn deform_group_weights<'py>(
 /// basis key's index. ``shown``: with Shape Key Lock, the index of the key shown alone.
 #[pyfunction]
 #[pyo3(signature = (keys, reference, out, shown = None))]
-fn shape_key_mix(keys: &Bound<'_, PyList>, reference: i64, out: &Bound<'_, PyAny>, shown: Option<i64>) -> PyResult<()> {
+fn shape_key_mix(keys: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>, out: &Bound<'_, PyAny>, shown: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
     guard(|| {
-        let reference = usize::try_from(reference).map_err(|_| PyValueError::new_err("reference must be ≥ 0"))?;
+        let keys = keys.cast::<PyList>().map_err(|_| PyTypeError::new_err("keys must be a list of (data, relative_to, value, muted, weights) tuples"))?;
+        let reference = args::int(reference, "reference", 0, i32::MAX as i64)? as usize;
+        let shown = match shown {
+            Some(s) if !s.is_none() => Some(args::int(s, "shown", 0, i32::MAX as i64)?),
+            _ => None,
+        };
         let mut held = Vec::with_capacity(keys.len());
         for (i, item) in keys.iter().enumerate() {
             let t = item.cast::<PyTuple>().map_err(|_| PyTypeError::new_err(format!("keys[{i}] must be a tuple (data, relative_to, value, muted, weights)")))?;
@@ -127,14 +153,11 @@ fn shape_key_mix(keys: &Bound<'_, PyList>, reference: i64, out: &Bound<'_, PyAny
                 return Err(PyValueError::new_err(format!("keys[{i}] must have 5 items, got {}", t.len())));
             }
             let data = arrays::readonly::<f32>(&t.get_item(0)?, "keys[i].data", &[None, Some(3)], &["N"])?;
-            let relative: i64 = t.get_item(1)?.extract().map_err(|_| PyTypeError::new_err(format!("keys[{i}].relative_to must be an integer")))?;
-            let value: f32 = t.get_item(2)?.extract().map_err(|_| PyTypeError::new_err(format!("keys[{i}].value must be a number")))?;
-            let muted: bool = t.get_item(3)?.extract().map_err(|_| PyTypeError::new_err(format!("keys[{i}].muted must be a bool")))?;
+            let relative = args::int(&t.get_item(1)?, &format!("keys[{i}].relative_to"), -1, i32::MAX as i64)?;
+            let value = args::float(&t.get_item(2)?, &format!("keys[{i}].value"))?;
+            let muted = args::boolean(&t.get_item(3)?, &format!("keys[{i}].muted"))?;
             let w = t.get_item(4)?;
             let weights = if w.is_none() { None } else { Some(arrays::readonly::<f32>(&w, "keys[i].weights", &[Some(data.shape()[0])], &["N"])?) };
-            if !value.is_finite() {
-                return Err(PyValueError::new_err(format!("keys[{i}].value is not finite")));
-            }
             held.push((data, usize::try_from(relative).unwrap_or(usize::MAX), value, muted, weights));
         }
         let blocks = held
@@ -155,7 +178,7 @@ fn shape_key_mix(keys: &Bound<'_, PyList>, reference: i64, out: &Bound<'_, PyAny
         let mut o = arrays::readwrite::<f32>(out, "out", &[None, Some(3)], &["V"])?;
         let o = as_points_mut(o.as_slice_mut()?);
         let r = match shown {
-            Some(s) => shape_keys::mix_locked(&blocks, reference, usize::try_from(s).unwrap_or(usize::MAX), o),
+            Some(s) => shape_keys::mix_locked(&blocks, reference, s as usize, o),
             None => shape_keys::mix_relative(&blocks, reference, o),
         };
         r.map_err(|e| PyValueError::new_err(format!("keys: {e}")))

@@ -8,6 +8,7 @@ use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
+use crate::args;
 use crate::arrays::{self, dq_from_slice, quat_from_wxyz, quat_to_wxyz};
 use crate::guard;
 
@@ -41,14 +42,7 @@ fn params(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Params> {
         let (v, _) = arrays::small(obj, name, &[None], &["T"])?;
         return Ok(Params::Many(v));
     }
-    if let Ok(t) = obj.extract::<f64>() {
-        if !t.is_finite() {
-            return Err(PyValueError::new_err(format!("{name} must be finite")));
-        }
-        return Ok(Params::One(t as f32));
-    }
-    let (v, _) = arrays::small(obj, name, &[None], &["T"])?;
-    Ok(Params::Many(v))
+    Ok(Params::One(args::float(obj, name)?))
 }
 
 /// Evaluates `f` at each parameter, giving `(width,)` for a number or `(T, width)` for an array.
@@ -109,19 +103,21 @@ fn dlb<'py>(transforms: &Bound<'py, PyAny>, weights: &Bound<'py, PyAny>) -> PyRe
 /// repeats ``b ← b·exp(Σ wᵢ·log(b*·qᵢ))`` until the step is shorter than ``precision`` or
 /// ``max_iterations`` updates were made. Returns ``(blend (8,), iterations, converged)``.
 #[pyfunction]
-#[pyo3(signature = (transforms, weights, precision = 1e-6, max_iterations = 32))]
+#[pyo3(signature = (transforms, weights, precision = None, max_iterations = None))]
 fn dib<'py>(
     transforms: &Bound<'py, PyAny>,
     weights: &Bound<'py, PyAny>,
-    precision: f32,
-    max_iterations: i64,
+    precision: Option<&Bound<'py, PyAny>>,
+    max_iterations: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Bound<'py, PyArray1<f32>>, u32, bool)> {
     guard(|| {
-        if !(precision >= 0.0) || !precision.is_finite() {
+        let precision = args::or(precision, 1e-6, |o| args::float(o, "precision"))?;
+        if !(precision >= 0.0) {
             return Err(PyValueError::new_err("precision must be a finite number ≥ 0"));
         }
-        let max_iterations = u32::try_from(max_iterations)
-            .map_err(|_| PyValueError::new_err("max_iterations must be between 0 and 2^32-1"))?;
+        // DIB converges in a handful of iterations when it converges at all; the bound keeps a
+        // call from running for hours.
+        let max_iterations = args::or(max_iterations, 32, |o| args::int(o, "max_iterations", 0, 100_000))? as u32;
         let qs = dq_list(transforms, "transforms")?;
         let (w, _) = arrays::small(weights, "weights", &[None], &["N"])?;
         let r = dqskin_core::dib(&qs, &w, precision, max_iterations).map_err(blend_error)?;
@@ -214,7 +210,9 @@ fn forward_kinematics<'py>(parents: &Bound<'py, PyAny>, locals: &Bound<'py, PyAn
 
 fn parents_arg(obj: &Bound<'_, PyAny>) -> PyResult<Vec<i64>> {
     let np = obj.py().import("numpy")?;
-    let arr = np.call_method1("asarray", (obj,))?;
+    let arr = np.call_method1("asarray", (obj,)).map_err(|e| {
+        pyo3::exceptions::PyTypeError::new_err(format!("parents must be an array of integers: {}", arrays::one_line(&e, obj.py())))
+    })?;
     let kind: String = arr.getattr("dtype")?.getattr("kind")?.extract()?;
     if kind != "i" && kind != "u" {
         return Err(pyo3::exceptions::PyTypeError::new_err("parents must be an array of integers"));
@@ -223,7 +221,9 @@ fn parents_arg(obj: &Bound<'_, PyAny>) -> PyResult<Vec<i64>> {
     if ndim != 1 {
         return Err(PyValueError::new_err("parents must be one-dimensional"));
     }
-    arr.call_method0("tolist")?.extract::<Vec<i64>>()
+    arr.call_method0("tolist")?
+        .extract::<Vec<i64>>()
+        .map_err(|_| PyValueError::new_err("parents has an index too large for a 64-bit integer"))
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -7,6 +7,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::arrays::{self, mat4_from_row_major, mat4_to_row_major, quat_from_wxyz, quat_to_wxyz};
+use crate::args;
 use crate::guard;
 
 /// A dual quaternion ``real + ε·dual``; unit dual quaternions are rigid transforms.
@@ -31,8 +32,14 @@ pub struct PyScrew {
 #[pymethods]
 impl PyScrew {
     #[new]
-    fn new(axis: (f32, f32, f32), moment: (f32, f32, f32), angle: f32, pitch: f32) -> Self {
-        Self { axis, moment, angle, pitch }
+    fn new(axis: &Bound<'_, PyAny>, moment: &Bound<'_, PyAny>, angle: &Bound<'_, PyAny>, pitch: &Bound<'_, PyAny>) -> PyResult<Self> {
+        guard(|| {
+            let axis = vec3(axis, "axis")?;
+            let moment = vec3(moment, "moment")?;
+            let angle = args::float(angle, "angle")?;
+            let pitch = args::float(pitch, "pitch")?;
+            Ok(Self { axis: to_tuple(axis), moment: to_tuple(moment), angle, pitch })
+        })
     }
 
     /// The point of the axis closest to the origin.
@@ -119,15 +126,17 @@ impl PyDualQuat {
     /// raises ``ValueError``; with ``check=False`` the rotation is taken from the normalized
     /// columns, as Blender's ``mat4_to_quat`` does.
     #[staticmethod]
-    #[pyo3(signature = (matrix, check = true, tolerance = 1e-5))]
-    fn from_matrix(matrix: &Bound<'_, PyAny>, check: bool, tolerance: f32) -> PyResult<Self> {
+    #[pyo3(signature = (matrix, check = None, tolerance = None))]
+    fn from_matrix(matrix: &Bound<'_, PyAny>, check: Option<&Bound<'_, PyAny>>, tolerance: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
         guard(|| {
+            let check = args::or(check, true, |o| args::boolean(o, "check"))?;
+            let tolerance = args::or(tolerance, 1e-5, |o| args::float_in(o, "tolerance", 0.0, 1.0))?;
             let (m, _) = arrays::small(matrix, "matrix", &[Some(4), Some(4)], &[])?;
             let m = mat4_from_row_major(&m);
             if check {
                 DualQuat::try_from_mat4(&m, tolerance)
                     .map(Self)
-                    .map_err(|e| PyValueError::new_err(format!("matrix: {e}")))
+                    .map_err(|e| PyValueError::new_err(format!("matrix: {e} (tolerance = {tolerance})")))
             } else {
                 Ok(Self(DualQuat::from_mat4(&m)))
             }
@@ -200,9 +209,9 @@ impl PyDualQuat {
     }
 
     /// Whether this is a unit dual quaternion (a rigid transform) within ``tolerance``.
-    #[pyo3(signature = (tolerance = 1e-5))]
-    fn is_unit(&self, tolerance: f32) -> bool {
-        self.0.is_unit(tolerance)
+    #[pyo3(signature = (tolerance = None))]
+    fn is_unit(&self, tolerance: Option<&Bound<'_, PyAny>>) -> PyResult<bool> {
+        guard(|| Ok(self.0.is_unit(args::or(tolerance, 1e-5, |o| args::float_in(o, "tolerance", 0.0, 1.0))?)))
     }
 
     /// Divided by its dual-number norm; ``ValueError`` if the real part is zero.
@@ -235,11 +244,11 @@ impl PyDualQuat {
     }
 
     /// ``self**t = exp(t·log(self))``: the screw motion scaled by ``t``.
-    fn pow(&self, t: f32) -> Self {
-        Self(self.0.powf(t))
+    fn pow(&self, t: &Bound<'_, PyAny>) -> PyResult<Self> {
+        guard(|| Ok(Self(self.0.powf(args::float(t, "t")?))))
     }
 
-    fn __pow__(&self, t: f32, _modulo: Option<&Bound<'_, PyAny>>) -> Self {
+    fn __pow__(&self, t: &Bound<'_, PyAny>, _modulo: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
         self.pow(t)
     }
 
@@ -275,14 +284,15 @@ impl PyDualQuat {
         if let Ok(o) = other.cast::<PyDualQuat>() {
             return Ok(Py::new(py, Self(self.0 * o.get().0))?.into_any());
         }
-        if let Ok(s) = other.extract::<f32>() {
+        if other.extract::<f64>().is_ok() {
+            let s = args::float(other, "the factor")?;
             return Ok(Py::new(py, Self(self.0 * s))?.into_any());
         }
         Ok(py.NotImplemented())
     }
 
-    fn __rmul__(&self, other: f32) -> Self {
-        Self(self.0 * other)
+    fn __rmul__(&self, other: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
+        self.__mul__(other)
     }
 
     fn __add__(&self, other: &Self) -> Self {
@@ -306,9 +316,15 @@ impl PyDualQuat {
 /// ``(N, 4, 4)`` rigid matrices to ``(N, 8)`` unit dual quaternions. With ``check=True`` a matrix
 /// that is not rigid raises ``ValueError`` naming it.
 #[pyfunction]
-#[pyo3(signature = (matrices, check = true, tolerance = 1e-5))]
-fn dual_quats_from_matrices<'py>(matrices: &Bound<'py, PyAny>, check: bool, tolerance: f32) -> PyResult<Bound<'py, PyArray2<f32>>> {
+#[pyo3(signature = (matrices, check = None, tolerance = None))]
+fn dual_quats_from_matrices<'py>(
+    matrices: &Bound<'py, PyAny>,
+    check: Option<&Bound<'py, PyAny>>,
+    tolerance: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
     guard(|| {
+        let check = args::or(check, true, |o| args::boolean(o, "check"))?;
+        let tolerance = args::or(tolerance, 1e-5, |o| args::float_in(o, "tolerance", 0.0, 1.0))?;
         let py = matrices.py();
         let m = arrays::readonly::<f32>(matrices, "matrices", &[None, Some(4), Some(4)], &["N"])?;
         let data = m.as_slice()?;
@@ -319,7 +335,7 @@ fn dual_quats_from_matrices<'py>(matrices: &Bound<'py, PyAny>, check: bool, tole
             let mat: Mat4 = mat4_from_row_major(c);
             let dq = if check {
                 DualQuat::try_from_mat4(&mat, tolerance)
-                    .map_err(|e| PyValueError::new_err(format!("matrices[{i}]: {e}")))?
+                    .map_err(|e| PyValueError::new_err(format!("matrices[{i}]: {e} (tolerance = {tolerance})")))?
             } else {
                 DualQuat::from_mat4(&mat)
             };

@@ -8,6 +8,7 @@
 // pyo3 methods take `&self`.
 #![allow(clippy::wrong_self_convention)]
 
+mod args;
 mod arrays;
 mod blender;
 mod blending;
@@ -36,12 +37,13 @@ pub(crate) fn guard<T>(f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
     }
 }
 
-/// Sets the number of worker threads the kernels use (at least 1).
+/// Sets the number of worker threads the kernels use: at least 1, at most 4 per core (at least
+/// 16, at most 1024); checked before any thread starts.
 #[pyfunction]
-fn set_num_threads(threads: i64) -> PyResult<()> {
+fn set_num_threads(threads: &Bound<'_, PyAny>) -> PyResult<()> {
     guard(|| {
-        let n = usize::try_from(threads)
-            .map_err(|_| pyo3::exceptions::PyValueError::new_err("threads must be at least 1"))?;
+        let max = dqskin_core::pool::max_threads();
+        let n = args::int(threads, "threads", 1, max as i64)? as usize;
         dqskin_core::pool::set_num_threads(n).map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("threads: {e}")))
     })
 }
@@ -61,6 +63,7 @@ fn _panic_for_tests() -> PyResult<()> {
 #[pymodule]
 fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("MAX_INFLUENCES_PER_VERTEX", dqskin_core::MAX_INFLUENCES_PER_VERTEX)?;
     m.add_function(wrap_pyfunction!(set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(get_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(_panic_for_tests, m)?)?;

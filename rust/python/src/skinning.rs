@@ -6,6 +6,7 @@ use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
+use crate::args;
 use crate::arrays::{self, mat4_from_row_major};
 use crate::guard;
 
@@ -26,9 +27,9 @@ pub struct PyInfluences(pub Influences);
 #[pymethods]
 impl PyInfluences {
     #[new]
-    fn new(offsets: &Bound<'_, PyAny>, bones: &Bound<'_, PyAny>, weights: &Bound<'_, PyAny>, bone_count: i64) -> PyResult<Self> {
+    fn new(offsets: &Bound<'_, PyAny>, bones: &Bound<'_, PyAny>, weights: &Bound<'_, PyAny>, bone_count: &Bound<'_, PyAny>) -> PyResult<Self> {
         guard(|| {
-            let bone_count = usize::try_from(bone_count).map_err(|_| PyValueError::new_err("bone_count must be ≥ 0"))?;
+            let bone_count = args::int(bone_count, "bone_count", 0, u32::MAX as i64)? as usize;
             let offsets = arrays::indices(offsets, "offsets")?;
             let bones = arrays::indices(bones, "bones")?;
             let w = arrays::readonly::<f32>(weights, "weights", &[None], &["N"])?;
@@ -40,21 +41,29 @@ impl PyInfluences {
     /// From dense ``(V, K)`` arrays, as glTF stores joints and weights: every vertex lists ``K``
     /// bones; pairs with zero weight are dropped (they never change the result).
     #[staticmethod]
-    fn from_dense(bones: &Bound<'_, PyAny>, weights: &Bound<'_, PyAny>, bone_count: i64) -> PyResult<Self> {
+    fn from_dense(bones: &Bound<'_, PyAny>, weights: &Bound<'_, PyAny>, bone_count: &Bound<'_, PyAny>) -> PyResult<Self> {
         guard(|| {
-            let bone_count = usize::try_from(bone_count).map_err(|_| PyValueError::new_err("bone_count must be ≥ 0"))?;
+            let bone_count = args::int(bone_count, "bone_count", 0, u32::MAX as i64)? as usize;
             let w = arrays::readonly::<f32>(weights, "weights", &[None, None], &["V", "K"])?;
             let (v, k) = (w.shape()[0], w.shape()[1]);
-            let np = bones.py().import("numpy")?;
-            let flat = np.call_method1("ravel", (bones,))?;
-            let b_shape: Vec<usize> = bones.getattr("shape")?.extract().map_err(|_| {
-                PyTypeError::new_err("bones must be a numpy array of integers")
-            })?;
-            if b_shape != [v, k] {
+            if k > dqskin_core::MAX_INFLUENCES_PER_VERTEX {
                 return Err(PyValueError::new_err(format!(
-                    "bones must have the same shape as weights ({v}, {k}), got {b_shape:?}"
+                    "weights has {k} influences per vertex; at most {} are supported",
+                    dqskin_core::MAX_INFLUENCES_PER_VERTEX
                 )));
             }
+            let b_arr = bones.cast::<numpy::PyUntypedArray>().map_err(|_| {
+                let ty = bones.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+                PyTypeError::new_err(format!("bones must be a numpy array of integers, got {ty}"))
+            })?;
+            if b_arr.shape() != [v, k] {
+                return Err(PyValueError::new_err(format!(
+                    "bones must have the same shape as weights ({v}, {k}), got {:?}",
+                    b_arr.shape()
+                )));
+            }
+            let np = bones.py().import("numpy")?;
+            let flat = np.call_method1("ravel", (bones,))?;
             let b = arrays::indices(&flat, "bones")?;
             let wv = w.as_slice()?;
             let mut offsets = Vec::with_capacity(v + 1);
@@ -68,7 +77,7 @@ impl PyInfluences {
                         ow.push(wv[i]);
                     }
                 }
-                offsets.push(u32::try_from(ob.len()).map_err(|_| PyValueError::new_err("too many influences"))?);
+                offsets.push(u32::try_from(ob.len()).map_err(|_| PyValueError::new_err("weights: too many influences"))?);
             }
             Influences::from_csr(&offsets, &ob, &ow, bone_count).map(Self).map_err(skin_error)
         })
@@ -94,16 +103,16 @@ impl PyInfluences {
     ///   ``bbone_mapping``: ``{bone index: (index (V,) int32, blend (V,) float32)}`` computed
     ///   elsewhere (``PoseBone.bbone_segment_index`` for the Curved mapping); a negative index
     ///   falls back to the Straight mapping for that vertex.
-    #[pyo3(signature = (positions, premat = None, *, envelopes = None, use_vertex_groups = true,
-        use_envelopes = false, bbone_segments = None, rest = None, lengths = None, bbone_mapping = None))]
+    #[pyo3(signature = (positions, premat = None, *, envelopes = None, use_vertex_groups = None,
+        use_envelopes = None, bbone_segments = None, rest = None, lengths = None, bbone_mapping = None))]
     #[allow(clippy::too_many_arguments)]
     fn effective(
         &self,
         positions: &Bound<'_, PyAny>,
         premat: Option<&Bound<'_, PyAny>>,
         envelopes: Option<&Bound<'_, PyAny>>,
-        use_vertex_groups: bool,
-        use_envelopes: bool,
+        use_vertex_groups: Option<&Bound<'_, PyAny>>,
+        use_envelopes: Option<&Bound<'_, PyAny>>,
         bbone_segments: Option<&Bound<'_, PyAny>>,
         rest: Option<&Bound<'_, PyAny>>,
         lengths: Option<&Bound<'_, PyAny>>,
@@ -111,12 +120,14 @@ impl PyInfluences {
     ) -> PyResult<Self> {
         guard(|| {
             let py = positions.py();
+            let use_vertex_groups = args::or(use_vertex_groups, true, |o| args::boolean(o, "use_vertex_groups"))?;
+            let use_envelopes = args::or(use_envelopes, false, |o| args::boolean(o, "use_envelopes"))?;
             let v = self.0.vertex_count();
             let b = self.0.bone_count();
             let mut mappings: Vec<(usize, Vec<i32>, Vec<f32>)> = Vec::new();
             if let Some(d) = bbone_mapping {
                 for (key, value) in d.iter() {
-                    let bone: usize = key.extract().map_err(|_| PyTypeError::new_err("bbone_mapping keys must be bone indices"))?;
+                    let bone = args::int(&key, "bbone_mapping key", 0, u32::MAX as i64)? as usize;
                     let (idx, blend): (Bound<'_, PyAny>, Bound<'_, PyAny>) = value
                         .extract()
                         .map_err(|_| PyTypeError::new_err("bbone_mapping values must be (index, blend) pairs of arrays"))?;
@@ -327,17 +338,17 @@ fn parse_method(method: &str) -> PyResult<u8> {
 ///
 /// The GIL is released while the kernel runs on dqskin's thread pool.
 #[pyfunction]
-#[pyo3(signature = (positions, influences, deform, rest = None, *, method = "dual_quaternion",
-    blend = None, blend_factor = 1.0, premat = None, postmat = None, mask = None, out = None))]
+#[pyo3(signature = (positions, influences, deform, rest = None, *, method = None,
+    blend = None, blend_factor = None, premat = None, postmat = None, mask = None, out = None))]
 #[allow(clippy::too_many_arguments)]
 fn skin<'py>(
     positions: &Bound<'py, PyAny>,
     influences: &Bound<'py, PyAny>,
     deform: &Bound<'py, PyAny>,
     rest: Option<&Bound<'py, PyAny>>,
-    method: &str,
+    method: Option<&Bound<'py, PyAny>>,
     blend: Option<&Bound<'py, PyAny>>,
-    blend_factor: f64,
+    blend_factor: Option<&Bound<'py, PyAny>>,
     premat: Option<&Bound<'py, PyAny>>,
     postmat: Option<&Bound<'py, PyAny>>,
     mask: Option<&Bound<'py, PyAny>>,
@@ -345,6 +356,9 @@ fn skin<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
         let py = positions.py();
+        let method = args::or(method, "dual_quaternion".to_string(), |o| args::string(o, "method"))?;
+        let method = method.as_str();
+        let blend_factor = args::or(blend_factor, 1.0, |o| args::float(o, "blend_factor"))?;
         let kind = parse_method(method)?;
         let infl = influences.cast::<PyInfluences>().map_err(|_| {
             PyTypeError::new_err("influences must be a dqskin.Influences (build one from CSR arrays once and reuse it)")
@@ -394,7 +408,7 @@ fn skin<'py>(
         let method = match kind {
             0 => Method::Linear,
             1 => Method::DualQuaternion,
-            _ => Method::Blend { amount: blend_slice, factor: blend_factor as f32 },
+            _ => Method::Blend { amount: blend_slice, factor: blend_factor },
         };
         let options = SkinOptions { premat, postmat, mask: mask_slice };
         py.detach(|| dqskin_core::skin(method, pos_slice, infl, &pose, &options, out_slice))
@@ -411,8 +425,12 @@ fn skin<'py>(
 /// ``out`` untouched). Arguments that are not arrays of the right kind raise at once, naming
 /// the job.
 #[pyfunction]
-fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, pyo3::types::PyList>) -> PyResult<Vec<Option<String>>> {
+fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, PyAny>) -> PyResult<Vec<Option<String>>> {
     guard(|| {
+        let jobs = jobs.cast::<pyo3::types::PyList>().map_err(|_| {
+            let ty = jobs.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+            PyTypeError::new_err(format!("jobs must be a list of tuples, got {ty}"))
+        })?;
         struct Held<'py> {
             kind: u8,
             positions: numpy::PyReadonlyArrayDyn<'py, f32>,
@@ -446,7 +464,7 @@ fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, pyo3::types::PyList>) -> Py
                 PyTypeError::new_err(format!("jobs[{i}]: influences must be a dqskin.Influences"))
             })?;
             let (v, b) = (influences.get().0.vertex_count(), influences.get().0.bone_count());
-            let method: String = t.get_item(4)?.extract().map_err(|_| PyTypeError::new_err(format!("jobs[{i}]: method must be a string")))?;
+            let method = args::string(&t.get_item(4)?, "method").map_err(at)?;
             let kind = parse_method(&method).map_err(at)?;
             let positions = arrays::readonly::<f32>(&t.get_item(0)?, "positions", &[Some(v), Some(3)], &["V"]).map_err(at)?;
             let deform = matrices(&t.get_item(2)?, "deform", Some(b)).map_err(at)?;
@@ -460,9 +478,9 @@ fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, pyo3::types::PyList>) -> Py
             };
             let mask = opt(7, "mask")?;
             let blend = opt(8, "blend")?;
-            let blend_factor: f64 = t.get_item(9)?.extract().map_err(|_| PyTypeError::new_err(format!("jobs[{i}]: blend_factor must be a number")))?;
+            let blend_factor = args::float(&t.get_item(9)?, "blend_factor").map_err(at)?;
             let out = arrays::readwrite::<f32>(&t.get_item(10)?, "out", &[Some(v), Some(3)], &["V"]).map_err(at)?;
-            held.push(Held { kind, positions, influences, deform, rest, premat, postmat, mask, blend, blend_factor: blend_factor as f32, out });
+            held.push(Held { kind, positions, influences, deform, rest, premat, postmat, mask, blend, blend_factor, out });
         }
         let mut many = Vec::with_capacity(held.len());
         for h in held.iter_mut() {
@@ -506,7 +524,8 @@ fn as_points_mut(flat: &mut [f32]) -> &mut [[f32; 3]] {
 fn transform_points<'py>(matrix: &Bound<'py, PyAny>, points: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
         let py = points.py();
-        let m = space(Some(matrix), "matrix")?.expect("given");
+        let m = space(Some(matrix), "matrix")?
+            .ok_or_else(|| PyTypeError::new_err("matrix must be a 4×4 array of numbers, got None"))?;
         if let Some(problem) = dqskin_core::skin::affine_problem(&m) {
             return Err(PyValueError::new_err(format!("matrix {problem}")));
         }
@@ -526,7 +545,11 @@ fn mesh_volume(positions: &Bound<'_, PyAny>, triangles: &Bound<'_, PyAny>) -> Py
     guard(|| {
         let pos = arrays::readonly::<f32>(positions, "positions", &[None, Some(3)], &["V"])?;
         let np = triangles.py().import("numpy")?;
-        let shape: Vec<usize> = triangles.getattr("shape")?.extract()?;
+        let tri = triangles.cast::<numpy::PyUntypedArray>().map_err(|_| {
+            let ty = triangles.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+            PyTypeError::new_err(format!("triangles must be a numpy array of integers, got {ty}"))
+        })?;
+        let shape: Vec<usize> = tri.shape().to_vec();
         if shape.len() != 2 || shape[1] != 3 {
             return Err(PyValueError::new_err(format!("triangles must have shape (T, 3), got {shape:?}")));
         }

@@ -7,6 +7,7 @@ use numpy::{PyArray1, PyArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
+use crate::args;
 use crate::arrays::{self, dq_from_slice, quat_from_wxyz, quat_to_wxyz};
 use crate::guard;
 
@@ -49,14 +50,16 @@ fn continuous_signs<'py>(keys: &Bound<'py, PyAny>) -> PyResult<(Bound<'py, PyAny
 /// continuous in time even with uneven key spacing). Keys are made sign-continuous first.
 /// Returns ``(T, 4)`` unit quaternions.
 #[pyfunction]
-#[pyo3(signature = (times, keys, at, method = "squad"))]
+#[pyo3(signature = (times, keys, at, method = None))]
 fn sample_rotations<'py>(
     times: &Bound<'py, PyAny>,
     keys: &Bound<'py, PyAny>,
     at: &Bound<'py, PyAny>,
-    method: &str,
+    method: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
+        let method = args::or(method, "squad".to_string(), |o| args::string(o, "method"))?;
+        let method = method.as_str();
         let track = RotationTrack::new(&floats(times, "times")?, &quats(keys, "keys")?).map_err(track_error)?;
         let at = floats(at, "at")?;
         let out: Vec<Quat> = match method {
@@ -92,21 +95,47 @@ fn sample_transforms<'py>(times: &Bound<'py, PyAny>, keys: &Bound<'py, PyAny>, a
 /// ``key_weight`` on the curvature at the keys). Key times must lie on the sample grid.
 /// Returns ``(T, 4)``.
 #[pyfunction]
-#[pyo3(signature = (times, keys, step = 1.0, levels = 3, iterations = 400, key_weight = 1.2))]
+#[pyo3(signature = (times, keys, step = None, levels = None, iterations = None, key_weight = None))]
 fn spring<'py>(
     times: &Bound<'py, PyAny>,
     keys: &Bound<'py, PyAny>,
-    step: f32,
-    levels: u32,
-    iterations: u32,
-    key_weight: f32,
+    step: Option<&Bound<'py, PyAny>>,
+    levels: Option<&Bound<'py, PyAny>>,
+    iterations: Option<&Bound<'py, PyAny>>,
+    key_weight: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
+        let py = times.py();
+        let step = args::or(step, 1.0, |o| args::float(o, "step"))?;
+        if !(step > 0.0) {
+            return Err(PyValueError::new_err(format!("step must be positive, got {step}")));
+        }
+        let levels = args::or(levels, 3, |o| args::int(o, "levels", 1, 20))? as u32;
+        let iterations = args::or(iterations, 400, |o| args::int(o, "iterations", 0, i64::from(dqskin_core::tracks::MAX_SPRING_ITERATIONS)))? as u32;
+        let key_weight = args::or(key_weight, 1.2, |o| args::float(o, "key_weight"))?;
+        if !(key_weight > 0.0) {
+            return Err(PyValueError::new_err(format!("key_weight must be positive, got {key_weight}")));
+        }
         let t = floats(times, "times")?;
         let k = quats(keys, "keys")?;
         let settings = SpringSettings { step, levels, iterations, key_weight };
-        let out = times.py().detach(|| tracks::spring(&t, &k, &settings)).map_err(track_error)?;
-        quat_array(times.py(), &out)
+        // Long runs stop on Ctrl-C: the GIL is taken back now and then to look for signals.
+        let interrupted = std::sync::Mutex::new(None);
+        let stop = || {
+            let mut slot = interrupted.lock().unwrap_or_else(|e| e.into_inner());
+            if slot.is_none() {
+                if let Err(e) = Python::attach(|py| py.check_signals()) {
+                    *slot = Some(e);
+                }
+            }
+            slot.is_some()
+        };
+        let result = py.detach(|| tracks::spring_with(&t, &k, &settings, &stop));
+        if let Some(e) = interrupted.into_inner().unwrap_or_else(|e| e.into_inner()) {
+            return Err(e);
+        }
+        let out = result.map_err(track_error)?;
+        quat_array(py, &out)
     })
 }
 

@@ -2,6 +2,11 @@
 
 use super::SkinError;
 
+/// The most influences one vertex may have. Sums of weights run in single precision as in
+/// Blender (at most 4096 · 2⁻²⁴ ≈ 2.4e-4 relative error), and the lane layout pads a vertex's
+/// 15 neighbours to its count (128 bytes per influence of the largest), so both stay bounded.
+pub const MAX_INFLUENCES_PER_VERTEX: usize = 4096;
+
 /// Vertices the kernels process together, one per SIMD lane.
 pub(crate) const LANES: usize = 16;
 const _: () = assert!(core::mem::size_of::<Slot>() == LANES * 8);
@@ -88,9 +93,15 @@ impl Influences {
             }
             max_per_vertex = max_per_vertex.max((w[1] - w[0]) as usize);
         }
+        if max_per_vertex > MAX_INFLUENCES_PER_VERTEX {
+            let v = offsets.windows(2).position(|w| (w[1] - w[0]) as usize == max_per_vertex).unwrap_or(0);
+            return invalid(format!(
+                "vertex {v} has {max_per_vertex} influences; at most {MAX_INFLUENCES_PER_VERTEX} per vertex are supported"
+            ));
+        }
         if let Some(i) = bones.iter().position(|&b| b as usize >= bone_count) {
             return invalid(format!(
-                "bones[{i}] = {} is out of range: there are {bone_count} bones",
+                "bones[{i}] = {} is out of range: bone_count = {bone_count}",
                 bones[i]
             ));
         }

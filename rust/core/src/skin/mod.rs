@@ -26,7 +26,7 @@ mod pose;
 
 pub use envelope::{bbone_segment_matrices, distance_factor, BBone, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
-pub use influences::{Influence, Influences};
+pub use influences::{Influence, Influences, MAX_INFLUENCES_PER_VERTEX};
 pub use pose::{affine_problem, Pose};
 
 
@@ -159,7 +159,7 @@ fn skin_with(
         Method::Blend { amount, factor } => {
             let kind = needs_rest(kernels::Kind::Blend)?;
             if !(0.0..=1.0).contains(&factor) {
-                return Err(SkinError::OutOfRange { what: "blend factor", index: None, value: factor });
+                return Err(SkinError::OutOfRange { what: "blend_factor", index: None, value: factor });
             }
             if let Some(amount) = amount {
                 check_len("blend amount", n, amount.len())?;

@@ -493,7 +493,7 @@ fn bad_inputs_are_rejected_before_anything_is_written() {
     ));
     assert!(matches!(
         err(skin(Method::Blend { amount: None, factor: 2.0 }, &positions, &influences, &pose, &opts, &mut out)),
-        SkinError::OutOfRange { what: "blend factor", .. }
+        SkinError::OutOfRange { what: "blend_factor", .. }
     ));
     let mut bad = Mat4::IDENTITY;
     bad.w_axis.w = 2.0;

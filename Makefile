@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 STAMPS := .stamps
 RUST_SOURCES := $(shell find rust bench -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: setup build addon test test-rust test-python demo bench clean
+.PHONY: setup build addon test test-rust test-python test-blenders demo bench clean
 
 setup: $(STAMPS)/deps $(STAMPS)/module $(STAMPS)/addon
 
@@ -47,6 +47,11 @@ test-rust:
 test-python: setup
 	$(PY) -m pytest -q
 
+# The Blender tests on the other Blender releases, each from its own bpy wheel and CPython in
+# .venvs/ (see tests/run_blenders.py); `make test` covers the pinned one.
+test-blenders: setup
+	$(PY) tests/run_blenders.py
+
 demo: setup
 	$(PY) -m dqskin.demo
 	$(PY) addon/demo.py
@@ -61,4 +66,4 @@ bench: setup
 	$(PY) bench/blender_bench.py --out target/bench-blender.json
 
 clean:
-	rm -rf $(STAMPS) target $(VENV)
+	rm -rf $(STAMPS) target $(VENV) .venvs

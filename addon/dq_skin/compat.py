@@ -125,3 +125,20 @@ def last_operator():
         return ops[-1] if ops else None
     except (IndexError, ReferenceError):
         return None
+
+
+
+def new_fcurve(curves, data_path: str, index: int, group: str):
+    """A new F-curve in `curves` (an action's or a channel bag's), in the channel group `group`.
+    The group argument is `action_group` before slotted actions (4.2, 4.3), missing on channel
+    bags in 4.4 and 4.5 (the group is made and assigned here), `group_name` from 5.0."""
+    params = curves.bl_rna.functions["new"].parameters.keys()
+    if "group_name" in params:
+        return curves.new(data_path, index=index, group_name=group)
+    if "action_group" in params:
+        return curves.new(data_path, index=index, action_group=group)
+    fc = curves.new(data_path, index=index)
+    bag = getattr(curves, "data", None)  # the channel bag owning the collection
+    if bag is not None and hasattr(bag, "groups"):
+        fc.group = bag.groups.get(group) or bag.groups.new(group)
+    return fc

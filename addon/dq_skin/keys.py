@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
+from . import compat
+
 
 @dataclass
 class Target:
@@ -67,7 +69,7 @@ def channel(target: Target, prop: str, index: int, create: bool = False):
     path = target.path(prop)
     found = curves.find(path, index=index)
     if found is None and create:
-        found = curves.new(path, index=index, group_name=target.bone or "Object Transforms")
+        found = compat.new_fcurve(curves, path, index, target.bone or "Object Transforms")
     return found
 
 

@@ -55,8 +55,13 @@ def rotation_at(dq, obj, frame, bone=None):
 
 
 def angle_between(a, b):
-    d = abs(float(np.dot(a, b))) / (np.linalg.norm(a) * np.linalg.norm(b))
-    return 2 * math.acos(min(1.0, d))
+    """Rotation angle between two quaternions, in float64 and without acos (which turns float32
+    rounding near 1 into ~4e-4 rad)."""
+    a = np.asarray(a, np.float64) / np.linalg.norm(a)
+    b = np.asarray(b, np.float64) / np.linalg.norm(b)
+    if np.dot(a, b) < 0:
+        b = -b
+    return 4 * math.atan2(np.linalg.norm(a - b), np.linalg.norm(a + b))
 
 
 KEY_FRAMES = [1, 11, 17]

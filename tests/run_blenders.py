@@ -1,0 +1,81 @@
+"""`make test-blenders`: the Blender tests on other Blender releases than the pinned one.
+
+Each release gets its own virtual environment, `.venvs/bpy-VERSION/`, with its own CPython (3.11
+up to Blender 5.0, 3.13 from 5.1), its `bpy` wheel from PyPI, the module's wheel from
+`target/wheels/` and the extension zip from `dist/` installed into its own Blender user folder
+(`.venvs/bpy-VERSION/user`); then `tests/blender` runs there with DQSKIN_BLENDER_USER pointing at
+that folder. Usage: python tests/run_blenders.py [VERSION ...] (default: all of VERSIONS).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+# Release -> CPython it needs. The pinned release (requirements-dev.txt) runs under `make test`.
+VERSIONS = {"4.2.23": "3.11", "5.2.3": "3.13"}
+PYTEST = "pytest==9.2.0"
+
+
+def python_for(minor: str) -> str:
+    """A working CPython `minor`: pyenv's newest (its shims may not be active), else the PATH's."""
+    pyenv = Path(os.environ.get("PYENV_ROOT", Path.home() / ".pyenv"))
+    candidates = [str(p) for p in sorted(pyenv.glob(f"versions/{minor}.*/bin/python{minor}"), reverse=True)]
+    if shutil.which(f"python{minor}"):
+        candidates.append(shutil.which(f"python{minor}"))
+    for exe in candidates:
+        if subprocess.run([exe, "--version"], capture_output=True).returncode == 0:
+            return exe
+    raise SystemExit(f"CPython {minor} is needed for these Blender releases (e.g. pyenv install {minor})")
+
+
+def run(cmd, **kw) -> None:
+    print("+", " ".join(map(str, cmd)), flush=True)
+    subprocess.run(cmd, check=True, **kw)
+
+
+def prepare(version: str, minor: str) -> Path:
+    venv = ROOT / ".venvs" / f"bpy-{version}"
+    py = venv / "bin" / "python"
+    stamp = venv / "bpy-installed"
+    if not stamp.exists():
+        shutil.rmtree(venv, ignore_errors=True)
+        run([python_for(minor), "-m", "venv", str(venv)])
+        run([str(py), "-m", "pip", "install", "--quiet", f"bpy=={version}", PYTEST])
+        stamp.write_text(version)
+    wheels = sorted((ROOT / "target" / "wheels").glob("dqskin-*.whl"))
+    zips = sorted((ROOT / "dist").glob("dq_skin-*.zip"))
+    if not wheels or not zips:
+        raise SystemExit("no module wheel or extension zip: run `make addon` first")
+    run([str(py), "-m", "pip", "install", "--quiet", "--force-reinstall", "--no-deps", str(wheels[-1])])
+    run([str(py), str(ROOT / "addon" / "install.py"), str(zips[-1]), str(venv / "user")], cwd=venv)
+    return venv
+
+
+def main(argv: list[str]) -> int:
+    chosen = argv or list(VERSIONS)
+    unknown = [v for v in chosen if v not in VERSIONS]
+    if unknown:
+        raise SystemExit(f"unknown Blender release(s) {unknown}; known: {list(VERSIONS)}")
+    results = {}
+    for version in chosen:
+        t = time.perf_counter()
+        venv = prepare(version, VERSIONS[version])
+        env = dict(os.environ, DQSKIN_BLENDER_USER=str(venv / "user"))
+        code = subprocess.run(
+            [str(venv / "bin" / "python"), "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/blender"], cwd=ROOT, env=env
+        ).returncode
+        results[version] = (code, time.perf_counter() - t)
+    print("\nBlender release  result   time")
+    for version, (code, seconds) in results.items():
+        print(f"{version:<16} {'passed' if code == 0 else f'FAILED ({code})':<8} {seconds:5.0f} s")
+    return 0 if all(code == 0 for code, _ in results.values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

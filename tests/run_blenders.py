@@ -17,8 +17,16 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-# Release -> CPython it needs. The pinned release (requirements-dev.txt) runs under `make test`.
-VERSIONS = {"4.2.23": "3.11", "5.2.3": "3.13"}
+# Release -> (CPython it needs, extra requirements). The pinned release (requirements-dev.txt)
+# runs under `make test`. bpy 4.4.0 was built against NumPy 1 but lets pip pick NumPy 2.
+VERSIONS = {
+    "4.2.23": ("3.11", []),
+    "4.3.0": ("3.11", ["numpy<2"]),
+    "4.4.0": ("3.11", ["numpy<2"]),
+    "4.5.15": ("3.11", []),
+    "5.1.2": ("3.13", []),
+    "5.2.3": ("3.13", []),
+}
 PYTEST = "pytest==9.2.0"
 
 
@@ -39,14 +47,14 @@ def run(cmd, **kw) -> None:
     subprocess.run(cmd, check=True, **kw)
 
 
-def prepare(version: str, minor: str) -> Path:
+def prepare(version: str, minor: str, extras: list[str]) -> Path:
     venv = ROOT / ".venvs" / f"bpy-{version}"
     py = venv / "bin" / "python"
     stamp = venv / "bpy-installed"
     if not stamp.exists():
         shutil.rmtree(venv, ignore_errors=True)
         run([python_for(minor), "-m", "venv", str(venv)])
-        run([str(py), "-m", "pip", "install", "--quiet", f"bpy=={version}", PYTEST])
+        run([str(py), "-m", "pip", "install", "--quiet", f"bpy=={version}", PYTEST, *extras])
         stamp.write_text(version)
     wheels = sorted((ROOT / "target" / "wheels").glob("dqskin-*.whl"))
     zips = sorted((ROOT / "dist").glob("dq_skin-*.zip"))
@@ -65,7 +73,7 @@ def main(argv: list[str]) -> int:
     results = {}
     for version in chosen:
         t = time.perf_counter()
-        venv = prepare(version, VERSIONS[version])
+        venv = prepare(version, *VERSIONS[version])
         env = dict(os.environ, DQSKIN_BLENDER_USER=str(venv / "user"))
         code = subprocess.run(
             [str(venv / "bin" / "python"), "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/blender"], cwd=ROOT, env=env

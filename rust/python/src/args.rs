@@ -10,8 +10,13 @@ fn type_name(obj: &Bound<'_, PyAny>) -> String {
     obj.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "?".into())
 }
 
+/// The numpy dtype kind of a numpy scalar or array ("b", "i", "f", "c", ...), or None.
+fn numpy_kind(obj: &Bound<'_, PyAny>) -> Option<String> {
+    obj.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract::<String>()).ok()
+}
+
 fn is_numpy_bool(obj: &Bound<'_, PyAny>) -> bool {
-    obj.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract::<String>()).is_ok_and(|k| k == "b")
+    numpy_kind(obj).is_some_and(|k| k == "b")
 }
 
 /// An integer in `[min, max]` (Python ints, numpy integers; not floats or bools).
@@ -43,13 +48,9 @@ pub fn float(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<f32> {
             return Err(PyTypeError::new_err(format!("{name} must be a number, got an array of shape {:?}", numpy::PyUntypedArrayMethods::shape(arr))));
         }
     }
-    if obj.hasattr("imag").unwrap_or(false) && !obj.is_instance_of::<PyFloat>() {
+    if numpy_kind(obj).is_some_and(|k| k == "c") {
         // numpy complex scalars: refuse rather than drop the imaginary part.
-        if let Ok(kind) = obj.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract::<String>()) {
-            if kind == "c" {
-                return Err(PyTypeError::new_err(format!("{name} must be a real number, got a complex {}", type_name(obj))));
-            }
-        }
+        return Err(PyTypeError::new_err(format!("{name} must be a real number, got a complex {}", type_name(obj))));
     }
     let v: f64 = match obj.extract::<f64>() {
         Ok(v) => v,

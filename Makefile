@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 STAMPS := .stamps
 RUST_SOURCES := $(shell find rust bench -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: setup build addon test test-rust test-python test-blenders demo bench clean
+.PHONY: setup build addon platforms test test-rust test-python test-blenders demo bench clean
 
 setup: $(STAMPS)/deps $(STAMPS)/module $(STAMPS)/addon
 
@@ -25,15 +25,26 @@ $(STAMPS)/module: $(STAMPS)/deps $(RUST_SOURCES) python/dqskin/__init__.py
 # The Blender extension: the installable zip in dist/ (validated by Blender's own tool), then
 # installed and enabled in the repo's Blender user folder, .blender_user/, which the Blender
 # tests use through BLENDER_USER_RESOURCES, as users' scripts do.
+# The module in it is linked through zig for manylinux2014 (glibc 2.17), so the zip loads on
+# every Linux Blender runs on; addon/build.py refuses a module that needs a newer glibc.
 ADDON_SOURCES := $(shell find addon -type f -not -path '*/__pycache__/*')
 $(STAMPS)/addon: $(STAMPS)/module $(ADDON_SOURCES)
-	rm -rf target/wheels
-	VIRTUAL_ENV=$(abspath $(VENV)) $(VENV)/bin/maturin build --release --quiet --out target/wheels
-	$(PY) addon/build.py target/wheels/dqskin-*.whl --out dist
-	$(PY) addon/install.py $$(ls dist/dq_skin-*.zip) .blender_user
+	$(PY) addon/build_native.py linux-x64 --out target/wheels/linux-x64
+	$(PY) addon/build.py target/wheels/linux-x64/dqskin-*.whl --out dist
+	$(PY) addon/install.py dist/dq_skin-*-linux_x64.zip .blender_user
 	@mkdir -p $(STAMPS) && touch $@
 
 addon: $(STAMPS)/addon
+
+# Zips for the platforms this machine can build but not run: Windows x64 and macOS (arm64,
+# x86-64). Their binaries are checked (imports, linked libraries, minimum OS) but they have never
+# been loaded in Blender, so they go to dist/unverified/ (see README, "Platforms").
+OTHER_PLATFORMS := windows-x64 macos-arm64 macos-x64
+platforms: setup
+	for p in $(OTHER_PLATFORMS); do \
+	  $(PY) addon/build_native.py $$p --out target/wheels/$$p && \
+	  $(PY) addon/build.py target/wheels/$$p/dqskin-*.whl --out dist/unverified || exit 1; \
+	done
 
 build: setup
 

@@ -1,8 +1,11 @@
-"""Builds the installable DQ Skin extension zip into dist/ and validates it with Blender's own tool.
+"""Builds the installable DQ Skin extension zip for one platform and validates it with Blender's tool.
 
 The compiled `dqskin` package (from the maturin wheel given on the command line) is bundled as a
 sub-package, `dq_skin.dqskin`, so it cannot collide with anything in Blender's shared wheel
-folder. Usage: python addon/build.py WHEEL [--out dist]
+folder. The compiled module is checked first (addon/native_check.py: glibc, DLL imports, linked
+libraries), and the zip's manifest lists exactly the platform it was built for:
+`dq_skin-VERSION-PLATFORM.zip`, as Blender names split-platform packages.
+Usage: python addon/build.py WHEEL [--out dist]
 """
 
 from __future__ import annotations
@@ -14,6 +17,8 @@ import sys
 import tempfile
 import zipfile
 from pathlib import Path
+
+import native_check
 
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE = ROOT / "addon" / "dq_skin"
@@ -46,7 +51,8 @@ def platform_of(wheel: Path) -> str:
     raise SystemExit(f"cannot tell the Blender platform of {wheel.name}")
 
 
-def stage(wheel: Path, into: Path) -> None:
+def stage(wheel: Path, into: Path) -> str:
+    """Copies the add-on and the wheel's module into `into`; returns the platform, checked."""
     shutil.copytree(SOURCE, into, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
     native = into / "dqskin"
     native.mkdir()
@@ -55,12 +61,24 @@ def stage(wheel: Path, into: Path) -> None:
             parts = name.split("/")
             if len(parts) == 2 and parts[0] == "dqskin" and (parts[1] in BUNDLED or parts[1].startswith("_dqskin.")):
                 (native / parts[1]).write_bytes(z.read(name))
-    if not any(native.glob("_dqskin.*.so")) and not any(native.glob("_dqskin*.pyd")):
-        raise SystemExit(f"{wheel} has no compiled dqskin module")
+    modules = [*native.glob("_dqskin.*.so"), *native.glob("_dqskin*.pyd")]
+    if len(modules) != 1:
+        raise SystemExit(f"{wheel} has {len(modules)} compiled dqskin modules, expected one")
+    platform = platform_of(wheel)
+    tag = wheel.name.rsplit("-", 1)[-1].removesuffix(".whl")
+    limit = min(native_check.BLENDER_GLIBC, native_check.glibc_of_tag(tag) or native_check.BLENDER_GLIBC)
+    try:
+        report = native_check.check(modules[0], glibc_limit=limit)
+    except native_check.NativeError as e:
+        raise SystemExit(f"error: {e}") from None
+    if report.platform != platform:
+        raise SystemExit(f"{wheel.name} is tagged {platform} but its module is built for {report.platform}")
+    print(f"{modules[0].name}: {report.summary}")
     manifest = into / "blender_manifest.toml"
     text = manifest.read_text()
     lines = [f'platforms = ["{platform_of(wheel)}"]' if line.startswith("platforms") else line for line in text.splitlines()]
     manifest.write_text("\n".join(lines) + "\n")
+    return platform
 
 
 def main() -> int:
@@ -72,18 +90,18 @@ def main() -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         staged = Path(tmp) / "dq_skin"
-        stage(args.wheel, staged)
-        for old in args.out.glob("dq_skin-*.zip"):
+        platform = stage(args.wheel, staged)
+        version = next(line.split('"')[1] for line in (staged / "blender_manifest.toml").read_text().splitlines()
+                       if line.startswith("version"))
+        target = args.out / f"dq_skin-{version}-{platform.replace('-', '_')}.zip"
+        for old in args.out.glob(f"dq_skin-*-{platform.replace('-', '_')}.zip"):
             old.unlink()
         subprocess.run(
-            [sys.executable, str(tool), "build", "--source-dir", str(staged), "--output-dir", str(args.out)],
+            [sys.executable, str(tool), "build", "--source-dir", str(staged), "--output-filepath", str(target)],
             check=True,
         )
-    zips = sorted(args.out.glob("dq_skin-*.zip"))
-    if len(zips) != 1:
-        raise SystemExit(f"expected one extension zip in {args.out}, found {zips}")
-    subprocess.run([sys.executable, str(tool), "validate", str(zips[0])], check=True)
-    print(zips[0])
+    subprocess.run([sys.executable, str(tool), "validate", str(target)], check=True)
+    print(target)
     return 0
 
 

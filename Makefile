@@ -27,7 +27,7 @@ $(STAMPS)/module: $(STAMPS)/deps $(RUST_SOURCES) python/dqskin/__init__.py
 # tests use through BLENDER_USER_RESOURCES, as users' scripts do.
 # The module in it is linked through zig for manylinux2014 (glibc 2.17), so the zip loads on
 # every Linux Blender runs on; addon/build.py refuses a module that needs a newer glibc.
-ADDON_SOURCES := $(shell find addon -type f -not -path '*/__pycache__/*')
+ADDON_SOURCES := $(shell find addon -type f -not -path '*/__pycache__/*') $(wildcard python/dqskin/*.py python/dqskin/*.pyi)
 $(STAMPS)/addon: $(STAMPS)/module $(ADDON_SOURCES)
 	$(PY) addon/build_native.py linux-x64 --out target/wheels/linux-x64
 	$(PY) addon/build.py target/wheels/linux-x64/dqskin-*.whl --out dist

@@ -23,7 +23,7 @@ import native_check
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE = ROOT / "addon" / "dq_skin"
 # What of the wheel's `dqskin/` package goes into the extension.
-BUNDLED = ("__init__.py", "_dqskin.pyi", "py.typed", "pc2.py")
+BUNDLED = ("__init__.py", "_dqskin.pyi", "py.typed", "pc2.py", "blender.py")
 
 
 def blender_ext() -> Path:

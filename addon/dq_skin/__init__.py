@@ -8,7 +8,7 @@ result the handlers (see `handlers`) keep current.
 
 import bpy
 
-from . import animation, bake, compare, handlers, operators, rig, ui  # noqa: F401
+from . import animation, bake, cli, compare, handlers, operators, rig, ui  # noqa: F401
 
 CLASSES = (*operators.CLASSES, *bake.CLASSES, *compare.CLASSES, *animation.CLASSES, *ui.CLASSES)
 
@@ -18,9 +18,11 @@ def register():
         bpy.utils.register_class(cls)
     ui.register_menus()
     handlers.register()
+    cli.register()
 
 
 def unregister():
+    cli.unregister()
     handlers.unregister()
     ui.unregister_menus()
     for cls in reversed(CLASSES):

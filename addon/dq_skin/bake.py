@@ -4,14 +4,13 @@ Cache modifier, so the animation plays and renders where this add-on is not inst
 
 from __future__ import annotations
 
-import sys
-import time
 from pathlib import Path
 
 import bpy
 import numpy as np
 
 from . import modifier, operators
+from .progress import Progress
 from .dqskin import pc2
 
 CACHE_NAME = "DQ Skin Cache"
@@ -22,33 +21,6 @@ def _positions(obj, depsgraph) -> np.ndarray:
     flat = np.empty(len(ev.data.vertices) * 3, np.float32)
     ev.data.attributes["position"].data.foreach_get("vector", flat)
     return flat.reshape(-1, 3)
-
-
-class Progress:
-    """Progress on the terminal (a text bar) and in the UI (`window_manager.progress_*`)."""
-
-    def __init__(self, context, total: int, label: str):
-        self.wm = getattr(context, "window_manager", None)
-        self.total, self.label, self.done = max(total, 1), label, 0
-        self.start = time.perf_counter()
-        self.tty = sys.stderr.isatty()
-        if self.wm is not None:
-            self.wm.progress_begin(0, self.total)
-
-    def step(self) -> None:
-        self.done += 1
-        if self.wm is not None:
-            self.wm.progress_update(self.done)
-        width = 30
-        filled = int(width * self.done / self.total)
-        line = f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total}"
-        if self.tty or self.done == self.total:
-            sys.stderr.write(line + ("\n" if self.done == self.total else ""))
-            sys.stderr.flush()
-
-    def end(self) -> None:
-        if self.wm is not None:
-            self.wm.progress_end()
 
 
 def bake(context, obj, mod, path, frame_start: int, frame_end: int, check=None) -> pc2.Header:

@@ -13,6 +13,7 @@ import numpy as np
 from mathutils import Quaternion, Vector
 
 from . import dqskin, operators
+from .progress import Progress
 
 VARIANTS = (
     ("Armature Linear", "armature", False),
@@ -91,17 +92,26 @@ def builtin_rigs(scene):
 
 def build(context, sources, spacing: float | None = None):
     """A "DQ Skin Comparison" collection in the current scene with one row per source mesh and
-    one column per variant. Returns `(collection, rows)`, `rows[i][name]` the variant objects."""
+    one column per variant, each labelled. Returns `(collection, rows)`, `rows[i][name]` the
+    variant objects."""
     scene = context.scene
     collection = bpy.data.collections.new("DQ Skin Comparison")
     scene.collection.children.link(collection)
+    sizes = [Vector(src.dimensions) for src in sources]
+    # One column pitch for every row, so that columns line up and labels have one size.
+    step = spacing or max(max(s.x, s.y, s.z * 0.6) for s in sizes) * 1.35 + 0.3
+    label_size = step / 10
+    label_material = _flat_material("DQ Skin Label", (0.9, 0.9, 0.9))
     rows = []
     y = 0.0
-    for src in sources:
+    for src, size in zip(sources, sizes):
         arm_src = next(m for m in src.modifiers if m.type == "ARMATURE").object
-        size = Vector(src.dimensions)
-        step = spacing or max(size.x, size.z * 0.6) * 1.6 + 0.5
         row = {}
+        # Labels at one height per row: above the source as it stands now.
+        context.view_layer.update()
+        corners = [src.matrix_world @ Vector(c) for c in src.bound_box]
+        top = max(c.z for c in corners) - y
+        middle = (min(c.x for c in corners) + max(c.x for c in corners)) / 2
         for col, (label, kind, preserve) in enumerate(VARIANTS):
             offset = Vector((col * step, 0.0, -y))  # rows stack downwards, facing the camera
             arm = arm_src.copy()
@@ -129,34 +139,48 @@ def build(context, sources, spacing: float | None = None):
                 if kind == "BLEND":
                     mod = next(m for m in obj.modifiers if m.type == "NODES")
                     operators.set_input(mod, "Blend Factor", 0.5)
-            text = bpy.data.objects.new(f"{label} label", bpy.data.curves.new(f"{label} label", "FONT"))
             head, _, tail = label.partition(" Skin " if label.startswith("DQ") else " ")
-            text.data.body = f"{head} Skin\n{tail}" if label.startswith("DQ") else f"{head}\n{tail}"
-            text.data.size = 0.25 * max(size.z, 1.0) / 4
-            text.data.align_x = "CENTER"
-            context.view_layer.update()
-            text.location = obj.matrix_world.translation + Vector((0, 0, size.z * 1.1 + 0.3))
-            text.rotation_euler = (math.pi / 2, 0, 0)
-            collection.objects.link(text)
+            body = f"{head} Skin\n{tail}" if label.startswith("DQ") else f"{head}\n{tail}"
+            text = _text(collection, f"{label} label", body, label_size, label_material)
+            text.location = (middle + offset.x, 0.0, top + label_size * 2.2)
             row[label] = obj
         rows.append(row)
-        y += size.z * 1.8 + 1.5
+        y += size.z * 1.3 + label_size * 3.5 + 0.2
     for src in sources:  # the originals stay, hidden, so the comparison shows once
         src.hide_viewport = src.hide_render = True
         arm_src = next(m for m in src.modifiers if m.type == "ARMATURE").object
         arm_src.hide_viewport = arm_src.hide_render = True
-    _camera_and_light(scene, collection, [o for r in rows for o in r.values()])
+    _camera_and_light(scene, collection)
     return collection, rows
 
 
-def _camera_and_light(scene, collection, objects):
-    points = np.array([o.matrix_world @ Vector(c) for o in objects for c in o.bound_box])
-    lo, hi = points.min(0), points.max(0)
-    center = (lo + hi) / 2
+def _text(collection, name, body, size, material, align="CENTER"):
+    text = bpy.data.objects.new(name, bpy.data.curves.new(name, "FONT"))
+    text.data.body = body
+    text.data.size = size
+    text.data.align_x = align
+    text.data.materials.append(material)
+    text.rotation_euler = (math.pi / 2, 0, 0)  # faces the camera, which looks along +Y
+    collection.objects.link(text)
+    return text
+
+
+def _flat_material(name, color):
+    """A material that shows `color` whatever the light (labels, the legend)."""
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    nodes.clear()
+    emission = nodes.new("ShaderNodeEmission")
+    emission.inputs["Color"].default_value = (*color, 1.0)
+    out = nodes.new("ShaderNodeOutputMaterial")
+    mat.node_tree.links.new(emission.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+def _camera_and_light(scene, collection):
     cam = bpy.data.objects.new("Comparison Camera", bpy.data.cameras.new("Comparison Camera"))
     cam.data.type = "ORTHO"
-    cam.data.ortho_scale = float(max(hi[0] - lo[0], (hi[2] - lo[2]) * 16 / 9) * 1.15 + 1.0)
-    cam.location = (float(center[0]), float(lo[1] - 20.0), float(center[2] + 0.6))
     cam.rotation_euler = (math.pi / 2, 0, 0)
     collection.objects.link(cam)
     scene.camera = cam
@@ -167,6 +191,45 @@ def _camera_and_light(scene, collection, objects):
     world = bpy.data.worlds.new("Comparison World")
     world.color = (0.05, 0.05, 0.06)
     scene.world = world
+    fit_camera(bpy.context, scene, collection)
+
+
+def _visible_bounds(context, collection):
+    """World-space bounds of what the comparison shows at the current frame: the deformed meshes
+    (evaluated) and the labels."""
+    depsgraph = context.evaluated_depsgraph_get()
+    points = []
+    for obj in collection.all_objects:
+        if obj.hide_render or obj.type not in ("MESH", "FONT"):
+            continue
+        ev = obj.evaluated_get(depsgraph)
+        if obj.type == "MESH" and len(ev.data.vertices):
+            co = np.empty(len(ev.data.vertices) * 3, np.float32)
+            ev.data.vertices.foreach_get("co", co)
+            m = np.array(obj.matrix_world)
+            points.append(co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3])
+        else:
+            points.append(np.array([obj.matrix_world @ Vector(c) for c in ev.bound_box]))
+    if not points:
+        return np.zeros(3), np.ones(3)
+    allp = np.concatenate(points)
+    return allp.min(0), allp.max(0)
+
+
+def fit_camera(context, scene, collection=None) -> float:
+    """Frames the comparison as it is at the current frame (deformed), with a small margin.
+    Returns the content's width / height, for a picture without empty bands."""
+    collection = collection or bpy.data.collections["DQ Skin Comparison"]
+    cam = scene.camera
+    lo, hi = _visible_bounds(context, collection)
+    margin = 0.04 * max(hi[0] - lo[0], hi[2] - lo[2])
+    width, height = hi[0] - lo[0] + 2 * margin, hi[2] - lo[2] + 2 * margin
+    aspect = scene.render.resolution_x * scene.render.pixel_aspect_x / max(1, scene.render.resolution_y * scene.render.pixel_aspect_y)
+    cam.data.ortho_scale = float(max(width, height * aspect))
+    center = (lo + hi) / 2
+    cam.location = (float(center[0]), float(lo[1] - 20.0), float(center[2]))
+    cam.data.clip_end = float(hi[1] - lo[1] + 40.0)
+    return float(width / max(height, 1e-9))
 
 
 def _positions(obj, depsgraph):
@@ -197,52 +260,61 @@ def report(context, scene, rows, frames, check=None):
     may raise to stop (the command line's Ctrl-C and SIGTERM)."""
     check = check or (lambda: None)
     result = []
-    for row in rows:
-        names = list(row)
-        first = row[names[0]]
-        mesh = first.data
-        tris = _triangles(mesh) if _closed(mesh) else None
-        rest_co = np.empty(len(mesh.vertices) * 3, np.float32)
-        mesh.vertices.foreach_get("co", rest_co)
-        rest_volume = dqskin.mesh_volume(rest_co.reshape(-1, 3), tris) if tris is not None else None
-        per = {n: {"positions": [], "seconds": 0.0} for n in names}
-        for f in frames:
-            check()
-            scene.frame_set(f)
-            depsgraph = context.evaluated_depsgraph_get()
-            for n in names:
-                # The copies stand side by side with their own armatures; in each copy's own
-                # space the deformations are directly comparable.
-                per[n]["positions"].append(_positions(row[n], depsgraph))
-        for n in names:
-            others = [o for o in names if o != n]
-            for o in others:
-                row[o].hide_viewport = True
-            start = time.perf_counter()
-            for f in frames:
-                check()
-                scene.frame_set(f)
-                _positions(row[n], context.evaluated_depsgraph_get())
-            per[n]["seconds"] = time.perf_counter() - start
-            for o in others:
-                row[o].hide_viewport = False
-        entry = {"mesh": first.name.split(".")[0], "vertices": len(mesh.vertices), "frames": [frames[0], frames[-1]], "methods": {}}
-        for n in names:
-            ours = np.stack(per[n]["positions"])
-            stats = {"ms_per_frame": per[n]["seconds"] / len(frames) * 1e3}
-            for ref in ("Armature Linear", "Armature Preserve Volume"):
-                d = np.linalg.norm(ours - np.stack(per[ref]["positions"]), axis=2)
-                stats[f"max_deviation_from_{ref.lower().replace(' ', '_')}"] = float(d.max())
-                stats[f"mean_deviation_from_{ref.lower().replace(' ', '_')}"] = float(d.mean())
-            if tris is not None and rest_volume:
-                last = per[n]["positions"][-1]
-                stats["volume_relative_to_rest"] = dqskin.mesh_volume(np.ascontiguousarray(last, np.float32), tris) / rest_volume
-            entry["methods"][n] = stats
-        result.append(entry)
+    # Every row's frames once for the positions, then once per variant alone for the timing.
+    steps = sum(len(frames) * (1 + len(row)) for row in rows)
+    with Progress(context, steps, f"Comparing {len(rows)} row(s) over {len(frames)} frame(s)") as progress:
+        for row in rows:
+            result.append(_report_row(context, scene, row, frames, check, progress))
     return result
 
 
-def write_report(result, out_dir, source: str, frames, picture: str | None = None) -> None:
+def _report_row(context, scene, row, frames, check, progress):
+    names = list(row)
+    first = row[names[0]]
+    mesh = first.data
+    tris = _triangles(mesh) if _closed(mesh) else None
+    rest_co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", rest_co)
+    rest_volume = dqskin.mesh_volume(rest_co.reshape(-1, 3), tris) if tris is not None else None
+    per = {n: {"positions": [], "seconds": 0.0} for n in names}
+    for f in frames:
+        check()
+        scene.frame_set(f)
+        depsgraph = context.evaluated_depsgraph_get()
+        for n in names:
+            # The copies stand side by side with their own armatures; in each copy's own
+            # space the deformations are directly comparable.
+            per[n]["positions"].append(_positions(row[n], depsgraph))
+        progress.step()
+    for n in names:
+        others = [o for o in names if o != n]
+        for o in others:
+            row[o].hide_viewport = True
+        start = time.perf_counter()
+        for f in frames:
+            check()
+            scene.frame_set(f)
+            _positions(row[n], context.evaluated_depsgraph_get())
+        per[n]["seconds"] = time.perf_counter() - start
+        progress.step(len(frames))
+        for o in others:
+            row[o].hide_viewport = False
+    entry = {"mesh": first.name.split(".")[0], "vertices": len(mesh.vertices), "frames": [frames[0], frames[-1]], "methods": {}}
+    for n in names:
+        ours = np.stack(per[n]["positions"])
+        stats = {"ms_per_frame": per[n]["seconds"] / len(frames) * 1e3}
+        for ref in ("Armature Linear", "Armature Preserve Volume"):
+            d = np.linalg.norm(ours - np.stack(per[ref]["positions"]), axis=2)
+            stats[f"max_deviation_from_{ref.lower().replace(' ', '_')}"] = float(d.max())
+            stats[f"mean_deviation_from_{ref.lower().replace(' ', '_')}"] = float(d.mean())
+        if tris is not None and rest_volume:
+            last = per[n]["positions"][-1]
+            stats["volume_relative_to_rest"] = dqskin.mesh_volume(np.ascontiguousarray(last, np.float32), tris) / rest_volume
+        entry["methods"][n] = stats
+    return entry
+
+
+def write_report(result, out_dir, source: str, frames, pictures: dict[str, str] | None = None) -> None:
     """`report.json` and `report.md` in `out_dir` (each written to a temporary file first)."""
     import json
     import os
@@ -263,8 +335,8 @@ def write_report(result, out_dir, source: str, frames, picture: str | None = Non
                 f"{r['max_deviation_from_armature_preserve_volume']:.3e} | "
                 f"{'' if volume is None else f'{volume:.3f}'} | {r['ms_per_frame']:.2f} |"
             )
-    if picture:
-        lines += ["", f"![comparison at frame {end}]({picture})"]
+    for caption, picture in (pictures or {}).items():
+        lines += ["", f"![{caption}]({picture})"]
     texts = {
         "report.json": json.dumps({"source": source, "frames": [start, end], "rows": result}, indent=2),
         "report.md": "\n".join(lines) + "\n",
@@ -276,16 +348,129 @@ def write_report(result, out_dir, source: str, frames, picture: str | None = Non
         os.replace(tmp, out / name)
 
 
-def render(scene, path, width=960, height=540, samples=8) -> None:
+def render(scene, path, width=1600, height=None, samples=8) -> None:
+    """Renders the comparison at the current frame (Cycles, CPU) to a PNG, the camera fitted to
+    it; `height=None` takes the height from the content's shape."""
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     scene.cycles.samples = samples
-    scene.render.resolution_x, scene.render.resolution_y = width, height
     scene.render.resolution_percentage = 100
+    scene.render.resolution_x, scene.render.resolution_y = width, height or width
+    shape = fit_camera(bpy.context, scene)
+    if height is None:
+        scene.render.resolution_y = max(64, min(2 * width, round(width / shape)))
+        fit_camera(bpy.context, scene)
+    scene.view_settings.view_transform = "Standard"  # colours as the legend's, unfiltered
     scene.render.image_settings.file_format = "PNG"
     scene.render.filepath = str(path)
     with bpy.context.temp_override(scene=scene):
         bpy.ops.render.render(write_still=True, scene=scene.name)
+
+
+# A perceptually uniform scale (viridis), low to high.
+DEVIATION_COLORS = ((0.0, (0.267, 0.005, 0.329)), (0.25, (0.229, 0.322, 0.546)), (0.5, (0.128, 0.567, 0.551)),
+                    (0.75, (0.369, 0.789, 0.383)), (1.0, (0.993, 0.906, 0.144)))
+DEVIATION_ATTRIBUTE = "dq_skin_deviation"
+
+
+def _deviation_material(scale: float):
+    """Colours a surface by its `dq_skin_deviation` attribute over `[0, scale]`."""
+    mat = bpy.data.materials.get("DQ Skin Deviation") or bpy.data.materials.new("DQ Skin Deviation")
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.clear()
+    attr = nodes.new("ShaderNodeAttribute")
+    attr.attribute_name = DEVIATION_ATTRIBUTE
+    to_unit = nodes.new("ShaderNodeMapRange")
+    to_unit.inputs["From Max"].default_value = scale
+    to_unit.clamp = True
+    ramp = nodes.new("ShaderNodeValToRGB")
+    elements = ramp.color_ramp.elements
+    elements[0].position, elements[0].color = DEVIATION_COLORS[0][0], (*DEVIATION_COLORS[0][1], 1)
+    elements[1].position, elements[1].color = DEVIATION_COLORS[-1][0], (*DEVIATION_COLORS[-1][1], 1)
+    for position, color in DEVIATION_COLORS[1:-1]:
+        elements.new(position).color = (*color, 1)
+    emission = nodes.new("ShaderNodeEmission")
+    out = nodes.new("ShaderNodeOutputMaterial")
+    links.new(attr.outputs["Fac"], to_unit.inputs["Value"])
+    links.new(to_unit.outputs["Result"], ramp.inputs["Fac"])
+    links.new(ramp.outputs["Color"], emission.inputs["Color"])
+    links.new(emission.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+def deviations(context, rows) -> list[dict[str, np.ndarray]]:
+    """Per row and variant, every vertex's distance from where Armature Linear puts it, at the
+    current frame (each in its own object space, as in the report)."""
+    depsgraph = context.evaluated_depsgraph_get()
+    out = []
+    for row in rows:
+        ref = _positions(row["Armature Linear"], depsgraph)
+        out.append({n: np.linalg.norm(_positions(o, depsgraph) - ref, axis=1) for n, o in row.items()})
+    return out
+
+
+def render_deviation(context, scene, rows, path, width=1600, height=None, samples=4) -> float:
+    """The deviation view: every variant coloured by its distance from Armature Linear at the
+    current frame, one scale for the picture, with a legend; rendered like `render`. The
+    variants are shown as still copies of their deformed meshes (whatever made them), which are
+    removed after: the scene is left as it was. Returns the scale's top (the largest distance)."""
+    values = deviations(context, rows)
+    scale = max([float(d.max()) for per in values for d in per.values()] + [1e-6])
+    collection = bpy.data.collections["DQ Skin Comparison"]
+    material = _deviation_material(scale)
+    depsgraph = context.evaluated_depsgraph_get()
+    added, hidden = [], []
+    try:
+        for row, per in zip(rows, values):
+            for name, obj in row.items():
+                mesh = bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph))
+                mesh.materials.clear()
+                mesh.materials.append(material)
+                attr = mesh.attributes.new(DEVIATION_ATTRIBUTE, "FLOAT", "POINT")
+                attr.data.foreach_set("value", per[name].astype(np.float32))
+                still = bpy.data.objects.new(f"{name} deviation", mesh)
+                still.matrix_world = obj.matrix_world.copy()
+                collection.objects.link(still)
+                added.append(still)
+                hidden.append((obj, obj.hide_render))
+                obj.hide_render = True
+        added += _legend(context, collection, scale, material)
+        render(scene, path, width=width, height=height, samples=samples)
+    finally:
+        for obj in added:
+            data = obj.data
+            bpy.data.objects.remove(obj)
+            (bpy.data.meshes if isinstance(data, bpy.types.Mesh) else bpy.data.curves).remove(data)
+        for obj, was in hidden:
+            obj.hide_render = was
+    return scale
+
+
+def _legend(context, collection, scale, material):
+    """A colour bar under the comparison, from 0 to `scale`, with its numbers and its title."""
+    lo, hi = _visible_bounds(context, collection)
+    width = (hi[0] - lo[0]) * 0.5
+    size = width / 24
+    left, z = (lo[0] + hi[0]) / 2 - width / 2, lo[2] - size * 3
+    steps = 64
+    verts = [(left + width * i / steps, 0.0, z + dz) for i in range(steps + 1) for dz in (0.0, size)]
+    faces = [(2 * i, 2 * i + 2, 2 * i + 3, 2 * i + 1) for i in range(steps)]
+    mesh = bpy.data.meshes.new("DQ Skin Legend")
+    mesh.from_pydata(verts, [], faces)
+    values = np.repeat(np.linspace(0.0, scale, steps + 1, dtype=np.float32), 2)
+    mesh.attributes.new(DEVIATION_ATTRIBUTE, "FLOAT", "POINT").data.foreach_set("value", values)
+    mesh.materials.append(material)
+    bar = bpy.data.objects.new("DQ Skin Legend", mesh)
+    collection.objects.link(bar)
+    white = _flat_material("DQ Skin Label", (0.9, 0.9, 0.9))
+    low = _text(collection, "DQ Skin Legend 0", "0", size, white, align="RIGHT")
+    low.location = (left - size * 0.5, 0.0, z + size * 0.15)
+    high = _text(collection, "DQ Skin Legend max", f"{scale:.3g}", size, white, align="LEFT")
+    high.location = (left + width + size * 0.5, 0.0, z + size * 0.15)
+    title = _text(collection, "DQ Skin Legend title", "distance from Armature Linear (scene units)", size, white)
+    title.location = (left + width / 2, 0.0, z - size * 1.3)
+    return [bar, low, high, title]
 
 
 class OBJECT_OT_dq_skin_comparison_scene(bpy.types.Operator):

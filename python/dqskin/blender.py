@@ -1,9 +1,9 @@
 """Batch command line for Blender files: ``python -m dqskin.blender COMMAND ...``.
 
-Works with the ``bpy`` module and inside Blender
-(``blender -b --python-expr "import dqskin.blender as c; c.main()" -- COMMAND ...`` or
-``blender -b --python path/to/blender.py -- COMMAND ...``). The DQ Skin extension must be
-installed in the Blender user folder named by ``BLENDER_USER_RESOURCES`` (or
+Works with the ``bpy`` module and inside Blender, where the installed extension registers the
+same commands with Blender's own command line: ``blender -b --command dq_skin COMMAND ...``
+(Blender 4.2+; the extension bundles this file). With the ``bpy`` module the DQ Skin extension
+must be installed in the Blender user folder named by ``BLENDER_USER_RESOURCES`` (or
 ``--user-resources``), as ``make setup`` does into ``.blender_user/``.
 
 Commands:
@@ -14,7 +14,9 @@ Commands:
 - ``compare [FILE] [--frames A-B] [--out DIR]``: a comparison scene (the file's first rigged
   mesh, or built-in test rigs) with the Armature modifier (Linear, Preserve Volume) and DQ Skin
   (Linear, Dual Quaternion, Blend) side by side: ``report.json`` and ``report.md`` (deviations
-  from each built-in method, volume relative to rest, per-frame time) and ``comparison.png``.
+  from each built-in method, volume relative to rest, per-frame time), ``comparison.png`` (the
+  variants, labelled) and ``deviation.png`` (each variant coloured by its distance from
+  Armature Linear, with a legend).
 
 On failure the exit code is 1 with a one-line reason (``DQSKIN_DEBUG=1`` adds the traceback),
 and no output file is written: all outputs go to a temporary file ``.NAME.dqskin-PID.tmp`` that
@@ -27,6 +29,7 @@ same output removes the temporaries of processes that no longer run.
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import signal
 import sys
@@ -34,6 +37,18 @@ import traceback
 from pathlib import Path
 
 EXTENSION = "bl_ext.user_default.dq_skin"
+
+
+def _embedded_in() -> str | None:
+    """The extension's package when this file runs from inside it (bundled as
+    `<extension>.dqskin.blender`: `blender --command dq_skin`), else None."""
+    parts = __name__.split(".")
+    return ".".join(parts[:-2]) if len(parts) > 2 and parts[-2:] == ["dqskin", "blender"] else None
+
+
+def _addon(module: str):
+    """A module of the DQ Skin extension (`modifier`, `bake`, ...), wherever it is installed."""
+    return importlib.import_module(f"{_embedded_in() or EXTENSION}.{module}")
 
 
 class Failure(Exception):
@@ -102,6 +117,11 @@ def _frames(text: str | None, scene) -> tuple[int, int]:
 
 
 def _bpy(user_resources: str | None):
+    if _embedded_in():
+        import bpy  # inside Blender, which has loaded the extension this runs from
+
+        watch_signals()
+        return bpy
     if user_resources:
         os.environ["BLENDER_USER_RESOURCES"] = str(Path(user_resources).resolve())
     import bpy  # noqa: F401  (after BLENDER_USER_RESOURCES)
@@ -158,15 +178,13 @@ def cmd_bake(args) -> str:
     obj = bpy.data.objects.get(args.object)
     if obj is None or obj.type != "MESH":
         raise Failure(f"{args.file}: no mesh object named {args.object!r}")
-    from bl_ext.user_default.dq_skin import modifier
-
+    modifier = _addon("modifier")
     if not modifier.dq_skin_modifiers(obj):
         if not any(m.type == "ARMATURE" for m in obj.modifiers):
             raise Failure(f"{obj.name} has neither a DQ Skin nor an Armature modifier")
         _add_dq_skin(bpy, obj, args.method)
     start, end = _frames(args.frames, bpy.context.scene)
-    from bl_ext.user_default.dq_skin import bake
-
+    bake = _addon("bake")
     mod = modifier.dq_skin_modifiers(obj)[0]
     out = Path(args.out).resolve()
     try:
@@ -184,11 +202,18 @@ def cmd_apply(args) -> str:
     objects = _skinned(bpy)
     if not objects:
         raise Failure(f"{args.file}: no object has an Armature modifier")
-    for obj in objects:
-        check()
-        with deferred():
-            _add_dq_skin(bpy, obj, args.method)
-    out = Path(args.out).resolve()
+    with _addon("progress").Progress(bpy.context, len(objects) + 1, f"Adding DQ Skin to {len(objects)} object(s)") as progress:
+        for obj in objects:
+            check()
+            with deferred():
+                _add_dq_skin(bpy, obj, args.method)
+            progress.step()
+        _save(bpy, Path(args.out).resolve())
+        progress.step()
+    return f"replaced {len(objects)} Armature modifier(s) with DQ Skin in {Path(args.out).resolve()}"
+
+
+def _save(bpy, out: Path) -> None:
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = _temporary(out)
@@ -203,7 +228,6 @@ def cmd_apply(args) -> str:
                 tmp.unlink()
     except (RuntimeError, OSError) as e:
         raise Failure(f"{out}: cannot be written ({_last_line(e)})") from None
-    return f"replaced {len(objects)} Armature modifier(s) with DQ Skin in {out}"
 
 
 def cmd_merge(args) -> str:
@@ -218,7 +242,7 @@ def cmd_merge(args) -> str:
 
 def cmd_compare(args) -> str:
     bpy = _bpy(args.user_resources)
-    from bl_ext.user_default.dq_skin import compare
+    compare = _addon("compare")
 
     if args.file:
         _load(bpy, args.file)
@@ -247,33 +271,39 @@ def cmd_compare(args) -> str:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise Failure(f"{out}: cannot be written ({_last_line(e)})") from None
-    picture = None
+    pictures = {}
     if not args.no_render:
         with deferred():
             scene.frame_set(end)
         check()
-        tmp = _temporary(out / "comparison.png").with_suffix(".png")
-        try:
-            check()
-            with deferred():
-                compare.render(scene, tmp, width=args.width, height=args.height, samples=args.samples)
-            check()
-            os.replace(tmp, out / "comparison.png")
-        except (RuntimeError, OSError) as e:
-            raise Failure(f"{out}: cannot write the picture ({_last_line(e)})") from None
-        finally:
-            if tmp.exists():
-                tmp.unlink()
-        picture = "comparison.png"
+        views = (
+            ("comparison.png", f"the variants at frame {end}", compare.render, (scene,)),
+            ("deviation.png", f"distance from Armature Linear at frame {end}", compare.render_deviation, (bpy.context, scene, rows)),
+        )
+        for filename, caption, draw, first_args in views:
+            tmp = _temporary(out / filename).with_suffix(".png")
+            try:
+                check()
+                print(f"rendering {filename} ({args.samples} samples)", file=sys.stderr, flush=True)
+                with deferred():
+                    draw(*first_args, tmp, width=args.width, height=args.height, samples=args.samples)
+                check()
+                os.replace(tmp, out / filename)
+            except (RuntimeError, OSError) as e:
+                raise Failure(f"{out}: cannot write {filename} ({_last_line(e)})") from None
+            finally:
+                if tmp.exists():
+                    tmp.unlink()
+            pictures[caption] = filename
     try:
-        compare.write_report(result, out, name, [start, end], picture)
+        compare.write_report(result, out, name, [start, end], pictures)
     except OSError as e:
         raise Failure(f"{out}: cannot write the report ({_last_line(e)})") from None
     return f"compared {name} over frames {start}-{end}: {out / 'report.md'}"
 
 
-def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m dqskin.blender", description=__doc__.splitlines()[0])
+def parser(prog: str = "python -m dqskin.blender") -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     p.add_argument("--user-resources", help="Blender user folder with DQ Skin installed (sets BLENDER_USER_RESOURCES)")
     sub = p.add_subparsers(dest="command", required=True)
     methods = ["AUTO", "LINEAR", "DUAL_QUATERNION", "BLEND"]
@@ -298,31 +328,36 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--frames")
     c.add_argument("--out", default="out")
     c.add_argument("--no-render", action="store_true", help="skip the PNG")
-    c.add_argument("--width", type=int, default=960)
-    c.add_argument("--height", type=int, default=540)
+    c.add_argument("--width", type=int, default=1600, help="picture width in pixels (default 1600)")
+    c.add_argument("--height", type=int, help="picture height (default: from the comparison's shape)")
     c.add_argument("--samples", type=int, default=8)
     c.set_defaults(run=cmd_compare)
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, prog: str = "python -m dqskin.blender") -> int:
     if argv is None:
         argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     watch_signals()
-    args = parser().parse_args(argv)
     try:
+        args = parser(prog).parse_args(argv)
+    except SystemExit as e:  # --help, or a usage error (printed): argparse's own exit code
+        return int(e.code or 0)
+    try:
+        if _embedded_in() and args.user_resources:
+            raise Failure("--user-resources is for `python -m dqskin.blender`; Blender has its user folder already")
         print(args.run(args))
         return 0
     except Interrupted as e:
-        print(f"dqskin.blender {args.command}: interrupted ({e}); nothing written", file=sys.stderr)
+        print(f"{prog} {args.command}: interrupted ({e}); nothing written", file=sys.stderr)
         return 128 + e.signum
     except Failure as e:
-        print(f"dqskin.blender {args.command}: {e}", file=sys.stderr)
+        print(f"{prog} {args.command}: {e}", file=sys.stderr)
         return 1
     except Exception as e:  # a bug: one line, the traceback on request
         if os.environ.get("DQSKIN_DEBUG"):
             traceback.print_exc()
-        print(f"dqskin.blender {args.command}: {type(e).__name__}: {_last_line(e)} (DQSKIN_DEBUG=1 shows where)", file=sys.stderr)
+        print(f"{prog} {args.command}: {type(e).__name__}: {_last_line(e)} (DQSKIN_DEBUG=1 shows where)", file=sys.stderr)
         return 1
 
 

@@ -1,4 +1,6 @@
-"""The batch command line, run as users run it: a separate `python -m dqskin.blender` process."""
+"""The batch command line, run as users run it, through both entry points: a separate
+`python -m dqskin.blender` process, and Blender's own `blender -b --command dq_skin` (the command
+the extension registers, called as Blender calls it; see as_blender_command.py)."""
 
 from __future__ import annotations
 
@@ -9,16 +11,30 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from conftest import ASSETS, USER
 
+ENTRY_POINTS = {
+    "python -m dqskin.blender": [sys.executable, "-m", "dqskin.blender"],
+    "blender --command dq_skin": [sys.executable, str(Path(__file__).with_name("as_blender_command.py"))],
+}
 
-def run(*args, cwd=None):
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(USER))
-    return subprocess.run([sys.executable, "-m", "dqskin.blender", *args], capture_output=True, text=True, env=env, cwd=cwd, timeout=600)
+
+def runner(entry):
+    def run(*args, cwd=None):
+        env = dict(os.environ, BLENDER_USER_RESOURCES=str(USER))
+        return subprocess.run([*ENTRY_POINTS[entry], *args], capture_output=True, text=True, env=env, cwd=cwd, timeout=600)
+
+    return run
 
 
-def test_bake_then_merge_chunks_like_a_farm(tmp_path):
+run = runner("python -m dqskin.blender")
+both = pytest.mark.parametrize("run", [runner(e) for e in ENTRY_POINTS], ids=list(ENTRY_POINTS))
+
+
+@both
+def test_bake_then_merge_chunks_like_a_farm(run, tmp_path):
     from dqskin import pc2
 
     whole = tmp_path / "whole.pc2"
@@ -39,7 +55,8 @@ def test_bake_then_merge_chunks_like_a_farm(tmp_path):
     np.testing.assert_array_equal(dw, dm)
 
 
-def test_failures_exit_non_zero_with_one_line_and_write_nothing(tmp_path):
+@both
+def test_failures_exit_non_zero_with_one_line_and_write_nothing(run, tmp_path):
     out = tmp_path / "x.pc2"
     r = run("bake", str(ASSETS / "CesiumMan.glb"), "--object", "Nobody", "--out", str(out))
     assert r.returncode != 0 and "no mesh object named 'Nobody'" in r.stderr
@@ -53,7 +70,8 @@ def test_failures_exit_non_zero_with_one_line_and_write_nothing(tmp_path):
     assert r.returncode != 0 and not (tmp_path / "m.pc2").exists()
 
 
-def test_apply_saves_a_file_with_dq_skin(tmp_path):
+@both
+def test_apply_saves_a_file_with_dq_skin(run, tmp_path):
     out = tmp_path / "fox_dq.blend"
     r = run("apply", str(ASSETS / "Fox.glb"), "--out", str(out))
     assert r.returncode == 0, r.stderr
@@ -84,9 +102,40 @@ def test_compare_writes_a_report_and_a_picture(tmp_path):
     assert (out / "comparison.png").stat().st_size > 0
 
 
-def test_compare_built_in_rigs(tmp_path):
+@both
+def test_compare_built_in_rigs(run, tmp_path):
     out = tmp_path / "rigs"
     r = run("compare", "--out", str(out), "--no-render")
     assert r.returncode == 0, r.stderr
     rows = json.loads((out / "report.json").read_text())["rows"]
     assert [row["mesh"] for row in rows] == ["Candy Wrapper Twist", "Elbow Bend", "Shoulder Raise"]
+
+
+def test_both_entry_points_bake_the_same_cache(tmp_path):
+    outs = []
+    for entry in ENTRY_POINTS:
+        out = tmp_path / f"{entry.split()[0]}.pc2"
+        r = runner(entry)("bake", str(ASSETS / "CesiumMan.glb"), "--object", "Cesium_Man", "--frames", "1-5", "--out", str(out))
+        assert r.returncode == 0, r.stderr
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+
+
+@pytest.mark.parametrize("entry", list(ENTRY_POINTS))
+def test_usage_errors_and_help_name_the_entry_point(entry):
+    r = runner(entry)("bake", "x.glb")
+    assert r.returncode == 2 and f"usage: {entry}" in r.stderr and "--object" in r.stderr
+    r = runner(entry)("--help")
+    assert r.returncode == 0 and "compare" in r.stdout and "merge" in r.stdout
+
+
+def test_blender_command_refuses_user_resources(tmp_path):
+    r = runner("blender --command dq_skin")("--user-resources", str(tmp_path), "merge", str(tmp_path / "a.pc2"), str(tmp_path / "b.pc2"))
+    assert r.returncode == 1 and "--user-resources is for `python -m dqskin.blender`" in r.stderr
+
+
+def test_long_commands_report_progress(tmp_path):
+    r = run("apply", str(ASSETS / "Fox.glb"), "--out", str(tmp_path / "fox.blend"))
+    assert r.returncode == 0 and "Adding DQ Skin to 1 object(s) [" in r.stderr and "2/2" in r.stderr, r.stderr
+    r = run("compare", "--out", str(tmp_path / "c"), "--no-render", "--frames", "1-4")
+    assert r.returncode == 0 and "Comparing 3 row(s) over 4 frame(s) [" in r.stderr, r.stderr

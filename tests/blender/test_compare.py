@@ -35,6 +35,51 @@ def test_builtin_rigs_comparison_report_and_render(dq_skin, tmp_path):
     assert tuple(image.size) == (320, 180)
     assert np.array(image.pixels[:]).reshape(180, 320, 4)[..., :3].max() > 0.2  # something lit
 
+    # The deviation view: at the last frame, each variant coloured by its distance from Armature
+    # Linear on one scale, whose top is the largest distance in the report's terms.
+    bpy.context.scene.frame_set(compare.FRAMES[1])
+    before = {o.name: o.hide_render for o in bpy.data.objects}
+    meshes, materials = len(bpy.data.meshes), len(bpy.data.curves)
+    path = tmp_path / "deviation.png"
+    scale = compare.render_deviation(bpy.context, bpy.context.scene, rows, path, width=320, samples=1)
+    last = compare.report(bpy.context, bpy.context.scene, rows, [compare.FRAMES[1]])
+    top = max(m["max_deviation_from_armature_linear"] for r in last for m in r["methods"].values())
+    assert scale == pytest.approx(top, rel=1e-6) and scale > 0.1  # Preserve Volume differs at the joints
+    image = bpy.data.images.load(str(path))
+    width, height = image.size
+    assert width == 320 and 0.5 * width < height < 2 * width  # the height follows the layout
+    pixels = np.array(image.pixels[:]).reshape(height, width, 4)[..., :3]
+    r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
+    # Both ends of the scale are on the picture (purple: no deviation; yellow: the most), not
+    # only one colour: the legend has both, the meshes the purple and the colours between.
+    purple = (b - g > 0.15) & (r - g > 0.1)
+    yellow = (r > 0.6) & (g > 0.6) & (b < 0.5 * g)
+    assert purple.sum() > 500 and yellow.sum() > 5, (purple.sum(), yellow.sum())
+    # The scene is left as it was: no still copies or legend, nothing left hidden.
+    assert {o.name: o.hide_render for o in bpy.data.objects} == before
+    assert (len(bpy.data.meshes), len(bpy.data.curves)) == (meshes, materials)
+
+
+def test_labels_sit_above_their_own_row(dq_skin):
+    with bpy.context.temp_override(active_object=None, selected_objects=[]):
+        assert bpy.ops.object.dq_skin_comparison_scene() == {"FINISHED"}
+    collection = bpy.data.collections["DQ Skin Comparison"]
+    labels = sorted((o for o in collection.objects if o.type == "FONT"), key=lambda o: -o.location.z)
+    heights = sorted({round(o.location.z, 4) for o in labels}, reverse=True)
+    assert len(heights) == 3  # one label height per row
+    sizes = {round(o.data.size, 6) for o in labels}
+    assert len(sizes) == 1  # one size for every row
+    meshes = [o for o in collection.objects if o.type == "MESH"]
+    columns = sorted({round(m.matrix_world.translation.x, 4) for m in meshes})
+    step = columns[1] - columns[0]
+    for label in labels:
+        # Its own mesh: in its column, under it, within one row.
+        below = [m for m in meshes if abs(m.matrix_world.translation.x - label.location.x) < step / 2
+                 and 0 < label.location.z - m.matrix_world.translation.z < heights[0] - heights[1]]
+        assert len(below) == 1, label.name
+        column = round((below[0].matrix_world.translation.x - columns[0]) / step)
+        assert label.name.startswith(dq_skin.compare.VARIANTS[column][0] + " label"), label.name
+
 
 def test_comparison_of_a_character(dq_skin, assets):
     obj, arm_mod = import_character(assets / "RiggedSimple.glb")

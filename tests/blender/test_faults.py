@@ -29,7 +29,7 @@ def one_line_failure(r, code=1):
     assert r.returncode == code, (r.returncode, r.stdout, r.stderr)
     # Blender's own lines ("Read blend", "Info:", 4.2's "Attempt to free nullptr pointer") aside,
     # exactly one line, ours.
-    lines = [line for line in r.stderr.splitlines() if line.startswith("dqskin.blender")]
+    lines = [line for line in r.stderr.splitlines() if line.startswith("python -m dqskin.blender")]
     assert len(lines) == 1, r.stderr
     assert "Traceback" not in r.stderr and "Error:" not in r.stderr.replace(lines[0], ""), r.stderr
     return lines[0]

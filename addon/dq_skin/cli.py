@@ -1,0 +1,27 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Blender's own command line: `blender -b --command dq_skin compare|bake|apply|merge ...` runs the
+batch commands of `python -m dqskin.blender` (bundled in the extension), with the same options,
+exit codes and atomic writes."""
+
+from __future__ import annotations
+
+import bpy
+
+from .dqskin import blender as batch
+
+COMMAND = "dq_skin"
+_registered = []
+
+
+def execute(argv) -> int:
+    """What Blender runs for `--command dq_skin ARGS...`: its exit code."""
+    return batch.main(list(argv), prog=f"blender --command {COMMAND}")
+
+
+def register() -> None:
+    _registered.append(bpy.utils.register_cli_command(COMMAND, execute))
+
+
+def unregister() -> None:
+    while _registered:
+        bpy.utils.unregister_cli_command(_registered.pop())

@@ -1,0 +1,19 @@
+"""Runs `blender -b --command dq_skin ARGS...` as Blender does, with the bpy module (there is no
+Blender binary here): Blender enables the installed extensions, then calls the function the
+extension registered with `bpy.utils.register_cli_command` and exits with its return value.
+Usage: python as_blender_command.py ARGS..."""
+
+import sys
+
+import bpy  # noqa: F401  (first: it makes Blender's own modules importable)
+
+import addon_utils  # noqa: E402
+
+EXTENSION = "bl_ext.user_default.dq_skin"
+
+if addon_utils.enable(EXTENSION, default_set=True) is None:
+    sys.exit(f"{EXTENSION} is not installed")
+cli = sys.modules[f"{EXTENSION}.cli"]
+# Blender accepted the registration (register_cli_command raises otherwise) under this name.
+assert cli.COMMAND == "dq_skin" and len(cli._registered) == 1, cli._registered
+sys.exit(cli.execute(sys.argv[1:]))

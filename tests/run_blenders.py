@@ -2,7 +2,7 @@
 
 Each release gets its own virtual environment, `.venvs/bpy-VERSION/`, with its own CPython (3.11
 up to Blender 5.0, 3.13 from 5.1), its `bpy` wheel from PyPI, the module's wheel from
-`target/wheels/` and the extension zip from `dist/` installed into its own Blender user folder
+`target/wheels/linux-x64/` and the extension zip from `dist/` installed into its own Blender user folder
 (`.venvs/bpy-VERSION/user`); then `tests/blender` runs there with DQSKIN_BLENDER_USER pointing at
 that folder. Usage: python tests/run_blenders.py [VERSION ...] (default: all of VERSIONS).
 """
@@ -56,7 +56,7 @@ def prepare(version: str, minor: str, extras: list[str]) -> Path:
         run([python_for(minor), "-m", "venv", str(venv)])
         run([str(py), "-m", "pip", "install", "--quiet", f"bpy=={version}", PYTEST, *extras])
         stamp.write_text(version)
-    wheels = sorted((ROOT / "target" / "wheels").glob("dqskin-*.whl"))
+    wheels = sorted((ROOT / "target" / "wheels" / "linux-x64").glob("dqskin-*.whl"))
     zips = sorted((ROOT / "dist").glob("dq_skin-*.zip"))
     if not wheels or not zips:
         raise SystemExit("no module wheel or extension zip: run `make addon` first")

@@ -246,6 +246,9 @@ impl VertexClasses {
     }
 }
 
+/// A weight vector bit for bit: `(bone, weight bits)` sorted by bone.
+type WeightKey = Vec<(u32, u64)>;
+
 /// Merged triangles listed under each pair of their bones, in padded structure-of-arrays form.
 struct PairIndex {
     /// Pair `(j, k)`, `j < k` → its entries `starts[id]..starts[id + 1]`.
@@ -269,7 +272,7 @@ struct Entry {
 impl PairIndex {
     fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]], weights: &WeightVectors) -> Self {
         // Triangles merged by weight vector: Σ A and Σ A·c.
-        let mut merged: HashMap<Vec<(u32, u64)>, (f64, [f64; 3])> = HashMap::new();
+        let mut merged: HashMap<WeightKey, (f64, [f64; 3])> = HashMap::new();
         let mut mean: Vec<(u32, f64)> = Vec::new();
         for t in triangles {
             let [a, b, c] = t.map(|v| positions[v as usize].map(f64::from));
@@ -293,7 +296,7 @@ impl PairIndex {
             if mean.len() < 2 {
                 continue;
             }
-            let key: Vec<(u32, u64)> = mean.iter().map(|&(bone, w)| (bone, (w / 3.0).to_bits())).collect();
+            let key: WeightKey = mean.iter().map(|&(bone, w)| (bone, (w / 3.0).to_bits())).collect();
             let centroid = [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0, (a[2] + b[2] + c[2]) / 3.0];
             let slot = merged.entry(key).or_insert((0.0, [0.0; 3]));
             slot.0 += area;
@@ -330,7 +333,7 @@ impl PairIndex {
             pc: [Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total)],
         };
         for list in &mut lists {
-            list.sort_by(|a, b| (a.bj.to_bits(), a.bk.to_bits()).cmp(&(b.bj.to_bits(), b.bk.to_bits())));
+            list.sort_by_key(|e| (e.bj.to_bits(), e.bk.to_bits()));
             list.dedup_by(|next, kept| {
                 let same = next.bj.to_bits() == kept.bj.to_bits() && next.bk.to_bits() == kept.bk.to_bits();
                 if same {

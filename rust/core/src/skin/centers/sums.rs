@@ -59,8 +59,9 @@ const EXP_POLY: [f64; 10] = [
     1.0,
 ];
 const LOG2_E: f64 = core::f64::consts::LOG2_E;
-const LN2_HI: f64 = 6.931_471_803_691_238_2e-1;
-const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+/// ln 2 in two parts (fdlibm's): `k·LN2_HI` is exact for the k used here.
+const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
 /// 1.5·2⁵²: adding it rounds to an integer kept in the low mantissa bits.
 const ROUND: f64 = 6_755_399_441_055_744.0;
 /// Added to the bits of `x·log₂e + ROUND` (whose low bits are k): `k + 1023` in the bits that the
@@ -186,7 +187,7 @@ fn sums(list: &PairList<'_>, aj: f64, ak: f64, inv_sigma2: f64, shift: f64) -> [
 /// centroids by at most `δ/(1−δ)·max|cₜ − p*|`, i.e. `≤ 1.0001·δ·(bbox diagonal)`.
 #[inline(always)]
 pub(super) fn exp_nonpositive(x: f64) -> f64 {
-    let x = x.max(MIN_EXPONENT).min(0.0);
+    let x = x.clamp(MIN_EXPONENT, 0.0);
     let t = x * LOG2_E + ROUND;
     let kf = t - ROUND;
     let r = (x - kf * LN2_HI) - kf * LN2_LO;

@@ -9,7 +9,7 @@ use core::arch::x86_64::*;
 use super::influences::{Slot, LANES};
 use super::kernels::{DqSum, Points};
 use super::kernels::{DUAL_QUATERNION, LINEAR};
-use super::pose::{CorBone, DqBone, LinearBone, PivotBone};
+use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
 
 const _: () = assert!(LANES == 16);
 
@@ -321,6 +321,7 @@ pub(super) struct BatchJob<'a> {
     pub dq: &'a [DqBone],
     pub pivot: &'a [PivotBone],
     pub cor: &'a [CorBone],
+    pub cor_rigid: &'a [CorRigidBone],
     pub scaled: bool,
     pub premat: Option<&'a glam::Affine3A>,
     pub postmat: Option<&'a glam::Affine3A>,
@@ -437,6 +438,24 @@ pub(super) unsafe fn batch<const KIND: u8>(
     }
 }
 
+/// `p` rotated by the unit quaternions `q = (v, w)`: `p + 2·(w·(v × p) + v × (v × p))`.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn rotate(q: &[__m512; 4], p: &[__m512; 3]) -> [__m512; 3] {
+    let cross = |a: &[__m512; 3], b: &[__m512; 3]| {
+        [
+            _mm512_fmsub_ps(a[1], b[2], _mm512_mul_ps(a[2], b[1])),
+            _mm512_fmsub_ps(a[2], b[0], _mm512_mul_ps(a[0], b[2])),
+            _mm512_fmsub_ps(a[0], b[1], _mm512_mul_ps(a[1], b[0])),
+        ]
+    };
+    let v = [q[0], q[1], q[2]];
+    let a = cross(&v, p);
+    let b = cross(&v, &a);
+    let two = _mm512_set1_ps(2.0);
+    core::array::from_fn(|k| _mm512_fmadd_ps(two, _mm512_fmadd_ps(q[3], a[k], b[k]), p[k]))
+}
+
 /// Everything skinning with centers of rotation does to one full batch of 16 vertices, in
 /// registers: load the points and their centers, `premat` on both, the sums (where each bone
 /// puts the center, the sign-aligned rotations, with `SCALED` the blended scale/shear of the
@@ -444,7 +463,8 @@ pub(super) unsafe fn batch<const KIND: u8>(
 /// the portable path in `kernels.rs`.
 ///
 /// # Safety
-/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `cor`.
+/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `cor`
+/// and `cor_rigid`.
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub(super) unsafe fn batch_centers<const SCALED: bool>(
     job: &BatchJob<'_>,
@@ -471,18 +491,18 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     let mut real = [_mm512_setzero_ps(); 4];
     let mut contrib = _mm512_setzero_ps();
     for slot in slots {
-        // SAFETY: indices are in range (validated); a CorBone is 32 floats: matrix rows 0–1,
-        // row 2 and the rotation, stretch rows 0–1, stretch row 2 and zeros.
-        let a = unsafe { load_columns(job.cor, &slot.bones, 0) };
-        let b = unsafe { load_columns(job.cor, &slot.bones, 8) };
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
-        let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
-        for r in 0..3 {
-            let m = rows[r];
-            let moved = _mm512_fmadd_ps(m[0], c[0], _mm512_fmadd_ps(m[1], c[1], _mm512_fmadd_ps(m[2], c[2], m[3])));
-            anchor[r] = _mm512_fmadd_ps(w, moved, anchor[r]);
-        }
-        if SCALED {
+        let q = if SCALED {
+            // SAFETY: indices are in range (validated); a CorBone is 32 floats: matrix rows 0–1,
+            // row 2 and the rotation, stretch rows 0–1, stretch row 2 and zeros.
+            let a = unsafe { load_columns(job.cor, &slot.bones, 0) };
+            let b = unsafe { load_columns(job.cor, &slot.bones, 8) };
+            let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
+            for r in 0..3 {
+                let m = rows[r];
+                let moved = _mm512_fmadd_ps(m[0], c[0], _mm512_fmadd_ps(m[1], c[1], _mm512_fmadd_ps(m[2], c[2], m[3])));
+                anchor[r] = _mm512_fmadd_ps(w, moved, anchor[r]);
+            }
             let s = unsafe { load_columns(job.cor, &slot.bones, 16) };
             let t = unsafe { load_columns(job.cor, &slot.bones, 24) };
             let rows = [[s[0], s[1], s[2]], [s[4], s[5], s[6]], [t[0], t[1], t[2]]];
@@ -491,8 +511,18 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
                 let stretched = _mm512_fmadd_ps(m[0], d[0], _mm512_fmadd_ps(m[1], d[1], _mm512_mul_ps(m[2], d[2])));
                 offset[r] = _mm512_fmadd_ps(w, stretched, offset[r]);
             }
-        }
-        let q = [b[4], b[5], b[6], b[7]];
+            [b[4], b[5], b[6], b[7]]
+        } else {
+            // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
+            // rotation, the translation and a zero.
+            let r = unsafe { load_columns(job.cor_rigid, &slot.bones, 0) };
+            let q = [r[0], r[1], r[2], r[3]];
+            let moved = rotate(&q, &c);
+            for k in 0..3 {
+                anchor[k] = _mm512_fmadd_ps(w, _mm512_add_ps(moved[k], r[4 + k]), anchor[k]);
+            }
+            q
+        };
         let dot = _mm512_add_ps(
             _mm512_fmadd_ps(q[1], real[1], _mm512_mul_ps(q[0], real[0])),
             _mm512_fmadd_ps(q[3], real[3], _mm512_mul_ps(q[2], real[2])),

@@ -11,7 +11,7 @@ use glam::{Affine3A, Mat4, Vec4};
 use rayon::prelude::*;
 
 use super::influences::{Slot, LANES};
-use super::pose::{CorBone, DqBone, LinearBone, PivotBone};
+use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
 use super::{Influences, Pose, MIN_TOTAL_WEIGHT};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -205,6 +205,7 @@ fn batches<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
         dq: &pose.dq,
         pivot: &pose.pivot,
         cor: &pose.cor,
+        cor_rigid: &pose.cor_rigid,
         scaled: SCALED,
         premat: premat.as_ref(),
         postmat: postmat.as_ref(),
@@ -265,7 +266,7 @@ fn batches<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
                 Some(m) => center.transform::<ISA>(m),
                 None => center,
             };
-            let sum = accumulate_centers::<ISA, SCALED>(&batch.co, &center, batch.slots, &pose.cor);
+            let sum = accumulate_centers::<ISA, SCALED>(&batch.co, &center, batch.slots, &pose.cor, &pose.cor_rigid);
             let moved = finish_centers::<ISA, SCALED>(&batch.co, &center, &sum, &batch.strength);
             finish_points::<ISA>(&batch, moved, postmat.as_ref(), out);
             continue;
@@ -505,12 +506,18 @@ pub(super) struct CorSum {
 /// Sums for centers of rotation; the quaternion signs are chosen against the running sum as in
 /// [`accumulate_dual_quaternion`].
 #[inline(always)]
-fn accumulate_centers<const ISA: u8, const SCALED: bool>(co: &Points, center: &Points, slots: &[Slot], cor: &[CorBone]) -> CorSum {
+fn accumulate_centers<const ISA: u8, const SCALED: bool>(
+    co: &Points,
+    center: &Points,
+    slots: &[Slot],
+    cor: &[CorBone],
+    cor_rigid: &[CorRigidBone],
+) -> CorSum {
     // SAFETY: `ISA` names the instruction set the running copy was chosen for after detecting
     // it; bone indices were validated against the pose's bone count.
     #[cfg(target_arch = "x86_64")]
     if ISA >= ISA_AVX2 {
-        return unsafe { super::avx2::accumulate_centers(co, center, slots, cor, SCALED) };
+        return unsafe { super::avx2::accumulate_centers(co, center, slots, cor, cor_rigid, SCALED) };
     }
     let mut s = CorSum { anchor: [ZERO; 3], real: [ZERO; 4], offset: [ZERO; 3], contrib: ZERO };
     for slot in slots {
@@ -518,10 +525,19 @@ fn accumulate_centers<const ISA: u8, const SCALED: bool>(co: &Points, center: &P
             let b = bone(cor, slot.bones[l]);
             let w = slot.weights[l];
             let (cx, cy, cz) = (center.x[l], center.y[l], center.z[l]);
+            let moved = if SCALED {
+                let m = |r: usize| {
+                    let row = b.matrix.rows[r];
+                    madd::<ISA>(row.x, cx, madd::<ISA>(row.y, cy, madd::<ISA>(row.z, cz, row.w)))
+                };
+                [m(0), m(1), m(2)]
+            } else {
+                let r = bone(cor_rigid, slot.bones[l]);
+                let p = rotate::<ISA>(r.real, [cx, cy, cz]);
+                [p[0] + r.translation.x, p[1] + r.translation.y, p[2] + r.translation.z]
+            };
             for r in 0..3 {
-                let row = b.matrix.rows[r];
-                let moved = madd::<ISA>(row.x, cx, madd::<ISA>(row.y, cy, madd::<ISA>(row.z, cz, row.w)));
-                s.anchor[r][l] = madd::<ISA>(w, moved, s.anchor[r][l]);
+                s.anchor[r][l] = madd::<ISA>(w, moved[r], s.anchor[r][l]);
             }
             if SCALED {
                 let (dx, dy, dz) = (co.x[l] - cx, co.y[l] - cy, co.z[l] - cz);
@@ -541,6 +557,22 @@ fn accumulate_centers<const ISA: u8, const SCALED: bool>(co: &Points, center: &P
         }
     }
     s
+}
+
+/// `p` rotated by the unit quaternion `q = (v, w)`: `p + 2·(w·(v × p) + v × (v × p))`.
+#[inline(always)]
+fn rotate<const ISA: u8>(q: Vec4, p: [f32; 3]) -> [f32; 3] {
+    let cross = |a: [f32; 3], b: [f32; 3]| {
+        [
+            madd::<ISA>(a[1], b[2], -(a[2] * b[1])),
+            madd::<ISA>(a[2], b[0], -(a[0] * b[2])),
+            madd::<ISA>(a[0], b[1], -(a[1] * b[0])),
+        ]
+    };
+    let v = [q.x, q.y, q.z];
+    let a = cross(v, p);
+    let b = cross(v, a);
+    core::array::from_fn(|k| madd::<ISA>(2.0, madd::<ISA>(q.w, a[k], b[k]), p[k]))
 }
 
 /// `co' = anchor/contrib + R·d` with `R` the rotation of the summed quaternion (its matrix

@@ -68,6 +68,16 @@ pub(crate) struct CorBone {
     pub padding: Vec4,
 }
 
+/// A rigid bone for skinning with centers of rotation: its rotation (x, y, z, w) and
+/// translation (x, y, z, 0). 8 floats, so SIMD code loads a lane's record in one window; the
+/// kernels rotate the center by `real` rather than read a 3×3 matrix.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(32))]
+pub(crate) struct CorRigidBone {
+    pub real: Vec4,
+    pub translation: Vec4,
+}
+
 /// Per-frame bone data for all skinning methods.
 #[derive(Clone, Debug)]
 pub struct Pose {
@@ -75,6 +85,7 @@ pub struct Pose {
     pub(crate) dq: Vec<DqBone>,
     pub(crate) pivot: Vec<PivotBone>,
     pub(crate) cor: Vec<CorBone>,
+    pub(crate) cor_rigid: Vec<CorRigidBone>,
     scaled: Vec<bool>,
 }
 
@@ -95,7 +106,7 @@ impl Pose {
             check_affine("deform", bone, m)?;
         }
         let linear = deform.iter().map(|m| LinearBone { matrix: AffineRows::from_mat4(m) }).collect();
-        let (mut dq, mut pivot, mut cor, mut scaled) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut dq, mut pivot, mut cor, mut cor_rigid, mut scaled) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         if let Some(rest) = rest {
             if rest.len() != deform.len() {
                 return Err(SkinError::LengthMismatch {
@@ -133,10 +144,11 @@ impl Pose {
                     stretch: AffineRows::from_mat4(&Mat4::from_mat3(stretch)),
                     padding: Vec4::ZERO,
                 });
+                cor_rigid.push(CorRigidBone { real: Vec4::from(q), translation: t.extend(0.0) });
                 scaled.push(is_scaled);
             }
         }
-        Ok(Self { linear, dq, pivot, cor, scaled })
+        Ok(Self { linear, dq, pivot, cor, cor_rigid, scaled })
     }
 
     /// Number of bones.

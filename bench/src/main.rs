@@ -3,13 +3,17 @@
 //! (positions, CSR offsets, influence pairs) and writes exactly the bytes it writes (positions
 //! out), doing nothing else.
 //!
-//! Usage: `dqskin-bench [--quick] [--json FILE] [--only LBS-rigid|DQS-rigid|DQS-scaled|Blend-rigid]`.
+//! Also times the precompute of the centers of rotation on the procedural creature
+//! (`rigs::Creature`, 40 bones, 4 smooth influences per vertex) at about 50k and 250k vertices.
+//!
+//! Usage: `dqskin-bench [--quick] [--json FILE] [--only LBS-rigid|DQS-rigid|DQS-scaled|Blend-rigid|CoR-rigid|CoR-scaled|precompute]`.
 
 use std::hint::black_box;
 use std::time::Instant;
 
 use dqskin_core::glam::{Mat4, Quat, Vec3};
-use dqskin_core::{pool, skin, Influences, Method, Pose, SkinOptions};
+use dqskin_core::rigs::Creature;
+use dqskin_core::{centers_of_rotation, pool, skin, Influences, Method, Pose, SkinOptions};
 use rayon::prelude::*;
 
 const BONES: usize = 64;
@@ -34,6 +38,8 @@ impl Rng {
 
 struct Scene {
     positions: Vec<[f32; 3]>,
+    /// Stand-in centers of rotation (their values do not change the kernel's work).
+    centers: Vec<[f32; 3]>,
     influences: Influences,
     rigid: Pose,
     scaled: Pose,
@@ -81,7 +87,8 @@ fn scene(vertices: usize, per_vertex: usize) -> Scene {
     };
     let rigid = pose_with(false, &mut rng);
     let scaled = pose_with(true, &mut rng);
-    Scene { positions, influences, rigid, scaled }
+    let centers = positions.iter().map(|p| [0.9 * p[0], p[1], 0.9 * p[2]]).collect();
+    Scene { positions, centers, influences, rigid, scaled }
 }
 
 /// Seconds one call of `f` takes.
@@ -150,6 +157,8 @@ fn main() {
                     ("DQS", Method::DualQuaternion, "rigid", &s.rigid),
                     ("DQS", Method::DualQuaternion, "scaled", &s.scaled),
                     ("Blend", Method::Blend { amount: None, factor: 0.5 }, "rigid", &s.rigid),
+                    ("CoR", Method::CentersOfRotation { centers: &s.centers }, "rigid", &s.rigid),
+                    ("CoR", Method::CentersOfRotation { centers: &s.centers }, "scaled", &s.scaled),
                 ]
                 .into_iter()
                 .filter(|(name, _, pose_name, _)| only.as_ref().is_none_or(|o| *o == format!("{name}-{pose_name}")))
@@ -201,6 +210,7 @@ fn main() {
             }
         }
     }
+    let precompute = if only.as_ref().is_none_or(|o| o == "precompute") { precompute_rows(quick, all) } else { Vec::new() };
     if let Some(path) = json {
         let body: Vec<String> = rows
             .iter()
@@ -220,8 +230,79 @@ fn main() {
                 )
             })
             .collect();
-        let text = format!("{{\"bones\":{BONES},\"threads_available\":{all},\"rows\":[\n{}\n]}}\n", body.join(",\n"));
+        let pre: Vec<String> = precompute
+            .iter()
+            .map(|p| {
+                format!(
+                    "{{\"vertices\":{},\"triangles\":{},\"bones\":{},\"unique_weight_vectors\":{},\"with_center\":{},\"threads\":{},\"seconds\":{:.6e}}}",
+                    p.vertices, p.triangles, p.bones, p.unique, p.with_center, p.threads, p.seconds
+                )
+            })
+            .collect();
+        let text = format!(
+            "{{\"bones\":{BONES},\"threads_available\":{all},\"rows\":[\n{}\n],\"centers_precompute\":[\n{}\n]}}\n",
+            body.join(",\n"),
+            pre.join(",\n")
+        );
         std::fs::write(&path, text).unwrap_or_else(|e| panic!("cannot write {path}: {e}"));
         println!("wrote {path}");
     }
+}
+
+struct PrecomputeRow {
+    vertices: usize,
+    triangles: usize,
+    bones: usize,
+    unique: usize,
+    with_center: usize,
+    threads: usize,
+    seconds: f64,
+}
+
+/// Times `centers_of_rotation` (σ = 0.1) on the creature at about 50k and 250k vertices, on one
+/// thread and on all (best of a few runs).
+fn precompute_rows(quick: bool, all: usize) -> Vec<PrecomputeRow> {
+    let sizes: &[usize] = if quick { &[50_000] } else { &[50_000, 250_000] };
+    let mut rows = Vec::new();
+    println!();
+    println!("{:>9} {:>9} {:>5} {:>8} {:>8} {:>3} {:>9}", "vertices", "triangles", "bones", "unique", "centers", "thr", "precompute s");
+    for &target in sizes {
+        let c = Creature::new(target).expect("creature");
+        let unique: std::collections::HashSet<Vec<u32>> = (0..c.positions.len())
+            .map(|v| c.influences.of_vertex(v).iter().flat_map(|i| [i.bone, i.weight.to_bits()]).collect())
+            .collect();
+        for threads in [1, all] {
+            pool::set_num_threads(threads).expect("threads");
+            let runs = if quick || target > 100_000 { 1 } else { 3 };
+            let mut best = f64::INFINITY;
+            let mut with_center = 0;
+            for _ in 0..runs {
+                let start = Instant::now();
+                let centers = centers_of_rotation(&c.positions, &c.triangles, &c.influences, 0.1).expect("centers");
+                best = best.min(start.elapsed().as_secs_f64());
+                with_center = centers.has_center.iter().filter(|&&h| h).count();
+                black_box(centers);
+            }
+            println!(
+                "{:>9} {:>9} {:>5} {:>8} {:>8} {:>3} {:>9.3}",
+                c.positions.len(),
+                c.triangles.len(),
+                c.rest.len(),
+                unique.len(),
+                with_center,
+                threads,
+                best
+            );
+            rows.push(PrecomputeRow {
+                vertices: c.positions.len(),
+                triangles: c.triangles.len(),
+                bones: c.rest.len(),
+                unique: unique.len(),
+                with_center,
+                threads,
+                seconds: best,
+            });
+        }
+    }
+    rows
 }

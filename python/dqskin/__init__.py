@@ -13,6 +13,8 @@ Conventions
 
 Skinning matches Blender's Armature modifier: ``method='linear'`` is Preserve Volume off,
 ``method='dual_quaternion'`` is Preserve Volume on, and ``method='blend'`` mixes the two per vertex.
+``method='centers_of_rotation'`` skins with optimized centers of rotation (Le & Hodgins 2016),
+precomputed once per mesh by :func:`centers_of_rotation`.
 """
 
 from ._dqskin import (
@@ -31,6 +33,7 @@ from ._dqskin import (
     __version__,
     armature_spaces,
     bbone_segment_matrices,
+    centers_of_rotation,
     dib,
     dlb,
     dual_quats_from_matrices,
@@ -69,6 +72,7 @@ __all__ = [
     "__version__",
     "armature_spaces",
     "bbone_segment_matrices",
+    "centers_of_rotation",
     "dib",
     "dlb",
     "dual_quats_from_matrices",

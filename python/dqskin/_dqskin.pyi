@@ -166,15 +166,52 @@ def skin(
     deform: F32Array,
     rest: F32Array | None = None,
     *,
-    method: Literal["linear", "dual_quaternion", "blend", "LINEAR", "DUAL_QUATERNION", "BLEND", "lbs", "dqs"] = "dual_quaternion",
+    method: Literal[
+        "linear", "dual_quaternion", "blend", "centers_of_rotation",
+        "LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS_OF_ROTATION", "lbs", "dqs", "cor",
+    ] = "dual_quaternion",
     blend: F32Array | None = None,
     blend_factor: float = 1.0,
     premat: ArrayLike | None = None,
     postmat: ArrayLike | None = None,
     mask: F32Array | None = None,
     out: F32Array | None = None,
+    centers: F32Array | None = None,
 ) -> F32Array:
-    """Skins ``(V, 3)`` positions exactly as Blender's Armature modifier; returns ``out``."""
+    """Skins ``(V, 3)`` positions exactly as Blender's Armature modifier (or with centers of
+    rotation, ``method='centers_of_rotation'`` with ``centers`` from :func:`centers_of_rotation`);
+    returns ``out``."""
+
+@overload
+def centers_of_rotation(
+    positions: F32Array,
+    triangles: IntArray,
+    influences: Influences,
+    sigma: float = 0.1,
+    *,
+    with_mask: Literal[False] = False,
+) -> F32Array: ...
+@overload
+def centers_of_rotation(
+    positions: F32Array,
+    triangles: IntArray,
+    influences: Influences,
+    sigma: float = 0.1,
+    *,
+    with_mask: Literal[True],
+) -> tuple[F32Array, npt.NDArray[np.bool_]]: ...
+@overload
+def centers_of_rotation(
+    positions: F32Array,
+    triangles: IntArray,
+    influences: Influences,
+    sigma: float = 0.1,
+    *,
+    with_mask: bool,
+) -> F32Array | tuple[F32Array, npt.NDArray[np.bool_]]:
+    """Centers of rotation of a rest mesh (Le & Hodgins 2016), ``(V, 3)`` float32; a vertex
+    without a center gets its own position (skinned exactly like LBS). With ``with_mask=True``
+    also a ``(V,)`` bool array, True where the vertex has a center."""
 
 def bbone_segment_matrices(
     channel: ArrayLike, rest: ArrayLike, pose_joints: ArrayLike, rest_joints: ArrayLike
@@ -279,8 +316,13 @@ def skin_many(
             F32Array, Influences, F32Array, F32Array | None, str, ArrayLike | None, ArrayLike | None,
             F32Array | None, F32Array | None, float, F32Array,
         ]
+        | tuple[
+            F32Array, Influences, F32Array, F32Array | None, str, ArrayLike | None, ArrayLike | None,
+            F32Array | None, F32Array | None, float, F32Array, F32Array | None,
+        ]
     ],
 ) -> list[str | None]:
     """Many :func:`skin` calls at once, in parallel across meshes. Each job is ``(positions,
-    influences, deform, rest, method, premat, postmat, mask, blend, blend_factor, out)``; returns
-    None or the error message per job."""
+    influences, deform, rest, method, premat, postmat, mask, blend, blend_factor, out)``,
+    optionally followed by ``centers`` for ``method='centers_of_rotation'``; returns None or the
+    error message per job."""

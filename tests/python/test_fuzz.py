@@ -57,6 +57,8 @@ def out() -> np.ndarray:
 def catalogue():
     c = {
         "skin": (dqskin.skin, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="blend", blend=np.full(V, 0.5, F), blend_factor=0.5, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F), mask=np.ones(V, F), out=out()), ["out"]),
+        "skin.centers_of_rotation": (dqskin.skin, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="centers_of_rotation", centers=POS * 0.5, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F), mask=np.ones(V, F), out=out()), ["out"]),
+        "centers_of_rotation": (dqskin.centers_of_rotation, lambda: dict(positions=POS, triangles=TRI, influences=INF, sigma=0.1, with_mask=True), []),
         "skin_many": (dqskin.skin_many, lambda: dict(jobs=[(POS, INF, DEF, REST, "linear", None, None, None, None, 1.0, out())]), []),
         "Influences": (dqskin.Influences, lambda: dict(offsets=np.array([0, 1, 2]), bones=np.array([0, 1]), weights=np.ones(2, F), bone_count=2), []),
         "Influences.from_dense": (dqskin.Influences.from_dense, lambda: dict(bones=np.zeros((V, 2), int), weights=np.ones((V, 2), F), bone_count=B), []),

@@ -7,11 +7,13 @@
 //! - [`blend`]: ScLERP, DLB and DIB (Kavan et al. 2006).
 //! - [`quat_interp`]: Slerp and Squad (Dam et al. 1998).
 //! - [`hierarchy`]: forward kinematics with dual quaternions (Kenwright 2012).
-//! - [`skin`]: LBS, DQS (exactly Blender's Armature modifier) and their per-vertex blend.
+//! - [`skin`]: LBS, DQS (exactly Blender's Armature modifier), their per-vertex blend, and
+//!   skinning with optimized centers of rotation (Le & Hodgins 2016).
 //! - [`pool`]: the thread pool the kernels run on.
 //! - [`shape_keys`]: Blender's relative shape-key mix.
 //! - [`tracks`]: keyed rotation and transform tracks (Slerp, Squad in time, ScLERP, Spring).
-//! - [`rigs`]: procedural test rigs (the twisted cylinder) and mesh measurements.
+//! - [`rigs`]: procedural test rigs (the twisted cylinder, a branching creature) and mesh
+//!   measurements.
 
 // `!(x >= 0.0)` is deliberate throughout: unlike `x < 0.0` it is also true for NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -36,4 +38,4 @@ pub use dual_quat::{DualNumber, DualQuat, NotRigid, Screw};
 pub use glam;
 pub use hierarchy::{forward_kinematics, HierarchyError};
 pub use quat_interp::{make_signs_continuous, slerp, Squad};
-pub use skin::{armature_spaces, deform_group_weights, skin, skin_many, BBone, DeformGroups, ManyJob, MAX_INFLUENCES_PER_VERTEX, Effective, Envelope, Influence, Influences, Method, Pose, SkinError, SkinOptions};
+pub use skin::{armature_spaces, centers_of_rotation, centers_of_rotation_with_progress, deform_group_weights, skin, skin_many, BBone, Centers, DeformGroups, ManyJob, MAX_INFLUENCES_PER_VERTEX, Effective, Envelope, Influence, Influences, Method, Pose, SkinError, SkinOptions};

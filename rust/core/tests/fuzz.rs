@@ -7,7 +7,7 @@ use dqskin_core::glam::{Mat4, Quat, Vec3};
 use dqskin_core::shape_keys::{self, KeyBlock};
 use dqskin_core::tracks::{self, RotationTrack, SpringSettings};
 use dqskin_core::{
-    armature_spaces, deform_group_weights, dib, dlb, forward_kinematics, make_signs_continuous, sclerp, skin, skin_many,
+    armature_spaces, centers_of_rotation, centers_of_rotation_with_progress, deform_group_weights, dib, dlb, forward_kinematics, make_signs_continuous, sclerp, skin, skin_many,
     DeformGroups, DualQuat, Influences, ManyJob, Method, Pose, SkinOptions, Squad,
 };
 use proptest::prelude::*;
@@ -75,15 +75,21 @@ proptest! {
         positions in prop::collection::vec(prop::array::uniform3(num()), 0..12),
         mask in prop::option::of(prop::collection::vec(num(), 0..12)),
         pre in prop::option::of(mat()),
-        method in 0u8..3,
+        method in 0u8..4,
         factor in num(),
+        centers in prop::collection::vec(prop::array::uniform3(num()), 0..12),
     ) {
         if let Ok(inf) = Influences::from_csr(&offsets, &bones, &weights, bone_count) {
             let with_rest = if rest.len() == deform.len() { Some(rest.as_slice()) } else { None };
             if let Ok(pose) = Pose::new(&deform, with_rest) {
                 let mut out = vec![[9.0f32; 3]; positions.len()];
                 let before = out.clone();
-                let m = match method { 0 => Method::Linear, 1 => Method::DualQuaternion, _ => Method::Blend { amount: mask.as_deref(), factor } };
+                let m = match method {
+                    0 => Method::Linear,
+                    1 => Method::DualQuaternion,
+                    2 => Method::Blend { amount: mask.as_deref(), factor },
+                    _ => Method::CentersOfRotation { centers: &centers },
+                };
                 let options = SkinOptions { premat: pre, postmat: pre.map(|p| p.inverse()), mask: mask.as_deref() };
                 if skin(m, &positions, &inf, &pose, &options, &mut out).is_err() {
                     prop_assert_eq!(out, before);
@@ -92,6 +98,27 @@ proptest! {
             let mut out = vec![[0.0f32; 3]; positions.len()];
             let mut jobs = vec![ManyJob { method: Method::Linear, positions: &positions, influences: &inf, deform: &deform, rest: None, options: SkinOptions::default(), out: &mut out }];
             let _ = skin_many(&mut jobs);
+        }
+    }
+
+    #[test]
+    fn centers_of_rotation_never_panic(
+        (offsets, bones, weights, bone_count) in csr(),
+        positions in prop::collection::vec(prop::array::uniform3(num()), 0..12),
+        triangles in prop::collection::vec(prop::array::uniform3(0u32..14), 0..20),
+        sigma in num(),
+        stop_after in 0usize..3,
+    ) {
+        if let Ok(inf) = Influences::from_csr(&offsets, &bones, &weights, bone_count) {
+            if let Ok(c) = centers_of_rotation(&positions, &triangles, &inf, sigma) {
+                prop_assert_eq!(c.centers.len(), positions.len());
+                prop_assert!(c.centers.iter().zip(&c.has_center).all(|(p, h)| !h || p.iter().all(|x| x.is_finite())));
+            }
+            let mut calls = 0;
+            let _ = centers_of_rotation_with_progress(&positions, &triangles, &inf, sigma, &mut |_, _| {
+                calls += 1;
+                calls <= stop_after
+            });
         }
     }
 

@@ -311,15 +311,51 @@ fn space(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Mat4>> {
     }
 }
 
+const CENTERS_OF_ROTATION: u8 = 3;
+
 fn parse_method(method: &str) -> PyResult<u8> {
     match method.to_ascii_lowercase().as_str() {
         "linear" | "lbs" => Ok(0),
         "dual_quaternion" | "dqs" => Ok(1),
         "blend" => Ok(2),
+        "centers_of_rotation" | "cor" => Ok(CENTERS_OF_ROTATION),
         _ => Err(PyValueError::new_err(format!(
-            "method must be 'linear', 'dual_quaternion' or 'blend', got {method:?}"
+            "method must be 'linear', 'dual_quaternion', 'blend' or 'centers_of_rotation', got {method:?}"
         ))),
     }
+}
+
+/// The per-vertex centers `skin` needs for ``method='centers_of_rotation'`` (and refuses
+/// otherwise).
+fn centers_arg<'py>(centers: Option<&Bound<'py, PyAny>>, kind: u8, v: usize) -> PyResult<Option<numpy::PyReadonlyArrayDyn<'py, f32>>> {
+    let given = centers.filter(|c| !c.is_none());
+    match (given, kind) {
+        (Some(c), CENTERS_OF_ROTATION) => {
+            let a = arrays::readonly::<f32>(c, "centers", &[Some(v), Some(3)], &["V"])?;
+            arrays::check_finite("centers", a.as_slice()?)?;
+            Ok(Some(a))
+        }
+        (None, CENTERS_OF_ROTATION) => Err(PyValueError::new_err(
+            "centers is required for method='centers_of_rotation': the (V, 3) float32 array from dqskin.centers_of_rotation()",
+        )),
+        (Some(_), _) => Err(PyValueError::new_err("centers is only used with method='centers_of_rotation'")),
+        (None, _) => Ok(None),
+    }
+}
+
+/// ``(T, 3)`` integer triangles as vertex indices (range checked by the caller).
+fn triangle_indices(triangles: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
+    let np = triangles.py().import("numpy")?;
+    let tri = triangles.cast::<numpy::PyUntypedArray>().map_err(|_| {
+        let ty = triangles.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        PyTypeError::new_err(format!("triangles must be a numpy array of integers, got {ty}"))
+    })?;
+    let shape: Vec<usize> = tri.shape().to_vec();
+    if shape.len() != 2 || shape[1] != 3 {
+        return Err(PyValueError::new_err(format!("triangles must have shape (T, 3), got {shape:?}")));
+    }
+    let flat = arrays::indices(&np.call_method1("ravel", (triangles,))?, "triangles")?;
+    Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }
 
 /// Skins ``positions`` (``(V, 3)`` float32) and returns the result (``out`` if given).
@@ -329,9 +365,11 @@ fn parse_method(method: &str) -> PyResult<u8> {
 ///   matrix in armature space (Blender's ``PoseBone.matrix_channel``), row-major.
 /// - ``rest``: ``(B, 4, 4)`` float32 rest matrices (``Bone.matrix_local``), required for
 ///   ``'dual_quaternion'`` and ``'blend'`` (Blender's scale path depends on them).
-/// - ``method``: ``'linear'`` (Preserve Volume off), ``'dual_quaternion'`` (on) or ``'blend'``:
+/// - ``method``: ``'linear'`` (Preserve Volume off), ``'dual_quaternion'`` (on), ``'blend'``:
 ///   ``(1−α)·linear + α·dual_quaternion`` with ``α = blend_factor · blend[v]`` (or
-///   ``blend_factor`` alone without ``blend``); all in ``[0, 1]``.
+///   ``blend_factor`` alone without ``blend``); all in ``[0, 1]``; or
+///   ``'centers_of_rotation'`` (Le & Hodgins 2016) with ``centers``, the ``(V, 3)`` float32
+///   array from :func:`centers_of_rotation` (needs ``rest``).
 /// - ``premat``/``postmat``: 4×4 mesh→armature and armature→mesh transforms (identity if None).
 /// - ``mask``: ``(V,)`` float32 per-vertex strength in ``[0, 1]``; 0 leaves a vertex unchanged.
 /// - ``out``: optional ``(V, 3)`` float32 C-contiguous buffer that does not overlap the inputs.
@@ -339,7 +377,7 @@ fn parse_method(method: &str) -> PyResult<u8> {
 /// The GIL is released while the kernel runs on dqskin's thread pool.
 #[pyfunction]
 #[pyo3(signature = (positions, influences, deform, rest = None, *, method = None,
-    blend = None, blend_factor = None, premat = None, postmat = None, mask = None, out = None))]
+    blend = None, blend_factor = None, premat = None, postmat = None, mask = None, out = None, centers = None))]
 #[allow(clippy::too_many_arguments)]
 fn skin<'py>(
     positions: &Bound<'py, PyAny>,
@@ -353,6 +391,7 @@ fn skin<'py>(
     postmat: Option<&Bound<'py, PyAny>>,
     mask: Option<&Bound<'py, PyAny>>,
     out: Option<&Bound<'py, PyAny>>,
+    centers: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
         let py = positions.py();
@@ -390,6 +429,7 @@ fn skin<'py>(
         if kind != 2 && blend.is_some() {
             return Err(PyValueError::new_err("blend is only used with method='blend'"));
         }
+        let centers = centers_arg(centers, kind, v)?;
         let out_arr = match out {
             Some(o) if !o.is_none() => o.clone(),
             _ => numpy::PyArray2::<f32>::zeros(py, [v, 3], false).into_any(),
@@ -405,9 +445,10 @@ fn skin<'py>(
             None => None,
         };
         let out_slice = as_points_mut(out_rw.as_slice_mut()?);
-        let method = match kind {
-            0 => Method::Linear,
-            1 => Method::DualQuaternion,
+        let method = match (kind, &centers) {
+            (0, _) => Method::Linear,
+            (1, _) => Method::DualQuaternion,
+            (CENTERS_OF_ROTATION, Some(c)) => Method::CentersOfRotation { centers: as_points(c.as_slice()?) },
             _ => Method::Blend { amount: blend_slice, factor: blend_factor },
         };
         let options = SkinOptions { premat, postmat, mask: mask_slice };
@@ -421,7 +462,8 @@ fn skin<'py>(
 /// Skins many meshes in one call, in parallel across meshes: for scenes with many small
 /// characters. ``jobs``: a list of tuples ``(positions, influences, deform, rest, method,
 /// premat, postmat, mask, blend, blend_factor, out)`` with the arguments of :func:`skin` (``out``
-/// required). Returns one entry per job: None, or the error message of a job that failed (its
+/// required), optionally followed by ``centers`` (a twelfth item, for
+/// ``method='centers_of_rotation'``). Returns one entry per job: None, or the error message of a job that failed (its
 /// ``out`` untouched). Arguments that are not arrays of the right kind raise at once, naming
 /// the job.
 #[pyfunction]
@@ -443,6 +485,7 @@ fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, PyAny>) -> PyResult<Vec<Opt
             blend: Option<numpy::PyReadonlyArrayDyn<'py, f32>>,
             blend_factor: f32,
             out: numpy::PyReadwriteArrayDyn<'py, f32>,
+            centers: Option<numpy::PyReadonlyArrayDyn<'py, f32>>,
         }
         let mut held = Vec::with_capacity(jobs.len());
         for (i, item) in jobs.iter().enumerate() {
@@ -455,10 +498,10 @@ fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, PyAny>) -> PyResult<Vec<Opt
                 }
             };
             let t = item.cast::<pyo3::types::PyTuple>().map_err(|_| {
-                PyTypeError::new_err(format!("jobs[{i}] must be a tuple (positions, influences, deform, rest, method, premat, postmat, mask, blend, blend_factor, out)"))
+                PyTypeError::new_err(format!("jobs[{i}] must be a tuple (positions, influences, deform, rest, method, premat, postmat, mask, blend, blend_factor, out[, centers])"))
             })?;
-            if t.len() != 11 {
-                return Err(PyValueError::new_err(format!("jobs[{i}] must have 11 items, got {}", t.len())));
+            if t.len() != 11 && t.len() != 12 {
+                return Err(PyValueError::new_err(format!("jobs[{i}] must have 11 items (12 with centers), got {}", t.len())));
             }
             let influences = t.get_item(1)?.cast_into::<PyInfluences>().map_err(|_| {
                 PyTypeError::new_err(format!("jobs[{i}]: influences must be a dqskin.Influences"))
@@ -479,16 +522,19 @@ fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, PyAny>) -> PyResult<Vec<Opt
             let mask = opt(7, "mask")?;
             let blend = opt(8, "blend")?;
             let blend_factor = args::float(&t.get_item(9)?, "blend_factor").map_err(at)?;
+            let centers_obj = if t.len() == 12 { Some(t.get_item(11)?) } else { None };
+            let centers = centers_arg(centers_obj.as_ref(), kind, v).map_err(at)?;
             let out = arrays::readwrite::<f32>(&t.get_item(10)?, "out", &[Some(v), Some(3)], &["V"]).map_err(at)?;
-            held.push(Held { kind, positions, influences, deform, rest, premat, postmat, mask, blend, blend_factor, out });
+            held.push(Held { kind, positions, influences, deform, rest, premat, postmat, mask, blend, blend_factor, out, centers });
         }
         let mut many = Vec::with_capacity(held.len());
         for h in held.iter_mut() {
             let mask = match &h.mask { Some(m) => Some(m.as_slice()?), None => None };
             let blend = match &h.blend { Some(m) => Some(m.as_slice()?), None => None };
-            let method = match h.kind {
-                0 => Method::Linear,
-                1 => Method::DualQuaternion,
+            let method = match (h.kind, &h.centers) {
+                (0, _) => Method::Linear,
+                (1, _) => Method::DualQuaternion,
+                (CENTERS_OF_ROTATION, Some(c)) => Method::CentersOfRotation { centers: as_points(c.as_slice()?) },
                 _ => Method::Blend { amount: blend, factor: h.blend_factor },
             };
             many.push(dqskin_core::ManyJob {
@@ -544,24 +590,15 @@ fn transform_points<'py>(matrix: &Bound<'py, PyAny>, points: &Bound<'py, PyAny>)
 fn mesh_volume(positions: &Bound<'_, PyAny>, triangles: &Bound<'_, PyAny>) -> PyResult<f64> {
     guard(|| {
         let pos = arrays::readonly::<f32>(positions, "positions", &[None, Some(3)], &["V"])?;
-        let np = triangles.py().import("numpy")?;
-        let tri = triangles.cast::<numpy::PyUntypedArray>().map_err(|_| {
-            let ty = triangles.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-            PyTypeError::new_err(format!("triangles must be a numpy array of integers, got {ty}"))
-        })?;
-        let shape: Vec<usize> = tri.shape().to_vec();
-        if shape.len() != 2 || shape[1] != 3 {
-            return Err(PyValueError::new_err(format!("triangles must have shape (T, 3), got {shape:?}")));
-        }
-        let flat = arrays::indices(&np.call_method1("ravel", (triangles,))?, "triangles")?;
+        let tris = triangle_indices(triangles)?;
         let n = pos.shape()[0];
-        if let Some(i) = flat.iter().position(|&t| t as usize >= n) {
+        if let Some((t, &v)) = tris.iter().enumerate().find_map(|(t, tri)| tri.iter().find(|&&v| v as usize >= n).map(|v| (t, v))) {
+            let k = tris[t].iter().position(|&x| x == v).unwrap_or(0);
             return Err(PyValueError::new_err(format!(
-                "triangles contains vertex index {} (flat index {i}) but there are {n} positions",
-                flat[i]
+                "triangles contains vertex index {v} (flat index {}) but there are {n} positions",
+                3 * t + k
             )));
         }
-        let tris: Vec<[u32; 3]> = flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         Ok(dqskin_core::rigs::mesh_volume(as_points(pos.as_slice()?), &tris))
     })
 }
@@ -575,7 +612,68 @@ fn polygon_area(points: &Bound<'_, PyAny>) -> PyResult<f64> {
     })
 }
 
+/// Centers of rotation of a rest mesh (Le & Hodgins, SIGGRAPH 2016) for
+/// ``skin(..., method='centers_of_rotation', centers=...)``: a ``(V, 3)`` float32 array.
+///
+/// - ``positions``: ``(V, 3)`` float32 rest positions (the mesh space ``skin`` gets them in);
+/// - ``triangles``: ``(T, 3)`` integer vertex indices (split polygons into triangles first);
+/// - ``influences``: the :class:`Influences` of the same ``V`` vertices; each vertex's weights
+///   are normalized to sum 1 for the similarity (repeated bones added up);
+/// - ``sigma``: the similarity width (0.1 in the paper), a finite number > 0;
+/// - ``with_mask``: also return a ``(V,)`` bool array, True where the vertex has a center.
+///
+/// A vertex without a center (fewer than two bones, or no triangle sharing two of them) gets its
+/// own position, with which centers-of-rotation skinning is exactly linear blend skinning.
+/// The GIL is released while it runs on dqskin's thread pool; Ctrl-C stops it
+/// (``KeyboardInterrupt``).
+#[pyfunction]
+#[pyo3(signature = (positions, triangles, influences, sigma = None, *, with_mask = None))]
+fn centers_of_rotation<'py>(
+    positions: &Bound<'py, PyAny>,
+    triangles: &Bound<'py, PyAny>,
+    influences: &Bound<'py, PyAny>,
+    sigma: Option<&Bound<'py, PyAny>>,
+    with_mask: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    guard(|| {
+        let py = positions.py();
+        let sigma = args::or(sigma, dqskin_core::skin::DEFAULT_SIGMA, |o| args::float(o, "sigma"))?;
+        let with_mask = args::or(with_mask, false, |o| args::boolean(o, "with_mask"))?;
+        let infl = influences.cast::<PyInfluences>().map_err(|_| {
+            PyTypeError::new_err("influences must be a dqskin.Influences (the weights of the same vertices)")
+        })?;
+        let infl = &infl.get().0;
+        let v = infl.vertex_count();
+        let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
+        let tris = triangle_indices(triangles)?;
+        let points = as_points(pos.as_slice()?);
+        // Ctrl-C: between parts of the work the GIL is taken back to look for signals.
+        let mut interrupted = None;
+        let result = py.detach(|| {
+            dqskin_core::centers_of_rotation_with_progress(points, &tris, infl, sigma, &mut |_, _| {
+                if let Err(e) = Python::attach(|py| py.check_signals()) {
+                    interrupted = Some(e);
+                }
+                interrupted.is_none()
+            })
+        });
+        if let Some(e) = interrupted {
+            return Err(e);
+        }
+        let centers = result.map_err(skin_error)?;
+        let flat: Vec<f32> = centers.centers.iter().flatten().copied().collect();
+        let array = PyArray1::from_vec(py, flat).reshape([v, 3])?.into_any();
+        if with_mask {
+            let mask = PyArray1::from_vec(py, centers.has_center).into_any();
+            Ok(pyo3::types::PyTuple::new(py, [array, mask])?.into_any())
+        } else {
+            Ok(array)
+        }
+    })
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(centers_of_rotation, m)?)?;
     m.add_class::<PyInfluences>()?;
     m.add_function(wrap_pyfunction!(skin, m)?)?;
     m.add_function(wrap_pyfunction!(skin_many, m)?)?;

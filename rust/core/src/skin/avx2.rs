@@ -1,4 +1,5 @@
-//! AVX2+FMA versions of the dual quaternion accumulation, the hot loop of DQS.
+//! AVX2+FMA versions of the dual quaternion accumulation, the hot loop of DQS, and of the
+//! sums of skinning with centers of rotation.
 //!
 //! A slot's lanes are handled in two halves of eight. For each half, the eight lanes' bone
 //! records (8 floats each) are loaded as eight rows and transposed with shuffles into eight
@@ -12,8 +13,8 @@ use super::influences::{Slot, LANES};
 
 const HALF: usize = LANES / 2;
 const _: () = assert!(HALF == 8);
-use super::kernels::{DqSum, Points};
-use super::pose::{DqBone, PivotBone};
+use super::kernels::{CorSum, DqSum, Points};
+use super::pose::{CorBone, CorRigidBone, DqBone, PivotBone};
 
 /// Transposes eight rows of eight floats into eight columns.
 #[inline]
@@ -195,4 +196,122 @@ unsafe fn scaled_half(
         contrib = _mm256_add_ps(contrib, w);
     }
     (real, dual, contrib)
+}
+
+/// Adds `±w·q` to the quaternion sum, the sign chosen by `q·sum < 0` per lane.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+fn add_signed_rotation(real: &mut [__m256; 4], q: &[__m256], w: __m256) {
+    let dot = _mm256_add_ps(
+        _mm256_fmadd_ps(q[1], real[1], _mm256_mul_ps(q[0], real[0])),
+        _mm256_fmadd_ps(q[3], real[3], _mm256_mul_ps(q[2], real[2])),
+    );
+    let negative = _mm256_cmp_ps::<_CMP_LT_OQ>(dot, _mm256_setzero_ps());
+    let ws = _mm256_xor_ps(w, _mm256_and_ps(negative, _mm256_set1_ps(-0.0)));
+    for c in 0..4 {
+        real[c] = _mm256_fmadd_ps(q[c], ws, real[c]);
+    }
+}
+
+/// `p` rotated by the unit quaternions `q = (v, w)`: `p + 2·(w·(v × p) + v × (v × p))`.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+fn rotate(q: &[__m256; 4], p: &[__m256; 3]) -> [__m256; 3] {
+    let cross = |a: &[__m256; 3], b: &[__m256; 3]| {
+        [
+            _mm256_fmsub_ps(a[1], b[2], _mm256_mul_ps(a[2], b[1])),
+            _mm256_fmsub_ps(a[2], b[0], _mm256_mul_ps(a[0], b[2])),
+            _mm256_fmsub_ps(a[0], b[1], _mm256_mul_ps(a[1], b[0])),
+        ]
+    };
+    let v = [q[0], q[1], q[2]];
+    let a = cross(&v, p);
+    let b = cross(&v, &a);
+    let two = _mm256_set1_ps(2.0);
+    core::array::from_fn(|k| _mm256_fmadd_ps(two, _mm256_fmadd_ps(q[3], a[k], b[k]), p[k]))
+}
+
+/// Sums for skinning with centers of rotation (see `kernels.rs`): where each bone puts the
+/// center, the sign-aligned rotations, and with `scaled` the blended scale/shear of `co − c`.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA, and every bone index in `slots` must index `cor` and
+/// `cor_rigid`.
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn accumulate_centers(
+    co: &Points,
+    center: &Points,
+    slots: &[Slot],
+    cor: &[CorBone],
+    cor_rigid: &[CorRigidBone],
+    scaled: bool,
+) -> CorSum {
+    let z = [[0.0; LANES]; 3];
+    let mut sum = CorSum { anchor: z, real: [[0.0; LANES]; 4], offset: z, contrib: [0.0; LANES] };
+    for h in 0..2 {
+        let lanes = h * HALF..(h + 1) * HALF;
+        let load = |a: &[f32; LANES]| unsafe { _mm256_loadu_ps(a[lanes.clone()].as_ptr()) };
+        let c = [load(&center.x), load(&center.y), load(&center.z)];
+        let d = [
+            _mm256_sub_ps(load(&co.x), c[0]),
+            _mm256_sub_ps(load(&co.y), c[1]),
+            _mm256_sub_ps(load(&co.z), c[2]),
+        ];
+        let mut anchor = [_mm256_setzero_ps(); 3];
+        let mut offset = [_mm256_setzero_ps(); 3];
+        let mut real = [_mm256_setzero_ps(); 4];
+        let mut contrib = _mm256_setzero_ps();
+        for slot in slots {
+            let bones = &slot.bones[lanes.clone()];
+            let w = unsafe { _mm256_loadu_ps(slot.weights[lanes.clone()].as_ptr()) };
+            if !scaled {
+                // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
+                // rotation, the translation and a zero.
+                let r = unsafe { load_columns(cor_rigid, bones, 0) };
+                let q = [r[0], r[1], r[2], r[3]];
+                let moved = rotate(&q, &c);
+                for k in 0..3 {
+                    anchor[k] = _mm256_fmadd_ps(w, _mm256_add_ps(moved[k], r[4 + k]), anchor[k]);
+                }
+                add_signed_rotation(&mut real, &q, w);
+                contrib = _mm256_add_ps(contrib, w);
+                continue;
+            }
+            // SAFETY: indices are in range (validated); a CorBone is 32 floats: matrix rows 0–1,
+            // row 2 and the rotation, stretch rows 0–1, stretch row 2 and zeros.
+            let a = unsafe { load_columns(cor, bones, 0) };
+            let b = unsafe { load_columns(cor, bones, 8) };
+            let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
+            for r in 0..3 {
+                let m = rows[r];
+                let moved = _mm256_fmadd_ps(m[0], c[0], _mm256_fmadd_ps(m[1], c[1], _mm256_fmadd_ps(m[2], c[2], m[3])));
+                anchor[r] = _mm256_fmadd_ps(w, moved, anchor[r]);
+            }
+            {
+                let s = unsafe { load_columns(cor, bones, 16) };
+                let t = unsafe { load_columns(cor, bones, 24) };
+                let rows = [[s[0], s[1], s[2]], [s[4], s[5], s[6]], [t[0], t[1], t[2]]];
+                for r in 0..3 {
+                    let m = rows[r];
+                    let stretched = _mm256_fmadd_ps(m[0], d[0], _mm256_fmadd_ps(m[1], d[1], _mm256_mul_ps(m[2], d[2])));
+                    offset[r] = _mm256_fmadd_ps(w, stretched, offset[r]);
+                }
+            }
+            add_signed_rotation(&mut real, &[b[4], b[5], b[6], b[7]], w);
+            contrib = _mm256_add_ps(contrib, w);
+        }
+        let at = h * HALF;
+        // SAFETY: each destination has 8 floats from `at` (LANES = 2·HALF).
+        unsafe {
+            for r in 0..3 {
+                _mm256_storeu_ps(sum.anchor[r][at..].as_mut_ptr(), anchor[r]);
+                _mm256_storeu_ps(sum.offset[r][at..].as_mut_ptr(), offset[r]);
+            }
+            for c in 0..4 {
+                _mm256_storeu_ps(sum.real[c][at..].as_mut_ptr(), real[c]);
+            }
+            _mm256_storeu_ps(sum.contrib[at..].as_mut_ptr(), contrib);
+        }
+    }
+    sum
 }

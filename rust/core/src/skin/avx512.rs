@@ -9,7 +9,7 @@ use core::arch::x86_64::*;
 use super::influences::{Slot, LANES};
 use super::kernels::{DqSum, Points};
 use super::kernels::{DUAL_QUATERNION, LINEAR};
-use super::pose::{DqBone, LinearBone, PivotBone};
+use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
 
 const _: () = assert!(LANES == 16);
 
@@ -320,6 +320,8 @@ pub(super) struct BatchJob<'a> {
     pub linear: &'a [LinearBone],
     pub dq: &'a [DqBone],
     pub pivot: &'a [PivotBone],
+    pub cor: &'a [CorBone],
+    pub cor_rigid: &'a [CorRigidBone],
     pub scaled: bool,
     pub premat: Option<&'a glam::Affine3A>,
     pub postmat: Option<&'a glam::Affine3A>,
@@ -418,6 +420,152 @@ pub(super) unsafe fn batch<const KIND: u8>(
         (None, Some(d)) => d,
         (None, None) => p,
     };
+    let mut r = match job.postmat {
+        Some(m) => Affine::new(m).apply(moved),
+        None => moved,
+    };
+    // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
+    let untouched = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(a, zero);
+    for k in 0..3 {
+        r[k] = _mm512_mask_mov_ps(r[k], untouched, o[k]);
+    }
+    let mut result = Points { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
+    unsafe {
+        _mm512_storeu_ps(result.x.as_mut_ptr(), r[0]);
+        _mm512_storeu_ps(result.y.as_mut_ptr(), r[1]);
+        _mm512_storeu_ps(result.z.as_mut_ptr(), r[2]);
+        store_points(&result, out);
+    }
+}
+
+/// `p` rotated by the unit quaternions `q = (v, w)`: `p + 2·(w·(v × p) + v × (v × p))`.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn rotate(q: &[__m512; 4], p: &[__m512; 3]) -> [__m512; 3] {
+    let cross = |a: &[__m512; 3], b: &[__m512; 3]| {
+        [
+            _mm512_fmsub_ps(a[1], b[2], _mm512_mul_ps(a[2], b[1])),
+            _mm512_fmsub_ps(a[2], b[0], _mm512_mul_ps(a[0], b[2])),
+            _mm512_fmsub_ps(a[0], b[1], _mm512_mul_ps(a[1], b[0])),
+        ]
+    };
+    let v = [q[0], q[1], q[2]];
+    let a = cross(&v, p);
+    let b = cross(&v, &a);
+    let two = _mm512_set1_ps(2.0);
+    core::array::from_fn(|k| _mm512_fmadd_ps(two, _mm512_fmadd_ps(q[3], a[k], b[k]), p[k]))
+}
+
+/// Everything skinning with centers of rotation does to one full batch of 16 vertices, in
+/// registers: load the points and their centers, `premat` on both, the sums (where each bone
+/// puts the center, the sign-aligned rotations, with `SCALED` the blended scale/shear of the
+/// offset), the rotation of the offset, strength, `postmat`, mask, store. The same arithmetic as
+/// the portable path in `kernels.rs`.
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `cor`
+/// and `cor_rigid`.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(super) unsafe fn batch_centers<const SCALED: bool>(
+    job: &BatchJob<'_>,
+    positions: &[[f32; 3]; LANES],
+    centers: &[[f32; 3]; LANES],
+    out: &mut [[f32; 3]; LANES],
+    slots: &[Slot],
+    strength: Option<&[f32; LANES]>,
+) {
+    let lanes = |p: &Points| unsafe { [_mm512_loadu_ps(p.x.as_ptr()), _mm512_loadu_ps(p.y.as_ptr()), _mm512_loadu_ps(p.z.as_ptr())] };
+    // SAFETY (all unaligned loads and stores below): the arrays have exactly 16 lanes.
+    let o = lanes(&unsafe { load_points(positions) });
+    let c = lanes(&unsafe { load_points(centers) });
+    let (p, c) = match job.premat {
+        Some(m) => {
+            let m = Affine::new(m);
+            (m.apply(o), m.apply(c))
+        }
+        None => (o, c),
+    };
+    let d: [__m512; 3] = core::array::from_fn(|k| _mm512_sub_ps(p[k], c[k]));
+    let mut anchor = [_mm512_setzero_ps(); 3];
+    let mut offset = [_mm512_setzero_ps(); 3];
+    let mut real = [_mm512_setzero_ps(); 4];
+    let mut contrib = _mm512_setzero_ps();
+    for slot in slots {
+        let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
+        let q = if SCALED {
+            // SAFETY: indices are in range (validated); a CorBone is 32 floats: matrix rows 0–1,
+            // row 2 and the rotation, stretch rows 0–1, stretch row 2 and zeros.
+            let a = unsafe { load_columns(job.cor, &slot.bones, 0) };
+            let b = unsafe { load_columns(job.cor, &slot.bones, 8) };
+            let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
+            for r in 0..3 {
+                let m = rows[r];
+                let moved = _mm512_fmadd_ps(m[0], c[0], _mm512_fmadd_ps(m[1], c[1], _mm512_fmadd_ps(m[2], c[2], m[3])));
+                anchor[r] = _mm512_fmadd_ps(w, moved, anchor[r]);
+            }
+            let s = unsafe { load_columns(job.cor, &slot.bones, 16) };
+            let t = unsafe { load_columns(job.cor, &slot.bones, 24) };
+            let rows = [[s[0], s[1], s[2]], [s[4], s[5], s[6]], [t[0], t[1], t[2]]];
+            for r in 0..3 {
+                let m = rows[r];
+                let stretched = _mm512_fmadd_ps(m[0], d[0], _mm512_fmadd_ps(m[1], d[1], _mm512_mul_ps(m[2], d[2])));
+                offset[r] = _mm512_fmadd_ps(w, stretched, offset[r]);
+            }
+            [b[4], b[5], b[6], b[7]]
+        } else {
+            // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
+            // rotation, the translation and a zero.
+            let r = unsafe { load_columns(job.cor_rigid, &slot.bones, 0) };
+            let q = [r[0], r[1], r[2], r[3]];
+            let moved = rotate(&q, &c);
+            for k in 0..3 {
+                anchor[k] = _mm512_fmadd_ps(w, _mm512_add_ps(moved[k], r[4 + k]), anchor[k]);
+            }
+            q
+        };
+        let dot = _mm512_add_ps(
+            _mm512_fmadd_ps(q[1], real[1], _mm512_mul_ps(q[0], real[0])),
+            _mm512_fmadd_ps(q[3], real[3], _mm512_mul_ps(q[2], real[2])),
+        );
+        let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
+        let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
+        for k in 0..4 {
+            real[k] = _mm512_fmadd_ps(q[k], ws, real[k]);
+        }
+        contrib = _mm512_add_ps(contrib, w);
+    }
+    let zero = _mm512_setzero_ps();
+    let one = _mm512_set1_ps(1.0);
+    let two = _mm512_set1_ps(2.0);
+    let a = match strength {
+        Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
+        None => one,
+    };
+    let [x, y, z, w] = real;
+    let mul = |a, b| _mm512_mul_ps(a, b);
+    let add = |a, b| _mm512_add_ps(a, b);
+    let sub = |a, b| _mm512_sub_ps(a, b);
+    let (ww, xx, yy, zz) = (mul(w, w), mul(x, x), mul(y, y), mul(z, z));
+    let len2 = add(add(ww, xx), add(yy, zz));
+    let m00 = sub(add(ww, xx), add(yy, zz));
+    let m11 = sub(add(ww, yy), add(xx, zz));
+    let m22 = sub(add(ww, zz), add(xx, yy));
+    let (xy, xz, yz) = (mul(x, y), mul(x, z), mul(y, z));
+    let (wx, wy, wz) = (mul(w, x), mul(w, y), mul(w, z));
+    let dd = if SCALED { offset } else { d };
+    let row = |m0: __m512, m1: __m512, m2: __m512| _mm512_fmadd_ps(m0, dd[0], _mm512_fmadd_ps(m1, dd[1], mul(m2, dd[2])));
+    let n = [
+        row(m00, mul(two, sub(xy, wz)), mul(two, add(xz, wy))),
+        row(mul(two, add(xy, wz)), m11, mul(two, sub(yz, wx))),
+        row(mul(two, sub(xz, wy)), mul(two, add(yz, wx)), m22),
+    ];
+    let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::MIN_TOTAL_WEIGHT))
+        & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
+    let fa = _mm512_maskz_div_ps(valid, a, contrib);
+    let fr = _mm512_maskz_div_ps(valid, a, if SCALED { mul(len2, contrib) } else { len2 });
+    let keep = _mm512_mask_sub_ps(one, valid, one, a);
+    // anchor·(a/contrib) + n·(a/|q|²) + co·(1 − a)
+    let moved: [__m512; 3] = core::array::from_fn(|k| _mm512_fmadd_ps(anchor[k], fa, _mm512_fmadd_ps(n[k], fr, mul(p[k], keep))));
     let mut r = match job.postmat {
         Some(m) => Affine::new(m).apply(moved),
         None => moved,

@@ -11,7 +11,7 @@ use glam::{Affine3A, Mat4, Vec4};
 use rayon::prelude::*;
 
 use super::influences::{Slot, LANES};
-use super::pose::{DqBone, LinearBone, PivotBone};
+use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
 use super::{Influences, Pose, MIN_TOTAL_WEIGHT};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -19,6 +19,7 @@ pub(crate) enum Kind {
     Linear,
     DualQuaternion,
     Blend,
+    CentersOfRotation,
 }
 
 pub(crate) struct Job<'a> {
@@ -31,6 +32,8 @@ pub(crate) struct Job<'a> {
     pub mask: Option<&'a [f32]>,
     pub blend_amount: Option<&'a [f32]>,
     pub blend_factor: f32,
+    /// One center per vertex (mesh space) for [`Kind::CentersOfRotation`].
+    pub centers: Option<&'a [[f32; 3]]>,
 }
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
@@ -129,12 +132,15 @@ fn chunk<const ISA: u8>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
         (Kind::DualQuaternion, true) => batches::<ISA, DUAL_QUATERNION, true>(job, start, out),
         (Kind::Blend, false) => batches::<ISA, BLEND, false>(job, start, out),
         (Kind::Blend, true) => batches::<ISA, BLEND, true>(job, start, out),
+        (Kind::CentersOfRotation, false) => batches::<ISA, CENTERS, false>(job, start, out),
+        (Kind::CentersOfRotation, true) => batches::<ISA, CENTERS, true>(job, start, out),
     }
 }
 
 pub(super) const LINEAR: u8 = 0;
 pub(super) const DUAL_QUATERNION: u8 = 1;
 pub(super) const BLEND: u8 = 2;
+pub(super) const CENTERS: u8 = 3;
 
 type Lanes = [f32; LANES];
 const ZERO: Lanes = [0.0; LANES];
@@ -198,6 +204,8 @@ fn batches<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
         linear: &pose.linear,
         dq: &pose.dq,
         pivot: &pose.pivot,
+        cor: &pose.cor,
+        cor_rigid: &pose.cor_rigid,
         scaled: SCALED,
         premat: premat.as_ref(),
         postmat: postmat.as_ref(),
@@ -212,6 +220,21 @@ fn batches<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
                 let full = |a: &'a [f32]| -> &'a [f32; LANES] { a[first..first + LANES].try_into().expect("a full batch") };
                 let positions = job.positions[first..first + LANES].try_into().expect("a full batch");
                 let slots = job.influences.batch(first / LANES);
+                if let (CENTERS, Some(centers)) = (KIND, job.centers) {
+                    let centers = centers[first..first + LANES].try_into().expect("a full batch");
+                    // SAFETY: as below.
+                    unsafe {
+                        super::avx512::batch_centers::<SCALED>(
+                            simd_job,
+                            positions,
+                            centers,
+                            out.try_into().expect("a full batch"),
+                            slots,
+                            job.mask.map(full),
+                        )
+                    };
+                    continue;
+                }
                 // SAFETY: this copy only runs where AVX-512F, AVX2 and FMA were detected; bone
                 // indices were validated against the pose's bone count.
                 unsafe {
@@ -237,6 +260,17 @@ fn batches<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
             None => original,
         };
         let batch = Batch { first, n, original, co, strength, slots: job.influences.batch(first / LANES) };
+        if let (CENTERS, Some(centers)) = (KIND, job.centers) {
+            let center = load_points::<ISA>(&centers[first..first + n]);
+            let center = match &premat {
+                Some(m) => center.transform::<ISA>(m),
+                None => center,
+            };
+            let sum = accumulate_centers::<ISA, SCALED>(&batch.co, &center, batch.slots, &pose.cor, &pose.cor_rigid);
+            let moved = finish_centers::<ISA, SCALED>(&batch.co, &center, &sum, &batch.strength);
+            finish_points::<ISA>(&batch, moved, postmat.as_ref(), out);
+            continue;
+        }
         let sum = (KIND != LINEAR)
             .then(|| accumulate_dual_quaternion::<ISA, SCALED>(&batch.co, batch.slots, &pose.dq, &pose.pivot));
         finish_batch::<ISA, KIND>(job, &batch, sum.as_ref(), postmat.as_ref(), out);
@@ -276,6 +310,13 @@ fn finish_batch<const ISA: u8, const KIND: u8>(
         }
         _ => linear::<ISA>(co, batch.slots, &pose.linear, strength),
     };
+    finish_points::<ISA>(batch, moved, postmat, out);
+}
+
+/// Applies `postmat` and the mask to a batch's moved points and writes them.
+#[inline(always)]
+fn finish_points<const ISA: u8>(batch: &Batch<'_>, moved: Points, postmat: Option<&Affine3A>, out: &mut [[f32; 3]]) {
+    let strength = &batch.strength;
     let mut result = match postmat {
         Some(m) => moved.transform::<ISA>(m),
         None => moved,
@@ -449,6 +490,123 @@ fn finish_dual_quaternion<const ISA: u8>(co: &Points, s: &DqSum, strength: &Lane
         r.x[l] = madd::<ISA>(nx, f, px * keep);
         r.y[l] = madd::<ISA>(ny, f, py * keep);
         r.z[l] = madd::<ISA>(nz, f, pz * keep);
+    }
+    r
+}
+
+/// Per-lane sums for centers of rotation: `Σ wᵢ·Mᵢ·c` (where LBS puts the center), the
+/// sign-aligned quaternion sum, `Σ wᵢ·Sᵢ·(co − c)` (scaled poses only) and the total weight.
+pub(super) struct CorSum {
+    pub anchor: [Lanes; 3],
+    pub real: [Lanes; 4],
+    pub offset: [Lanes; 3],
+    pub contrib: Lanes,
+}
+
+/// Sums for centers of rotation; the quaternion signs are chosen against the running sum as in
+/// [`accumulate_dual_quaternion`].
+#[inline(always)]
+fn accumulate_centers<const ISA: u8, const SCALED: bool>(
+    co: &Points,
+    center: &Points,
+    slots: &[Slot],
+    cor: &[CorBone],
+    cor_rigid: &[CorRigidBone],
+) -> CorSum {
+    // SAFETY: `ISA` names the instruction set the running copy was chosen for after detecting
+    // it; bone indices were validated against the pose's bone count.
+    #[cfg(target_arch = "x86_64")]
+    if ISA >= ISA_AVX2 {
+        return unsafe { super::avx2::accumulate_centers(co, center, slots, cor, cor_rigid, SCALED) };
+    }
+    let mut s = CorSum { anchor: [ZERO; 3], real: [ZERO; 4], offset: [ZERO; 3], contrib: ZERO };
+    for slot in slots {
+        for l in 0..LANES {
+            let b = bone(cor, slot.bones[l]);
+            let w = slot.weights[l];
+            let (cx, cy, cz) = (center.x[l], center.y[l], center.z[l]);
+            let moved = if SCALED {
+                let m = |r: usize| {
+                    let row = b.matrix.rows[r];
+                    madd::<ISA>(row.x, cx, madd::<ISA>(row.y, cy, madd::<ISA>(row.z, cz, row.w)))
+                };
+                [m(0), m(1), m(2)]
+            } else {
+                let r = bone(cor_rigid, slot.bones[l]);
+                let p = rotate::<ISA>(r.real, [cx, cy, cz]);
+                [p[0] + r.translation.x, p[1] + r.translation.y, p[2] + r.translation.z]
+            };
+            for r in 0..3 {
+                s.anchor[r][l] = madd::<ISA>(w, moved[r], s.anchor[r][l]);
+            }
+            if SCALED {
+                let (dx, dy, dz) = (co.x[l] - cx, co.y[l] - cy, co.z[l] - cz);
+                for r in 0..3 {
+                    let row = b.stretch.rows[r];
+                    let stretched = madd::<ISA>(row.x, dx, madd::<ISA>(row.y, dy, row.z * dz));
+                    s.offset[r][l] = madd::<ISA>(w, stretched, s.offset[r][l]);
+                }
+            }
+            let q = [b.real.x, b.real.y, b.real.z, b.real.w];
+            let dot = q[0] * s.real[0][l] + q[1] * s.real[1][l] + q[2] * s.real[2][l] + q[3] * s.real[3][l];
+            let ws = if dot < 0.0 { -w } else { w };
+            for c in 0..4 {
+                s.real[c][l] = madd::<ISA>(q[c], ws, s.real[c][l]);
+            }
+            s.contrib[l] += w;
+        }
+    }
+    s
+}
+
+/// `p` rotated by the unit quaternion `q = (v, w)`: `p + 2·(w·(v × p) + v × (v × p))`.
+#[inline(always)]
+fn rotate<const ISA: u8>(q: Vec4, p: [f32; 3]) -> [f32; 3] {
+    let cross = |a: [f32; 3], b: [f32; 3]| {
+        [
+            madd::<ISA>(a[1], b[2], -(a[2] * b[1])),
+            madd::<ISA>(a[2], b[0], -(a[0] * b[2])),
+            madd::<ISA>(a[0], b[1], -(a[1] * b[0])),
+        ]
+    };
+    let v = [q.x, q.y, q.z];
+    let a = cross(v, p);
+    let b = cross(v, a);
+    core::array::from_fn(|k| madd::<ISA>(2.0, madd::<ISA>(q.w, a[k], b[k]), p[k]))
+}
+
+/// `co' = anchor/contrib + R·d` with `R` the rotation of the summed quaternion (its matrix
+/// divided by `|q|²`, as `mul_v3m3_dq` does) and `d = co − c` (rigid) or `offset/contrib`
+/// (scaled); then the strength: `co + a·(co' − co)`; `co` where `contrib ≤ 0.0001` or the sum
+/// is zero. Selects, not branches, so the lane loop vectorizes.
+#[inline(always)]
+fn finish_centers<const ISA: u8, const SCALED: bool>(co: &Points, center: &Points, s: &CorSum, strength: &Lanes) -> Points {
+    let mut r = *co;
+    for l in 0..LANES {
+        let (x, y, z, w) = (s.real[0][l], s.real[1][l], s.real[2][l], s.real[3][l]);
+        let len2 = w * w + x * x + y * y + z * z;
+        let (px, py, pz) = (co.x[l], co.y[l], co.z[l]);
+        let (dx, dy, dz) = if SCALED {
+            (s.offset[0][l], s.offset[1][l], s.offset[2][l])
+        } else {
+            (px - center.x[l], py - center.y[l], pz - center.z[l])
+        };
+        let m00 = w * w + x * x - y * y - z * z;
+        let m11 = w * w + y * y - x * x - z * z;
+        let m22 = w * w + z * z - x * x - y * y;
+        let (xy, xz, yz, wx, wy, wz) = (x * y, x * z, y * z, w * x, w * y, w * z);
+        let nx = m00 * dx + 2.0 * (xy - wz) * dy + 2.0 * (xz + wy) * dz;
+        let ny = 2.0 * (xy + wz) * dx + m11 * dy + 2.0 * (yz - wx) * dz;
+        let nz = 2.0 * (xz - wy) * dx + 2.0 * (yz + wx) * dy + m22 * dz;
+        let contrib = s.contrib[l];
+        let valid = contrib > MIN_TOTAL_WEIGHT && len2 > 0.0;
+        let a = strength[l];
+        let fa = if valid { a / contrib } else { 0.0 };
+        let fr = if valid { if SCALED { a / (len2 * contrib) } else { a / len2 } } else { 0.0 };
+        let keep = if valid { 1.0 - a } else { 1.0 };
+        r.x[l] = madd::<ISA>(s.anchor[0][l], fa, madd::<ISA>(nx, fr, px * keep));
+        r.y[l] = madd::<ISA>(s.anchor[1][l], fa, madd::<ISA>(ny, fr, py * keep));
+        r.z[l] = madd::<ISA>(s.anchor[2][l], fa, madd::<ISA>(nz, fr, pz * keep));
     }
     r
 }

@@ -12,18 +12,24 @@
 //!    running sum; bones with scale or shear move rigidly to where their matrix puts `co`;
 //!    the sum is applied with `mul_v3m3_dq` and `co += a·(r − co)`;
 //!    Blend: `(1−α)·LBS + α·DQS`;
+//!    Centers of rotation (Le & Hodgins 2016, see [`centers_of_rotation`]): with the vertex's
+//!    center `c = premat·p*`, `co' = Σ wᵢ·Mᵢ·c + R·Sw·(co − c)` (weights divided by `contrib`),
+//!    `R` the rotation of the sign-aligned quaternion sum, `Sw = Σ wᵢ·Sᵢ` the blended scale/shear
+//!    parts (identity for rigid bones); then `co += a·(co' − co)`;
 //! 5. `p' = postmat·co`.
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod centers;
 mod envelope;
 mod groups;
 mod influences;
 mod kernels;
 mod pose;
 
+pub use centers::{centers_of_rotation, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA};
 pub use envelope::{bbone_segment_matrices, distance_factor, BBone, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
 pub use influences::{Influence, Influences, MAX_INFLUENCES_PER_VERTEX};
@@ -42,6 +48,24 @@ pub enum Method<'a> {
     /// Per-vertex mix `(1−α)·Linear + α·DualQuaternion` with `α = factor·amount[v]`
     /// (`α = factor` when `amount` is `None`). `factor` and every amount must lie in `[0, 1]`.
     Blend { amount: Option<&'a [f32]>, factor: f32 },
+    /// Skinning with optimized centers of rotation (Le & Hodgins 2016): `centers` holds one
+    /// center per vertex in mesh space, from [`centers_of_rotation`] (a vertex's own position
+    /// gives exactly LBS). Needs the rest matrices, like dual quaternion skinning.
+    ///
+    /// Per vertex (weights divided by their total): the blended rotation `R` is that of the
+    /// normalized sum of the bones' rotations with signs aligned against the running sum (as in
+    /// DQS), the center goes where LBS puts it, and the offset from the center to the vertex
+    /// turns with `R`: `v' = Σ wⱼ·Mⱼ·p* + R·(v − p*)`, which is the paper's
+    /// `R·v + Σ wⱼ·(Rⱼ·p* + tⱼ) − R·p*` for rigid bones.
+    ///
+    /// Bones with scale or shear (Kavan et al.'s two phases, as Blender's Preserve Volume splits
+    /// them): each bone's matrix is its rotation `Rⱼ` (the one DQS uses) after a scale/shear
+    /// part `Sⱼ = Rⱼᵀ·M₃ⱼ`. The parts are blended linearly and applied to the vertex and to its
+    /// center alike, so the offset becomes `Σ wⱼ·Sⱼ·(v − p*)` before it turns; the center still
+    /// goes exactly where each bone's full matrix puts it (the DQS scale path with the center as
+    /// the pivot): `v' = Σ wⱼ·Mⱼ·p* + R·Σ wⱼ·Sⱼ·(v − p*)`. A uniformly scaled rig thus gives the
+    /// scaled rigid result, and a row without a center still gives LBS.
+    CentersOfRotation { centers: &'a [[f32; 3]] },
 }
 
 /// Optional inputs shared by all methods.
@@ -69,8 +93,17 @@ pub enum SkinError {
     InvalidSpaceMatrix { what: &'static str, problem: &'static str },
     /// A per-vertex value (mask or blend amount) is outside `[0, 1]` or not finite.
     OutOfRange { what: &'static str, index: Option<usize>, value: f32 },
-    /// Dual quaternion skinning was asked for but the pose has no rest matrices.
+    /// Dual quaternion or centers-of-rotation skinning was asked for but the pose has no rest
+    /// matrices.
     MissingRestMatrices,
+    /// An array of points has a NaN or infinite coordinate.
+    NotFinite { what: &'static str, index: usize },
+    /// A triangle refers to a vertex that does not exist.
+    InvalidTriangle { index: usize, vertex: u32, vertex_count: usize },
+    /// The similarity width σ of the centers of rotation is not a finite number > 0.
+    InvalidSigma(f32),
+    /// The progress callback asked to stop.
+    Cancelled,
 }
 
 impl core::fmt::Display for SkinError {
@@ -92,8 +125,15 @@ impl core::fmt::Display for SkinError {
             }
             SkinError::MissingRestMatrices => write!(
                 f,
-                "dual quaternion skinning needs the bones' rest matrices (Bone.matrix_local) for the scale path"
+                "dual quaternion and centers-of-rotation skinning need the bones' rest matrices (Bone.matrix_local) for the scale path"
             ),
+            SkinError::NotFinite { what, index } => write!(f, "{what}[{index}] has a NaN or infinite coordinate"),
+            SkinError::InvalidTriangle { index, vertex, vertex_count } => write!(
+                f,
+                "triangles[{index}] refers to vertex {vertex}, but there are {vertex_count} vertices"
+            ),
+            SkinError::InvalidSigma(s) => write!(f, "sigma = {s} must be a finite number greater than 0"),
+            SkinError::Cancelled => write!(f, "cancelled"),
         }
     }
 }
@@ -153,9 +193,19 @@ fn skin_with(
             Err(SkinError::MissingRestMatrices)
         }
     };
+    let mut centers = None;
     let (kind, blend_amount, blend_factor) = match method {
         Method::Linear => (kernels::Kind::Linear, None, 0.0),
         Method::DualQuaternion => (needs_rest(kernels::Kind::DualQuaternion)?, None, 0.0),
+        Method::CentersOfRotation { centers: c } => {
+            let kind = needs_rest(kernels::Kind::CentersOfRotation)?;
+            check_len("centers", n, c.len())?;
+            if let Some(index) = c.iter().position(|p| !p.iter().all(|x| x.is_finite())) {
+                return Err(SkinError::NotFinite { what: "centers", index });
+            }
+            centers = Some(c);
+            (kind, None, 0.0)
+        }
         Method::Blend { amount, factor } => {
             let kind = needs_rest(kernels::Kind::Blend)?;
             if !(0.0..=1.0).contains(&factor) {
@@ -178,6 +228,7 @@ fn skin_with(
         mask: options.mask,
         blend_amount,
         blend_factor,
+        centers,
     };
     if n <= kernels::CHUNK {
         // One task's worth: run it here. Handing it to the pool would cost more than the work

@@ -54,12 +54,38 @@ pub(crate) struct PivotBone {
     pub real: Vec4,
 }
 
+/// A bone for skinning with centers of rotation: its full deform matrix (which moves the
+/// center, as LBS would), its rotation (the one DQS uses), and the rows of its scale/shear part
+/// `S = Rᵀ·M₃` (exactly the identity for bones that do not take the scale path). The first
+/// 64-byte line is all that rigid poses read.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct CorBone {
+    pub matrix: AffineRows,
+    pub real: Vec4,
+    pub stretch: AffineRows,
+    /// Zeros, so that SIMD code can load the last 8-float window of the record.
+    pub padding: Vec4,
+}
+
+/// A rigid bone for skinning with centers of rotation: its rotation (x, y, z, w) and
+/// translation (x, y, z, 0). 8 floats, so SIMD code loads a lane's record in one window; the
+/// kernels rotate the center by `real` rather than read a 3×3 matrix.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(32))]
+pub(crate) struct CorRigidBone {
+    pub real: Vec4,
+    pub translation: Vec4,
+}
+
 /// Per-frame bone data for all skinning methods.
 #[derive(Clone, Debug)]
 pub struct Pose {
     pub(crate) linear: Vec<LinearBone>,
     pub(crate) dq: Vec<DqBone>,
     pub(crate) pivot: Vec<PivotBone>,
+    pub(crate) cor: Vec<CorBone>,
+    pub(crate) cor_rigid: Vec<CorRigidBone>,
     scaled: Vec<bool>,
 }
 
@@ -80,7 +106,7 @@ impl Pose {
             check_affine("deform", bone, m)?;
         }
         let linear = deform.iter().map(|m| LinearBone { matrix: AffineRows::from_mat4(m) }).collect();
-        let (mut dq, mut pivot, mut scaled) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut dq, mut pivot, mut cor, mut cor_rigid, mut scaled) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         if let Some(rest) = rest {
             if rest.len() != deform.len() {
                 return Err(SkinError::LengthMismatch {
@@ -111,10 +137,18 @@ impl Pose {
                     m.w_axis,
                 );
                 pivot.push(PivotBone { translation: AffineRows::from_mat4(&p), real: Vec4::from(q) });
+                let stretch = if is_scaled { Mat3::from_quat(q).transpose() * Mat3::from_mat4(*m) } else { Mat3::IDENTITY };
+                cor.push(CorBone {
+                    matrix: AffineRows::from_mat4(m),
+                    real: Vec4::from(q),
+                    stretch: AffineRows::from_mat4(&Mat4::from_mat3(stretch)),
+                    padding: Vec4::ZERO,
+                });
+                cor_rigid.push(CorRigidBone { real: Vec4::from(q), translation: t.extend(0.0) });
                 scaled.push(is_scaled);
             }
         }
-        Ok(Self { linear, dq, pivot, scaled })
+        Ok(Self { linear, dq, pivot, cor, cor_rigid, scaled })
     }
 
     /// Number of bones.

@@ -1,0 +1,427 @@
+//! Optimized centers of rotation (Le & Hodgins, "Real-time Skeletal Skinning with Optimized
+//! Centers of Rotation", SIGGRAPH 2016): the per-vertex precompute on the rest mesh.
+//!
+//! Vertex `i` with weights `wᵢ` gets the center
+//! `pᵢ* = Σₜ s(wᵢ, wₜ)·Aₜ·cₜ / Σₜ s(wᵢ, wₜ)·Aₜ` over the triangles `t` (area `Aₜ`, centroid
+//! `cₜ`, weights `wₜ` the mean of its corners'), with the similarity
+//! `s(a, b) = Σ_{j≠k} aⱼ·aₖ·bⱼ·bₖ·exp(−(aⱼ·bₖ − aₖ·bⱼ)²/σ²)`.
+//!
+//! Weight vectors are each vertex's influences with repeated bones added up, normalized to sum 1;
+//! a vertex whose total weight is at most [`MIN_TOTAL_WEIGHT`] (which skinning leaves in place)
+//! counts as having none. Where the denominator is 0 — fewer than two bones, or no triangle
+//! sharing two of its bones — the vertex has no center and is skinned by LBS (its row holds its
+//! own position, for which the per-frame formula is exactly LBS).
+//!
+//! # Algorithm (the exact sums, in a different order)
+//! A term of `s` is non-zero only for bones `j ≠ k` both in `a` and `b`, so
+//! `s(a, b) = Σ_{pairs j<k} 2·aⱼaₖ·bⱼbₖ·exp(…)`, and the two sums split into per-pair sums:
+//! 1. vertices with equal weight vectors share a center (computed once);
+//! 2. triangles with equal weight vectors are merged (their `A` and `A·c` added);
+//! 3. every merged triangle is listed under each pair of its bones, with `bⱼ`, `bₖ`,
+//!    `P = bⱼbₖ·A` and `P·c`; entries of a list with equal `(bⱼ, bₖ)` are merged again;
+//! 4. a vertex visits only the lists of its own bone pairs (a triangle sharing fewer than two
+//!    bones contributes 0 and is never visited), in parallel over unique weight vectors.
+//!
+//! Everything is accumulated in f64. No term is dropped; the only approximation is a
+//! vectorizable `exp` with a relative error below 1e-11, which moves a center (a weighted mean
+//! of centroids) by at most about 1e-11 × the bounding box diagonal (see `sums.rs`). The tests
+//! check the result against the naive O(V·T) sum with the library `exp`.
+
+mod sums;
+
+use std::collections::HashMap;
+
+use rayon::prelude::*;
+
+use super::kernels::Simd;
+use super::{Influences, SkinError, MIN_TOTAL_WEIGHT};
+use sums::{PairList, WIDTH};
+
+/// The paper's default σ.
+pub const DEFAULT_SIGMA: f32 = 0.1;
+
+/// Per-vertex centers of rotation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Centers {
+    /// One per vertex, in mesh space (the space of the rest positions); a vertex without a
+    /// center holds its own position.
+    pub centers: Vec<[f32; 3]>,
+    /// Whether the vertex has a center (false: it is skinned exactly like LBS).
+    pub has_center: Vec<bool>,
+}
+
+/// Computes the centers of rotation of a rest mesh: `positions` (one per vertex of
+/// `influences`), `triangles` (vertex indices) and the similarity width `sigma`
+/// ([`DEFAULT_SIGMA`] in the paper). Runs on the crate's thread pool.
+pub fn centers_of_rotation(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+) -> Result<Centers, SkinError> {
+    centers_of_rotation_with_progress(positions, triangles, influences, sigma, &mut |_, _| true)
+}
+
+/// [`centers_of_rotation`] that reports progress and can be cancelled: `progress(done, total)`
+/// (in units of work, `done ≤ total`) is called on the calling thread before the work starts
+/// and after every part of it (about a hundred parts on a large mesh); returning `false`
+/// stops the computation with [`SkinError::Cancelled`].
+pub fn centers_of_rotation_with_progress(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<Centers, SkinError> {
+    centers_with(Simd::detect(), positions, triangles, influences, sigma, progress)
+}
+
+/// [`centers_of_rotation_with_progress`] on a given compiled copy of the inner loop.
+pub(super) fn centers_with(
+    simd: Simd,
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<Centers, SkinError> {
+    let n = influences.vertex_count();
+    if positions.len() != n {
+        return Err(SkinError::LengthMismatch { what: "positions", expected: n, got: positions.len() });
+    }
+    if !(sigma > 0.0 && sigma.is_finite()) {
+        return Err(SkinError::InvalidSigma(sigma));
+    }
+    if let Some(index) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(SkinError::NotFinite { what: "positions", index });
+    }
+    for (index, t) in triangles.iter().enumerate() {
+        if let Some(&vertex) = t.iter().find(|&&v| v as usize >= n) {
+            return Err(SkinError::InvalidTriangle { index, vertex, vertex_count: n });
+        }
+    }
+    let weights = WeightVectors::new(influences);
+    let classes = VertexClasses::new(&weights);
+    let index = PairIndex::new(positions, triangles, &weights);
+    let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
+
+    // Parts of roughly equal work, so progress advances evenly and cancelling is quick.
+    let work: Vec<usize> = classes.members.iter().map(|c| index.work(&weights, c.first)).collect();
+    let total: usize = work.iter().sum();
+    let part_work = (total / 100).max(1 << 16);
+    let mut parts = vec![0usize];
+    let mut acc = 0;
+    for (c, w) in work.iter().enumerate() {
+        acc += w;
+        if acc >= part_work {
+            parts.push(c + 1);
+            acc = 0;
+        }
+    }
+    if *parts.last().unwrap_or(&0) != work.len() {
+        parts.push(work.len());
+    }
+
+    if !progress(0, total) {
+        return Err(SkinError::Cancelled);
+    }
+    let mut class_centers: Vec<Option<[f64; 3]>> = vec![None; classes.members.len()];
+    let mut done = 0;
+    for part in parts.windows(2) {
+        let range = part[0]..part[1];
+        let one = |(c, out): (usize, &mut Option<[f64; 3]>)| {
+            let v = classes.members[c].first;
+            *out = index.center(simd, &weights, v, inv_sigma2);
+        };
+        let slots = &mut class_centers[range.clone()];
+        let part_work: usize = work[range.clone()].iter().sum();
+        if part_work < (1 << 14) {
+            slots.iter_mut().enumerate().map(|(i, o)| (range.start + i, o)).for_each(one);
+        } else {
+            crate::pool::run(|| {
+                slots.par_iter_mut().enumerate().map(|(i, o)| (range.start + i, o)).for_each(one)
+            });
+        }
+        done += part_work;
+        if !progress(done, total) {
+            return Err(SkinError::Cancelled);
+        }
+    }
+
+    let mut centers = positions.to_vec();
+    let mut has_center = vec![false; n];
+    for (v, class) in classes.of_vertex.iter().enumerate() {
+        if let Some(c) = class.and_then(|c| class_centers[c as usize]) {
+            centers[v] = c.map(|x| x as f32);
+            has_center[v] = true;
+        }
+    }
+    Ok(Centers { centers, has_center })
+}
+
+/// Every vertex's weights, repeated bones added up, normalized to sum 1, sorted by bone, zero
+/// weights dropped (empty for a vertex with total weight ≤ [`MIN_TOTAL_WEIGHT`]).
+pub(crate) struct WeightVectors {
+    offsets: Vec<usize>,
+    entries: Vec<(u32, f64)>,
+}
+
+impl WeightVectors {
+    pub(crate) fn new(influences: &Influences) -> Self {
+        let mut offsets = Vec::with_capacity(influences.vertex_count() + 1);
+        let mut entries = Vec::with_capacity(influences.len());
+        offsets.push(0);
+        let mut list: Vec<(u32, f64)> = Vec::new();
+        for v in 0..influences.vertex_count() {
+            list.clear();
+            list.extend(influences.of_vertex(v).iter().filter(|i| i.weight > 0.0).map(|i| (i.bone, f64::from(i.weight))));
+            list.sort_by_key(|e| e.0);
+            list.dedup_by(|next, kept| {
+                let same = next.0 == kept.0;
+                if same {
+                    kept.1 += next.1;
+                }
+                same
+            });
+            let total: f64 = list.iter().map(|e| e.1).sum();
+            if total > f64::from(MIN_TOTAL_WEIGHT) {
+                entries.extend(list.iter().map(|&(b, w)| (b, w / total)));
+            }
+            offsets.push(entries.len());
+        }
+        Self { offsets, entries }
+    }
+
+    pub(crate) fn of(&self, v: usize) -> &[(u32, f64)] {
+        &self.entries[self.offsets[v]..self.offsets[v + 1]]
+    }
+}
+
+/// Vertices grouped by weight vector (bit for bit): only vertices with at least two bones get a
+/// class, since the others have no center.
+struct VertexClasses {
+    /// Per class, its first vertex (whose weights stand for all of them); classes ordered by
+    /// their bones, so that consecutive ones read the same pair lists.
+    members: Vec<Member>,
+    of_vertex: Vec<Option<u32>>,
+}
+
+struct Member {
+    first: usize,
+}
+
+impl VertexClasses {
+    fn new(weights: &WeightVectors) -> Self {
+        let n = weights.offsets.len() - 1;
+        let key = |v: usize| -> Vec<(u32, u64)> { weights.of(v).iter().map(|&(b, w)| (b, w.to_bits())).collect() };
+        let mut ids: HashMap<Vec<(u32, u64)>, u32> = HashMap::new();
+        let mut firsts = Vec::new();
+        let mut of_vertex = vec![None; n];
+        for (v, slot) in of_vertex.iter_mut().enumerate() {
+            if weights.of(v).len() < 2 {
+                continue;
+            }
+            let next = firsts.len() as u32;
+            let id = *ids.entry(key(v)).or_insert_with(|| {
+                firsts.push(v);
+                next
+            });
+            *slot = Some(id);
+        }
+        // Order by bones; renumber.
+        let mut order: Vec<u32> = (0..firsts.len() as u32).collect();
+        order.sort_by(|&a, &b| {
+            let (wa, wb) = (weights.of(firsts[a as usize]), weights.of(firsts[b as usize]));
+            wa.iter().map(|e| e.0).cmp(wb.iter().map(|e| e.0))
+        });
+        let mut renumber = vec![0u32; order.len()];
+        for (new, &old) in order.iter().enumerate() {
+            renumber[old as usize] = new as u32;
+        }
+        for c in of_vertex.iter_mut().flatten() {
+            *c = renumber[*c as usize];
+        }
+        let members = order.iter().map(|&c| Member { first: firsts[c as usize] }).collect();
+        Self { members, of_vertex }
+    }
+}
+
+/// A weight vector bit for bit: `(bone, weight bits)` sorted by bone.
+type WeightKey = Vec<(u32, u64)>;
+
+/// Merged triangles listed under each pair of their bones, in padded structure-of-arrays form.
+struct PairIndex {
+    /// Pair `(j, k)`, `j < k` → its entries `starts[id]..starts[id + 1]`.
+    ids: HashMap<(u32, u32), usize>,
+    starts: Vec<usize>,
+    bj: Vec<f64>,
+    bk: Vec<f64>,
+    p: Vec<f64>,
+    pc: [Vec<f64>; 3],
+}
+
+/// One pair-list entry before packing.
+#[derive(Clone, Copy)]
+struct Entry {
+    bj: f64,
+    bk: f64,
+    p: f64,
+    pc: [f64; 3],
+}
+
+impl PairIndex {
+    fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]], weights: &WeightVectors) -> Self {
+        // Triangles merged by weight vector: Σ A and Σ A·c.
+        let mut merged: HashMap<WeightKey, (f64, [f64; 3])> = HashMap::new();
+        let mut mean: Vec<(u32, f64)> = Vec::new();
+        for t in triangles {
+            let [a, b, c] = t.map(|v| positions[v as usize].map(f64::from));
+            let (e1, e2) = (sub(b, a), sub(c, a));
+            let area = 0.5 * length(cross(e1, e2));
+            if !(area > 0.0) {
+                continue;
+            }
+            mean.clear();
+            for &v in t {
+                mean.extend_from_slice(weights.of(v as usize));
+            }
+            mean.sort_by_key(|e| e.0);
+            mean.dedup_by(|next, kept| {
+                let same = next.0 == kept.0;
+                if same {
+                    kept.1 += next.1;
+                }
+                same
+            });
+            if mean.len() < 2 {
+                continue;
+            }
+            let key: WeightKey = mean.iter().map(|&(bone, w)| (bone, (w / 3.0).to_bits())).collect();
+            let centroid = [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0, (a[2] + b[2] + c[2]) / 3.0];
+            let slot = merged.entry(key).or_insert((0.0, [0.0; 3]));
+            slot.0 += area;
+            for k in 0..3 {
+                slot.1[k] += area * centroid[k];
+            }
+        }
+        // Lists per bone pair.
+        let mut ids: HashMap<(u32, u32), usize> = HashMap::new();
+        let mut lists: Vec<Vec<Entry>> = Vec::new();
+        for (key, (area, area_c)) in &merged {
+            for (x, &(j, bj)) in key.iter().enumerate() {
+                for &(k, bk) in &key[x + 1..] {
+                    let (bj, bk) = (f64::from_bits(bj), f64::from_bits(bk));
+                    let id = *ids.entry((j, k)).or_insert_with(|| {
+                        lists.push(Vec::new());
+                        lists.len() - 1
+                    });
+                    let w = bj * bk;
+                    lists[id].push(Entry { bj, bk, p: w * area, pc: area_c.map(|x| w * x) });
+                }
+            }
+        }
+        drop(merged);
+        // Equal (bⱼ, bₖ) in one list merged; padded to WIDTH.
+        let mut starts = vec![0];
+        let total: usize = lists.iter().map(|l| l.len().next_multiple_of(WIDTH)).sum();
+        let mut index = Self {
+            ids,
+            starts: Vec::new(),
+            bj: Vec::with_capacity(total),
+            bk: Vec::with_capacity(total),
+            p: Vec::with_capacity(total),
+            pc: [Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total)],
+        };
+        for list in &mut lists {
+            list.sort_by_key(|e| (e.bj.to_bits(), e.bk.to_bits()));
+            list.dedup_by(|next, kept| {
+                let same = next.bj.to_bits() == kept.bj.to_bits() && next.bk.to_bits() == kept.bk.to_bits();
+                if same {
+                    kept.p += next.p;
+                    for k in 0..3 {
+                        kept.pc[k] += next.pc[k];
+                    }
+                }
+                same
+            });
+            let padding = Entry { bj: 0.0, bk: 0.0, p: 0.0, pc: [0.0; 3] };
+            let padded = list.len().next_multiple_of(WIDTH);
+            for e in list.iter().chain(std::iter::repeat_n(&padding, padded - list.len())) {
+                index.bj.push(e.bj);
+                index.bk.push(e.bk);
+                index.p.push(e.p);
+                for k in 0..3 {
+                    index.pc[k].push(e.pc[k]);
+                }
+            }
+            starts.push(index.p.len());
+            *list = Vec::new();
+        }
+        index.starts = starts;
+        index
+    }
+
+    fn list(&self, j: u32, k: u32) -> Option<PairList<'_>> {
+        let id = *self.ids.get(&(j, k))?;
+        let r = self.starts[id]..self.starts[id + 1];
+        Some(PairList {
+            bj: &self.bj[r.clone()],
+            bk: &self.bk[r.clone()],
+            p: &self.p[r.clone()],
+            pc: [&self.pc[0][r.clone()], &self.pc[1][r.clone()], &self.pc[2][r]],
+        })
+    }
+
+    /// The bone pairs of vertex `v` with their list and weights `(aⱼ, aₖ)`.
+    fn pairs<'a>(&'a self, weights: &'a WeightVectors, v: usize) -> impl Iterator<Item = (PairList<'a>, f64, f64)> + 'a {
+        let a = weights.of(v);
+        (0..a.len()).flat_map(move |x| {
+            a[x + 1..].iter().filter_map(move |&(k, ak)| {
+                let (j, aj) = a[x];
+                self.list(j, k).map(|l| (l, aj, ak))
+            })
+        })
+    }
+
+    /// Entries vertex `v` visits.
+    fn work(&self, weights: &WeightVectors, v: usize) -> usize {
+        self.pairs(weights, v).map(|(l, _, _)| l.p.len()).sum::<usize>() + 1
+    }
+
+    /// The center of vertex `v`, if its denominator is positive.
+    fn center(&self, simd: Simd, weights: &WeightVectors, v: usize, inv_sigma2: f64) -> Option<[f64; 3]> {
+        // With exponents that could underflow (tiny σ), factor out the largest exp(−u²/σ²) so it
+        // becomes 1; the factor cancels in the ratio.
+        let shift = if inv_sigma2 > 600.0 {
+            let m = self.pairs(weights, v).map(|(l, aj, ak)| sums::min_cross_squared(&l, aj, ak)).fold(f64::INFINITY, f64::min);
+            if m.is_finite() { m * inv_sigma2 } else { 0.0 }
+        } else {
+            0.0
+        };
+        let mut total = [0.0f64; 4];
+        for (list, aj, ak) in self.pairs(weights, v) {
+            let s = sums::pair_sums(simd, &list, aj, ak, inv_sigma2, shift);
+            let f = 2.0 * aj * ak;
+            for k in 0..4 {
+                total[k] += f * s[k];
+            }
+        }
+        let d = total[0];
+        (d > 0.0).then(|| [total[1] / d, total[2] / d, total[3] / d]).filter(|c| c.iter().all(|x| x.is_finite()))
+    }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+fn length(a: [f64; 3]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,317 @@
+"""Skinning with optimized centers of rotation (Le & Hodgins, SIGGRAPH 2016):
+``dqskin.centers_of_rotation`` against a float64 brute force of the paper's formula, and
+``dqskin.skin(..., method='centers_of_rotation')`` against a float64 reference of the per-frame
+formula (with the scale/shear phase dqskin documents), plus the method's properties and bad
+input."""
+
+from __future__ import annotations
+
+import _thread
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import dqskin
+import reference
+from dqmath import quat_to_mat3, random_unit_quat
+
+F = np.float32
+SIGMA = 0.1
+# Centers: the paper's formula in float64 against dqskin's float64 sums stored as float32; the
+# bound is what dqskin promises (its exp differs from the library's by < 1e-11 relative).
+CENTER_TOL = 1e-5  # × bounding box diagonal
+# Kernel: float32 against float64 on the same inputs, as in test_skinning.py (a few dozen
+# dependent float32 operations on magnitudes up to ~10× the result).
+REL_TOL = 5e-5
+
+
+def normalized_weights(offsets, bones, weights, bone_count):
+    """Dense ``(V, B)`` weights, repeated bones added, normalized to sum 1; all zero where the
+    total is ≤ 0.0001 (skinning leaves those vertices in place)."""
+    v = len(offsets) - 1
+    w = np.zeros((v, bone_count))
+    for i in range(v):
+        for k in range(offsets[i], offsets[i + 1]):
+            w[i, bones[k]] += float(weights[k])
+    total = w.sum(axis=1)
+    ok = total > reference.CONTRIB_THRESHOLD
+    w[ok] /= total[ok, None]
+    w[~ok] = 0.0
+    return w
+
+
+def brute_force_centers(positions, triangles, influences, sigma=SIGMA):
+    """The paper's precompute straight from the formula: every vertex against every triangle,
+    ``s(a, b) = Σ_{j≠k} aⱼaₖbⱼbₖ·exp(−(aⱼbₖ − aₖbⱼ)²/σ²)``. Returns (centers or NaN, has)."""
+    p = np.asarray(positions, np.float64)
+    tri = np.asarray(triangles, np.int64)
+    a_all = normalized_weights(influences.offsets, influences.bones, influences.weights, influences.bone_count)
+    area = 0.5 * np.linalg.norm(np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]]), axis=1)
+    centroid = p[tri].mean(axis=1)
+    b = a_all[tri].mean(axis=1)  # (T, B)
+    centers = np.full_like(p, np.nan)
+    has = np.zeros(len(p), bool)
+    for v, a in enumerate(a_all):
+        s = np.zeros(len(tri))
+        for j in np.nonzero(a)[0]:
+            for k in np.nonzero(a)[0]:
+                if j != k:
+                    u = a[j] * b[:, k] - a[k] * b[:, j]
+                    s += a[j] * a[k] * b[:, j] * b[:, k] * np.exp(-(u * u) / sigma**2)
+        den = float(np.sum(s * area))
+        if den > 0:
+            centers[v] = (s * area) @ centroid / den
+            has[v] = True
+    return centers, has
+
+
+def reference_skin(positions, centers, influences, deform, rest, *, premat=None, postmat=None, mask=None):
+    """The per-frame formula in float64: ``v' = Σ wⱼ·Mⱼ·c + R·Σ wⱼ·Sⱼ·(v − c)`` (armature space,
+    weights over their total), ``R`` the rotation of the sign-aligned sum of the bones'
+    rotations (Blender's, via ``reference.mat4_to_dquat``), ``Sⱼ = Rⱼᵀ·M₃ⱼ`` for bones on
+    Blender's scale path, else the identity."""
+    pre = np.eye(4) if premat is None else np.asarray(premat, np.float64)
+    post = np.eye(4) if postmat is None else np.asarray(postmat, np.float64)
+    deform = np.asarray(deform, np.float64)
+    bones = [reference.mat4_to_dquat(r, m) for r, m in zip(np.asarray(rest, np.float64), deform)]
+    stretch = [quat_to_mat3(d.quat).T @ m[:3, :3] if d.scale_weight else np.eye(3) for d, m in zip(bones, deform)]
+    out = np.empty((len(positions), 3))
+    off, idx, wts = influences.offsets, influences.bones, influences.weights
+    for v, p in enumerate(np.asarray(positions, np.float64)):
+        a = 1.0 if mask is None else float(mask[v])
+        if a == 0.0:
+            out[v] = p
+            continue
+        co = pre[:3, :3] @ p + pre[:3, 3]
+        c = pre[:3, :3] @ np.asarray(centers[v], np.float64) + pre[:3, 3]
+        anchor, offset, q, contrib = np.zeros(3), np.zeros(3), np.zeros(4), 0.0
+        for k in range(off[v], off[v + 1]):
+            w, b = float(wts[k]), int(idx[k])
+            anchor += w * (deform[b, :3, :3] @ c + deform[b, :3, 3])
+            offset += w * (stretch[b] @ (co - c))
+            q += (-w if np.dot(bones[b].quat, q) < 0 else w) * bones[b].quat
+            contrib += w
+        if contrib > reference.CONTRIB_THRESHOLD and np.dot(q, q) > 0:
+            moved = anchor / contrib + quat_to_mat3(q / np.linalg.norm(q)) @ (offset / contrib)
+            co = co + (moved - co) * a
+        out[v] = post[:3, :3] @ co + post[:3, 3]
+    return out
+
+
+def diagonal(p):
+    p = np.asarray(p, np.float64)
+    return float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
+
+
+def check_centers(positions, triangles, influences, sigma=SIGMA):
+    want, want_has = brute_force_centers(positions, triangles, influences, sigma)
+    got, has = dqskin.centers_of_rotation(positions, triangles, influences, sigma, with_mask=True)
+    assert got.dtype == np.float32 and got.shape == (len(positions), 3)
+    assert has.dtype == np.bool_ and has.shape == (len(positions),)
+    np.testing.assert_array_equal(has, want_has)
+    assert np.all(np.linalg.norm(got[has] - want[has], axis=1) <= CENTER_TOL * diagonal(positions))
+    np.testing.assert_array_equal(got[~has], positions[~has])
+    return got, has
+
+
+def tube(rings=24, segments=16, bones=6, seed=0, length=3.0):
+    """A tube along Y over a chain of bones, 4 smooth influences per vertex that drift around
+    the tube (so weight vectors are mostly unique)."""
+    rng = np.random.default_rng(seed)
+    y = np.repeat(np.linspace(0, length, rings), segments)
+    phi = np.tile(np.linspace(0, 2 * np.pi, segments, endpoint=False), rings)
+    positions = np.stack([0.3 * np.cos(phi), y, -0.3 * np.sin(phi)], axis=1).astype(F)
+    s = y / length * bones + 0.15 * np.sin(2 * phi) + 0.01 * rng.standard_normal(len(y))
+    raw = np.exp(-(((s[:, None] - (np.arange(bones) + 0.5)) / 0.8) ** 2))
+    top = np.argsort(-raw, axis=1)[:, :4]
+    w = np.take_along_axis(raw, top, axis=1)
+    w /= w.sum(axis=1, keepdims=True)
+    influences = dqskin.Influences.from_dense(top, w.astype(F), bones)
+    ring = lambda r, k: r * segments + k % segments  # noqa: E731
+    tris = []
+    for r in range(rings - 1):
+        for k in range(segments):
+            tris += [[ring(r, k), ring(r, k + 1), ring(r + 1, k + 1)], [ring(r, k), ring(r + 1, k + 1), ring(r + 1, k)]]
+    rest = np.tile(np.eye(4, dtype=F), (bones, 1, 1))
+    rest[:, 1, 3] = np.arange(bones) * length / bones
+    return positions, np.array(tris, np.int64), influences, rest
+
+
+def random_rig(rest, rng, scaled=True):
+    """Deform matrices (posed @ inv(rest)) with random rotations; some bones scaled or sheared."""
+    deform = []
+    for b, r in enumerate(rest):
+        posed = np.eye(4)
+        posed[:3, :3] = quat_to_mat3(random_unit_quat(rng))
+        posed[:3, 3] = rng.normal(size=3)
+        if scaled and b % 3 == 1:
+            posed[:3, :3] = posed[:3, :3] @ np.diag(rng.uniform(0.5, 2.0, size=3))
+        if scaled and b % 3 == 2:
+            shear = np.eye(3)
+            shear[0, 1] = 0.4
+            posed[:3, :3] = posed[:3, :3] @ shear
+        deform.append(posed @ np.linalg.inv(r))
+    return np.asarray(deform, F)
+
+
+def test_precompute_matches_the_brute_force():
+    positions, tris, influences, _ = tube()
+    centers, has = check_centers(positions, tris, influences)
+    assert has.all()
+    # Centers of a tube whose weights hardly vary around it lie near its axis.
+    assert np.median(np.hypot(centers[:, 0], centers[:, 2])) < 0.1
+
+
+def test_precompute_on_random_meshes_and_weights():
+    rng = np.random.default_rng(5)
+    for case in range(6):
+        v, bones = 25, int(rng.integers(1, 5))
+        positions = rng.normal(size=(v, 3)).astype(F)
+        tris = rng.integers(0, v, size=(40, 3))
+        counts = rng.integers(0, 4, size=v)
+        offsets = np.concatenate([[0], np.cumsum(counts)])
+        idx = rng.integers(0, bones, size=offsets[-1])
+        w = np.where(rng.random(offsets[-1]) < 0.15, 0.0, rng.uniform(0, 2, offsets[-1])).astype(F)
+        influences = dqskin.Influences(offsets, idx, w, bones)
+        check_centers(positions, tris, influences, sigma=[0.1, 0.5, 0.04][case % 3])
+
+
+def test_vertices_without_a_center_keep_their_position():
+    cyl = dqskin.TwistCylinder(9, 12, 2.0, 0.5, 0.5)
+    centers, has = check_centers(cyl.positions, cyl.triangles, cyl.influences)
+    counts = np.diff(cyl.influences.offsets)
+    np.testing.assert_array_equal(has, counts == 2)
+    assert np.allclose(centers[has][:, [0, 2]], 0.0, atol=1e-5), "blended rings: centers on the axis"
+    plain = dqskin.centers_of_rotation(cyl.positions, cyl.triangles, cyl.influences)
+    np.testing.assert_array_equal(plain, centers)
+
+
+def test_kernel_matches_the_reference_with_scaled_bones_spaces_and_mask():
+    rng = np.random.default_rng(11)
+    positions, tris, influences, rest = tube(rings=12, segments=10)
+    centers = dqskin.centers_of_rotation(positions, tris, influences)
+    deform = random_rig(rest, rng)
+    premat = np.eye(4, dtype=F)
+    premat[:3, :3] = quat_to_mat3(random_unit_quat(rng)) * 1.5
+    premat[:3, 3] = [0.3, -1.0, 2.0]
+    postmat = np.linalg.inv(premat).astype(F)
+    mask = rng.random(len(positions)).astype(F)
+    mask[::7] = 0.0
+    got = dqskin.skin(positions, influences, deform, rest, method="centers_of_rotation", centers=centers, premat=premat, postmat=postmat, mask=mask)
+    want = reference_skin(positions, centers, influences, deform, rest, premat=premat, postmat=postmat, mask=mask)
+    err = np.linalg.norm(got - want, axis=1)
+    assert np.all(err <= REL_TOL * (1 + np.linalg.norm(want, axis=1))), err.max()
+    np.testing.assert_array_equal(got[::7], positions[::7])
+
+
+def test_rows_without_a_center_are_lbs_and_translations_are_lbs():
+    rng = np.random.default_rng(3)
+    positions, tris, influences, rest = tube(rings=10, segments=8)
+    deform = random_rig(rest, rng)
+    cor = dqskin.skin(positions, influences, deform, rest, method="centers_of_rotation", centers=positions)
+    lbs = dqskin.skin(positions, influences, deform, rest, method="linear")
+    assert np.allclose(cor, lbs, rtol=0, atol=REL_TOL * (1 + np.abs(lbs).max()))
+    shifts = np.tile(np.eye(4, dtype=F), (len(rest), 1, 1))
+    shifts[:, :3, 3] = rng.normal(size=(len(rest), 3))
+    centers = dqskin.centers_of_rotation(positions, tris, influences)
+    cor = dqskin.skin(positions, influences, shifts, rest, method="cor", centers=centers)
+    lbs = dqskin.skin(positions, influences, shifts, rest, method="lbs")
+    assert np.allclose(cor, lbs, rtol=0, atol=1e-5)
+    still = dqskin.skin(positions, influences, np.tile(np.eye(4, dtype=F), (len(rest), 1, 1)), rest, method="centers_of_rotation", centers=centers)
+    assert np.allclose(still, positions, rtol=0, atol=1e-5)
+
+
+def test_candy_wrapper_keeps_the_middle_cross_section():
+    cyl = dqskin.TwistCylinder(21, 48, 4.0, 0.5, 0.5)
+    centers = dqskin.centers_of_rotation(cyl.positions, cyl.triangles, cyl.influences)
+    rest_area = dqskin.polygon_area(cyl.positions[cyl.ring(10)])
+    deform = cyl.twist(np.pi)
+    out = dqskin.skin(cyl.positions, cyl.influences, deform, cyl.rest, method="centers_of_rotation", centers=centers)
+    lbs = dqskin.skin(cyl.positions, cyl.influences, deform, cyl.rest, method="linear")
+    assert dqskin.polygon_area(out[cyl.ring(10)]) / rest_area >= 0.95
+    assert dqskin.polygon_area(lbs[cyl.ring(10)]) / rest_area < 1e-6
+
+
+def test_skin_many_takes_centers_as_a_twelfth_item():
+    rng = np.random.default_rng(8)
+    positions, tris, influences, rest = tube(rings=10, segments=8)
+    centers = dqskin.centers_of_rotation(positions, tris, influences)
+    deform = random_rig(rest, rng, scaled=False)
+    want = dqskin.skin(positions, influences, deform, rest, method="centers_of_rotation", centers=centers)
+    out = np.zeros_like(positions)
+    lbs_out = np.zeros_like(positions)
+    res = dqskin.skin_many([
+        (positions, influences, deform, rest, "centers_of_rotation", None, None, None, None, 1.0, out, centers),
+        (positions, influences, deform, rest, "linear", None, None, None, None, 1.0, lbs_out, None),
+    ])
+    assert res == [None, None]
+    np.testing.assert_array_equal(out, want)
+    np.testing.assert_array_equal(lbs_out, dqskin.skin(positions, influences, deform, rest, method="linear"))
+    with pytest.raises(ValueError, match=r"jobs\[0\].*centers is required"):
+        dqskin.skin_many([(positions, influences, deform, rest, "cor", None, None, None, None, 1.0, out)])
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, words",
+    [
+        (dict(sigma=0.0), ValueError, ["sigma"]),
+        (dict(sigma=float("nan")), ValueError, ["sigma"]),
+        (dict(sigma="wide"), TypeError, ["sigma"]),
+        (dict(with_mask=1), TypeError, ["with_mask"]),
+        (dict(triangles=np.array([[0, 1, 999]])), ValueError, ["triangles[0]", "999"]),
+        (dict(triangles=np.array([[0, 1, -1]])), ValueError, ["triangles"]),
+        (dict(triangles=np.zeros((2, 4), int)), ValueError, ["triangles", "(T, 3)"]),
+        (dict(triangles=np.zeros((2, 3), F)), TypeError, ["triangles"]),
+        (dict(positions=np.zeros((3, 3), F)), ValueError, ["positions"]),
+        (dict(positions=np.zeros((100, 3))), TypeError, ["positions", "float32"]),
+        (dict(positions=np.full((100, 3), np.nan, F)), ValueError, ["positions[0]"]),
+        (dict(influences="weights"), TypeError, ["influences"]),
+    ],
+)
+def test_bad_precompute_input(kwargs, error, words):
+    cyl = dqskin.TwistCylinder(10, 10)
+    args = dict(positions=cyl.positions[:100].copy(), triangles=cyl.triangles[:50], influences=dqskin.Influences(cyl.influences.offsets[:101], cyl.influences.bones[: cyl.influences.offsets[100]], cyl.influences.weights[: cyl.influences.offsets[100]], 2))
+    args.update(kwargs)
+    with pytest.raises(error) as e:
+        dqskin.centers_of_rotation(**args)
+    for w in words:
+        assert w in str(e.value), str(e.value)
+
+
+def test_bad_kernel_input_leaves_out_untouched():
+    positions, tris, influences, rest = tube(rings=4, segments=8)
+    deform = np.tile(np.eye(4, dtype=F), (len(rest), 1, 1))
+    out = np.full_like(positions, 7.25)
+    cases = [
+        (dict(method="centers_of_rotation"), ValueError, "centers is required"),
+        (dict(method="centers_of_rotation", centers=positions[:5]), ValueError, "centers"),
+        (dict(method="centers_of_rotation", centers=positions.astype(np.float64)), TypeError, "centers"),
+        (dict(method="centers_of_rotation", centers=np.full_like(positions, np.inf)), ValueError, "centers"),
+        (dict(method="dual_quaternion", centers=positions), ValueError, "centers is only used"),
+        (dict(method="centers_of_rotation", centers=positions, rest=None), ValueError, "rest"),
+    ]
+    for kw, error, word in cases:
+        args = dict(rest=rest, out=out)
+        args.update(kw)
+        with pytest.raises(error, match=word):
+            dqskin.skin(positions, influences, deform, **args)
+        assert np.all(out == 7.25)
+
+
+def test_ctrl_c_stops_a_long_precompute():
+    positions, tris, influences, _ = tube(rings=700, segments=48, bones=30, seed=2, length=30.0)
+    start = time.perf_counter()
+    dqskin.centers_of_rotation(positions[:2000], tris[:3000] % 2000, dqskin.Influences(influences.offsets[:2001], influences.bones[: influences.offsets[2000]], influences.weights[: influences.offsets[2000]], 30))
+    small = time.perf_counter() - start
+    timer = threading.Timer(0.2, _thread.interrupt_main)
+    timer.start()
+    start = time.perf_counter()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            dqskin.centers_of_rotation(positions, tris, influences)
+            time.sleep(5)  # finished before the interrupt (a very fast machine): let it arrive
+    finally:
+        timer.cancel()
+    assert time.perf_counter() - start < 0.2 + 1.0 + 20 * small

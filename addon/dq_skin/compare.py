@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Comparison scenes: a rigged mesh (or built-in test rigs) deformed side by side by the
-Armature modifier (Linear, Preserve Volume) and by DQ Skin (Linear, Dual Quaternion, Blend),
+Armature modifier (Linear, Preserve Volume) and by DQ Skin (Linear, Dual Quaternion, Blend, Optimized Centers),
 labelled, sharing one animation, with a camera and a light; and the numbers to choose by."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 from mathutils import Quaternion, Vector
 
-from . import dqskin, operators
+from . import compat, dqskin, operators
 from .progress import Progress
 
 VARIANTS = (
@@ -21,6 +21,7 @@ VARIANTS = (
     ("DQ Skin Linear", "LINEAR", None),
     ("DQ Skin Dual Quaternion", "DUAL_QUATERNION", None),
     ("DQ Skin Blend", "BLEND", None),
+    ("DQ Skin Optimized Centers", "CENTERS", None),
 )
 FRAMES = (1, 48)
 
@@ -167,8 +168,7 @@ def _text(collection, name, body, size, material, align="CENTER"):
 
 def _flat_material(name, color):
     """A material that shows `color` whatever the light (labels, the legend)."""
-    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
-    mat.use_nodes = True
+    mat = compat.node_material(name)
     nodes = mat.node_tree.nodes
     nodes.clear()
     emission = nodes.new("ShaderNodeEmission")
@@ -276,6 +276,11 @@ def _report_row(context, scene, row, frames, check, progress):
     rest_co = np.empty(len(mesh.vertices) * 3, np.float32)
     mesh.vertices.foreach_get("co", rest_co)
     rest_volume = dqskin.mesh_volume(rest_co.reshape(-1, 3), tris) if tris is not None else None
+    edges = np.empty(len(mesh.edges) * 2, np.int64)
+    mesh.edges.foreach_get("vertices", edges)
+    edges = edges.reshape(-1, 2)
+    rest_lengths = np.linalg.norm(rest_co.reshape(-1, 3)[edges[:, 0]] - rest_co.reshape(-1, 3)[edges[:, 1]], axis=1)
+    usable = rest_lengths > 1e-9
     per = {n: {"positions": [], "seconds": 0.0} for n in names}
     for f in frames:
         check()
@@ -307,6 +312,14 @@ def _report_row(context, scene, row, frames, check, progress):
             d = np.linalg.norm(ours - np.stack(per[ref]["positions"]), axis=2)
             stats[f"max_deviation_from_{ref.lower().replace(' ', '_')}"] = float(d.max())
             stats[f"mean_deviation_from_{ref.lower().replace(' ', '_')}"] = float(d.mean())
+        if usable.any():
+            # How much the surface collapses (candy wrapper, elbow pinch) and bulges: edges
+            # shorter or longer than at rest, by how much on average over the mesh's edges, at
+            # the worst frame (the same mesh for every variant: directly comparable).
+            lengths = np.linalg.norm(ours[:, edges[usable, 0]] - ours[:, edges[usable, 1]], axis=2)
+            ratio = lengths / rest_lengths[usable]
+            stats["edge_shrink_mean"] = float(np.maximum(0.0, 1.0 - ratio).mean(axis=1).max())
+            stats["edge_stretch_mean"] = float(np.maximum(0.0, ratio - 1.0).mean(axis=1).max())
         if tris is not None and rest_volume:
             last = per[n]["positions"][-1]
             stats["volume_relative_to_rest"] = dqskin.mesh_volume(np.ascontiguousarray(last, np.float32), tris) / rest_volume
@@ -325,15 +338,16 @@ def write_report(result, out_dir, source: str, frames, pictures: dict[str, str] 
     out.mkdir(parents=True, exist_ok=True)
     start, end = frames[0], frames[-1]
     lines = [f"# DQ Skin vs the Armature modifier: {source}, frames {start}-{end}", ""]
-    lines.append("| mesh | method | max dev. from Linear | max dev. from Preserve Volume | volume / rest | ms/frame |")
-    lines.append("|---|---|---|---|---|---|")
+    lines.append("| mesh | method | max dev. from Linear | max dev. from Preserve Volume | volume / rest | edge shrink (collapse) | edge stretch (bulge) | ms/frame |")
+    lines.append("|---|---|---|---|---|---|---|---|")
     for row in result:
         for method, r in row["methods"].items():
             volume = r.get("volume_relative_to_rest")
             lines.append(
                 f"| {row['mesh']} | {method} | {r['max_deviation_from_armature_linear']:.3e} | "
                 f"{r['max_deviation_from_armature_preserve_volume']:.3e} | "
-                f"{'' if volume is None else f'{volume:.3f}'} | {r['ms_per_frame']:.2f} |"
+                f"{'' if volume is None else f'{volume:.3f}'} | {_percent(r.get('edge_shrink_mean'))} | "
+                f"{_percent(r.get('edge_stretch_mean'))} | {r['ms_per_frame']:.2f} |"
             )
     for caption, picture in (pictures or {}).items():
         lines += ["", f"![{caption}]({picture})"]
@@ -346,6 +360,10 @@ def write_report(result, out_dir, source: str, frames, pictures: dict[str, str] 
         with open(tmp, "w") as f:
             f.write(text)
         os.replace(tmp, out / name)
+
+
+def _percent(value) -> str:
+    return "" if value is None else f"{100 * value:.2f} %"
 
 
 def render(scene, path, width=1600, height=None, samples=8) -> None:
@@ -375,8 +393,7 @@ DEVIATION_ATTRIBUTE = "dq_skin_deviation"
 
 def _deviation_material(scale: float):
     """Colours a surface by its `dq_skin_deviation` attribute over `[0, scale]`."""
-    mat = bpy.data.materials.get("DQ Skin Deviation") or bpy.data.materials.new("DQ Skin Deviation")
-    mat.use_nodes = True
+    mat = compat.node_material("DQ Skin Deviation")
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
     attr = nodes.new("ShaderNodeAttribute")
@@ -475,7 +492,7 @@ def _legend(context, collection, scale, material):
 
 class OBJECT_OT_dq_skin_comparison_scene(bpy.types.Operator):
     """Build a scene comparing the Armature modifier (Linear, Preserve Volume) with DQ Skin
-    (Linear, Dual Quaternion, Blend) side by side, for the active rigged mesh or, with nothing
+    (Linear, Dual Quaternion, Blend, Optimized Centers) side by side, for the active rigged mesh or, with nothing
     selected, for built-in test rigs"""
 
     bl_idname = "object.dq_skin_comparison_scene"

@@ -142,3 +142,11 @@ def new_fcurve(curves, data_path: str, index: int, group: str):
     if bag is not None and hasattr(bag, "groups"):
         fc.group = bag.groups.get(group) or bag.groups.new(group)
     return fc
+
+
+def node_material(name: str):
+    """A material with a node tree (always there from 5.0, where `use_nodes` is deprecated)."""
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    return mat

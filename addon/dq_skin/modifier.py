@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import companion, compat, dqskin, meshdata, nodes, results, rig
+from . import centers, companion, compat, dqskin, meshdata, nodes, results, rig
 
 
 class SkinError(Exception):
@@ -114,12 +114,14 @@ class State:
     capture_on: bool | None = None
     parked: bool = False  # the companion was parked by the last write
     method: str = ""
+    centers: np.ndarray | None = field(default=None, repr=False)  # Optimized Centers, for binding_key
+    centers_key: tuple = ()
 
     def describe(self) -> str:
         """The panel's status line."""
         if self.status or not self.live or self.binding is None:
             return self.status
-        method = {"linear": "Linear", "dual_quaternion": "Dual Quaternion", "blend": "Blend"}.get(self.method, self.method)
+        method = {v: k for k, v in nodes.METHOD_KEYS.items()}.get(self.method, self.method)
         line = f"{method}: {len(self.binding.bone_names)} bones, {len(self.binding.influences)} influences, {self.seconds * 1e3:.1f} ms"
         if not self.companion:
             line += " · no Armature modifier after it for Blender without DQ Skin"
@@ -325,7 +327,10 @@ def _quick(obj, mod, st: State, ctx: Context, source: str):
         st.blend if s.method == "blend" else None,
         s.blend_factor,
         st.out,
+        st.centers if s.method == "centers_of_rotation" else None,
     )
+    if s.method == "centers_of_rotation" and (st.centers is None or st.centers_key != st.binding_key):
+        return False
     return Plan(obj, mod, st, s, st.result, nodes.RESULT_REPLACE, signature, job, time.perf_counter(), quick=True)
 
 
@@ -388,11 +393,13 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
         st.blend = data.group_weights(s.blend_group) if s.blend_group else None
         st.binding_key = key
         st.signature = None
+        st.centers = None
         st.segments = rig.bbone_segments(arm, st.binding)
         st.uses_envelopes = bool(st.envelopes[:, 10].any())
         st.uses_bbones = bool(st.segments.max(initial=0) > 1)
     st.needs_effective = s.use_envelopes or st.uses_envelopes or st.uses_bbones
     binding = st.binding
+    centers_now = _centers(obj, st, data, binding, ctx) if s.method == "centers_of_rotation" else None
     if len(positions) != binding.vertex_count:
         raise SkinError(
             f"An earlier modifier changed the vertex count ({binding.vertex_count} → {len(positions)}); "
@@ -444,8 +451,40 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
         st.blend if s.method == "blend" else None,
         s.blend_factor,
         st.out,
+        centers_now,
     )
     return Plan(obj, mod, st, s, result, mode, signature, job, start)
+
+
+def _centers(obj, st: State, data, binding, ctx: Context) -> np.ndarray:
+    """The Optimized Centers of Rotation for this binding: kept, found in the cache, computed now
+    (small meshes, command line, renders), or started in the background (the SkinError that
+    says so lets Blender's deformation stand in until they are ready)."""
+    if st.needs_effective:
+        raise SkinError("Optimized Centers works with vertex groups only, not with envelopes or B-Bones: choose another method")
+    if st.centers is not None and st.centers_key == st.binding_key:
+        return st.centers
+    triangles = centers.triangles_of(obj.data)
+    key = centers.key_of(data.positions, triangles, binding.influences)
+    got = centers.lookup(key, data.vertex_count)
+    if got is None:
+        job = centers.job_of(key)
+        if job is not None and job.finished and job.error:
+            raise SkinError(f"Optimized Centers: {job.error} (change the method or any setting to try again)")
+        if data.vertex_count <= centers.INLINE_VERTICES or centers.in_background() or ctx.depsgraph.mode == "RENDER":
+            label = f"Optimized Centers for {obj.name} ({data.vertex_count} vertices)" if centers.in_background() else ""
+            try:
+                got = centers.compute(data.positions, triangles, binding.influences, key, label=label)
+            except centers.Cancelled:
+                raise SkinError("Optimized Centers: cancelled") from None
+        else:
+            job = centers.start(data.positions, triangles, binding.influences, key, obj.name)
+            raise SkinError(
+                f"Optimized Centers: computing for {data.vertex_count} vertices ({job.fraction:.0%}); "
+                "Blender's deformation shows until they are ready"
+            )
+    st.centers, st.centers_key = got, st.binding_key
+    return got
 
 
 def finish(plan: Plan) -> None:

@@ -41,8 +41,8 @@ RESULT_POSITIONS = 2
 RESULT_PENDING = 3
 RESULT_SCALE_POSITIONS = 2.0
 
-METHODS = ("Linear", "Dual Quaternion", "Blend")
-METHOD_KEYS = {"Linear": "linear", "Dual Quaternion": "dual_quaternion", "Blend": "blend"}
+METHODS = ("Linear", "Dual Quaternion", "Blend", "Optimized Centers")
+METHOD_KEYS = {"Linear": "linear", "Dual Quaternion": "dual_quaternion", "Blend": "blend", "Optimized Centers": "centers_of_rotation"}
 WARNING = (
     "DQ Skin is not deforming this mesh (extension not installed or enabled, linked data, or an "
     "error): the Armature modifier after it does, as Blender would"
@@ -51,7 +51,7 @@ WARNING = (
 # (name, socket type, default, min, max, description, hidden)
 SETTINGS = (
     ("Armature", "NodeSocketObject", None, None, None, "The armature object that deforms the mesh", False),
-    ("Method", "NodeSocketMenu", "Dual Quaternion", None, None, "Linear, Dual Quaternion, or a per-vertex blend of both", False),
+    ("Method", "NodeSocketMenu", "Dual Quaternion", None, None, "Linear, Dual Quaternion, a per-vertex blend of both, or Optimized Centers of Rotation (no candy wrapper, no bulge)", False),
     ("Blend Amount", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend: how much Dual Quaternion per vertex (pick a vertex group with the attribute toggle)", False),
     ("Blend Factor", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend: overall factor multiplied with the amount", False),
     ("Use Vertex Groups", "NodeSocketBool", True, None, None, "Bind bones to vertex groups of the same name", False),
@@ -182,8 +182,23 @@ def ensure_group():
     """The DQ Skin node group, created on first use (shared by all DQ Skin modifiers)."""
     for group in bpy.data.node_groups:
         if group.bl_idname == "GeometryNodeTree" and group.get(GROUP_TAG) == VERSION and group.library is None:
+            add_missing_methods(group)
             return group
     return build_group()
+
+
+def add_missing_methods(group) -> None:
+    """Groups saved by an earlier DQ Skin 0.x lack the newer methods: add them at the end (the
+    stored values of the existing ones do not change)."""
+    switch = group.nodes.get("Method Items")
+    if switch is None or group.library is not None:
+        return
+    have = {item.name for item in switch.enum_items}
+    missing = [m for m in METHODS if m not in have]
+    for item in missing:
+        switch.enum_items.new(item)
+    if missing:
+        _menu_values.pop(group.session_uid, None)
 
 
 def build_group():

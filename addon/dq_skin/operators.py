@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import companion, compat, modifier, nodes, results
+from . import centers, companion, compat, modifier, nodes, results
 from .registry import REGISTRY
 
 METHOD_ITEMS = (
@@ -13,13 +13,14 @@ METHOD_ITEMS = (
     ("LINEAR", "Linear", "Linear blend skinning (Preserve Volume off)"),
     ("DUAL_QUATERNION", "Dual Quaternion", "Dual quaternion skinning (Preserve Volume on)"),
     ("BLEND", "Blend", "Per-vertex blend of Linear and Dual Quaternion"),
+    ("CENTERS", "Optimized Centers", "Optimized Centers of Rotation (Le and Hodgins 2016): no candy wrapper, no bulge at bent joints"),
 )
-MENU_NAME = {"LINEAR": "Linear", "DUAL_QUATERNION": "Dual Quaternion", "BLEND": "Blend"}
+MENU_NAME = {"LINEAR": "Linear", "DUAL_QUATERNION": "Dual Quaternion", "BLEND": "Blend", "CENTERS": "Optimized Centers"}
 
 
 def set_input(mod, name: str, value) -> None:
     """Sets a DQ Skin setting by name ("Method" takes an item name: 'Linear', 'Dual Quaternion',
-    'Blend')."""
+    'Blend', 'Optimized Centers')."""
     if name == "Method":
         nodes.put_method(mod, value if isinstance(value, str) else nodes.menu_values(mod.node_group)[value])
     else:
@@ -182,4 +183,21 @@ class OBJECT_OT_dq_skin_remove(ActiveMeshOperator):
         return {"FINISHED"}
 
 
-CLASSES = (OBJECT_OT_dq_skin_add, OBJECT_OT_dq_skin_remove)
+class OBJECT_OT_dq_skin_cancel_centers(bpy.types.Operator):
+    """Stop computing the Optimized Centers of the active object (Blender's deformation stays)"""
+
+    bl_idname = "object.dq_skin_cancel_centers"
+    bl_label = "Cancel Optimized Centers"
+
+    def execute(self, context):
+        obj = context.object
+        jobs = [j for j in centers.running() if obj is not None and obj.name in j.owners]
+        for job in jobs:
+            centers.cancel(job.key)
+        if not jobs:
+            self.report({"INFO"}, "Nothing is being computed for this object")
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+CLASSES = (OBJECT_OT_dq_skin_add, OBJECT_OT_dq_skin_remove, OBJECT_OT_dq_skin_cancel_centers)

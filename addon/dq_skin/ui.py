@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import modifier, nodes
+from . import centers, modifier, nodes
 
 
 class OBJECT_PT_dq_skin(bpy.types.Panel):
@@ -35,7 +35,12 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
                 box.label(text=f"{mod.name}: {method}", icon="MOD_ARMATURE")
             except Exception:  # a damaged modifier should not break the panel
                 box.label(text=mod.name, icon="MOD_ARMATURE")
-            if st.error:
+            job = next((j for j in centers.running() if obj.name in j.owners), None)
+            if job is not None:
+                row = box.row()
+                row.progress(factor=job.fraction, type="BAR", text=f"Optimized Centers: {job.fraction:.0%} of {job.vertices} vertices")
+                row.operator("object.dq_skin_cancel_centers", text="", icon="CANCEL")
+            elif st.error:
                 box.label(text=st.error, icon="ERROR")
             status = st.describe()
             if status:

@@ -1,6 +1,6 @@
 """Type stubs for the compiled core of dqskin (see the package docstring for conventions)."""
 
-from typing import Literal, Sequence, SupportsFloat, Union, final, overload
+from typing import Callable, Literal, Sequence, SupportsFloat, Union, final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -190,6 +190,7 @@ def centers_of_rotation(
     sigma: float = 0.1,
     *,
     with_mask: Literal[False] = False,
+    progress: Callable[[int, int], bool | None] | None = None,
 ) -> F32Array: ...
 @overload
 def centers_of_rotation(
@@ -199,6 +200,7 @@ def centers_of_rotation(
     sigma: float = 0.1,
     *,
     with_mask: Literal[True],
+    progress: Callable[[int, int], bool | None] | None = None,
 ) -> tuple[F32Array, npt.NDArray[np.bool_]]: ...
 @overload
 def centers_of_rotation(
@@ -208,10 +210,15 @@ def centers_of_rotation(
     sigma: float = 0.1,
     *,
     with_mask: bool,
+    progress: Callable[[int, int], bool | None] | None = None,
 ) -> F32Array | tuple[F32Array, npt.NDArray[np.bool_]]:
     """Centers of rotation of a rest mesh (Le & Hodgins 2016), ``(V, 3)`` float32; a vertex
     without a center gets its own position (skinned exactly like LBS). With ``with_mask=True``
-    also a ``(V,)`` bool array, True where the vertex has a center."""
+    also a ``(V,)`` bool array, True where the vertex has a center. ``progress(done, total)`` is
+    called about a hundred times; returning False raises :class:`Cancelled`."""
+
+class Cancelled(Exception):
+    """A long computation stopped because its progress callback returned False."""
 
 def bbone_segment_matrices(
     channel: ArrayLike, rest: ArrayLike, pose_joints: ArrayLike, rest_joints: ArrayLike

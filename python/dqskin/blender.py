@@ -13,7 +13,7 @@ Commands:
 - ``merge OUT IN [IN ...]``: join PC2 chunks of consecutive frame ranges (farm bakes).
 - ``compare [FILE] [--frames A-B] [--out DIR]``: a comparison scene (the file's first rigged
   mesh, or built-in test rigs) with the Armature modifier (Linear, Preserve Volume) and DQ Skin
-  (Linear, Dual Quaternion, Blend) side by side: ``report.json`` and ``report.md`` (deviations
+  (Linear, Dual Quaternion, Blend, Optimized Centers) side by side: ``report.json`` and ``report.md`` (deviations
   from each built-in method, volume relative to rest, per-frame time), ``comparison.png`` (the
   variants, labelled) and ``deviation.png`` (each variant coloured by its distance from
   Armature Linear, with a legend).
@@ -121,6 +121,7 @@ def _bpy(user_resources: str | None):
         import bpy  # inside Blender, which has loaded the extension this runs from
 
         watch_signals()
+        _addon("centers").interrupted = lambda: bool(_signalled)
         return bpy
     if user_resources:
         os.environ["BLENDER_USER_RESOURCES"] = str(Path(user_resources).resolve())
@@ -132,6 +133,8 @@ def _bpy(user_resources: str | None):
         raise Failure(
             f"the DQ Skin extension is not installed in {os.environ.get('BLENDER_USER_RESOURCES', 'the default user folder')}"
         )
+    # A long precompute (Optimized Centers) stops at Ctrl-C instead of finishing first.
+    _addon("centers").interrupted = lambda: bool(_signalled)
     return bpy
 
 
@@ -306,7 +309,7 @@ def parser(prog: str = "python -m dqskin.blender") -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     p.add_argument("--user-resources", help="Blender user folder with DQ Skin installed (sets BLENDER_USER_RESOURCES)")
     sub = p.add_subparsers(dest="command", required=True)
-    methods = ["AUTO", "LINEAR", "DUAL_QUATERNION", "BLEND"]
+    methods = ["AUTO", "LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS"]
     b = sub.add_parser("bake", help="bake DQ Skin to a PC2 cache")
     b.add_argument("file")
     b.add_argument("--object", required=True)

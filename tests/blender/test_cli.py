@@ -95,7 +95,7 @@ def test_compare_writes_a_report_and_a_picture(tmp_path):
     assert r.returncode == 0, r.stderr
     report = json.loads((out / "report.json").read_text())
     methods = report["rows"][0]["methods"]
-    assert len(methods) == 5
+    assert len(methods) == 6
     assert methods["DQ Skin Linear"]["max_deviation_from_armature_linear"] < 1e-5
     assert methods["DQ Skin Dual Quaternion"]["max_deviation_from_armature_preserve_volume"] < 1e-5
     assert "| DQ Skin Blend |" in (out / "report.md").read_text()

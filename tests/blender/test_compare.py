@@ -88,7 +88,7 @@ def test_comparison_of_a_character(dq_skin, assets):
         assert bpy.ops.object.dq_skin_comparison_scene() == {"FINISHED"}
     collection = bpy.data.collections["DQ Skin Comparison"]
     meshes = sorted((o for o in collection.objects if o.type == "MESH"), key=lambda o: o.matrix_world.translation.x)
-    assert len(meshes) == 5 and not obj.visible_get()
+    assert len(meshes) == len(dq_skin.compare.VARIANTS) == 6 and not obj.visible_get()
     row = dict(zip((v[0] for v in dq_skin.compare.VARIANTS), meshes))
     result = dq_skin.compare.report(bpy.context, bpy.context.scene, [row], [1, 10, 20])
     m = result[0]["methods"]
@@ -103,5 +103,5 @@ def test_operator_writes_the_report(dq_skin, tmp_path):
     with bpy.context.temp_override(active_object=None, selected_objects=[]):
         assert bpy.ops.object.dq_skin_comparison_scene(report_dir=str(tmp_path)) == {"FINISHED"}
     rows = json.loads((tmp_path / "report.json").read_text())["rows"]
-    assert len(rows) == 3 and len(rows[0]["methods"]) == 5
+    assert len(rows) == 3 and len(rows[0]["methods"]) == 6
     assert "| Candy Wrapper Twist | DQ Skin Blend |" in (tmp_path / "report.md").read_text()

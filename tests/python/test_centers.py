@@ -315,3 +315,30 @@ def test_ctrl_c_stops_a_long_precompute():
     finally:
         timer.cancel()
     assert time.perf_counter() - start < 0.2 + 1.0 + 20 * small
+
+
+def test_progress_reports_and_cancels():
+    positions, triangles, influences, _ = tube(rings=40, segments=24, bones=6)
+    seen = []
+    plain = dqskin.centers_of_rotation(positions, triangles, influences)
+    got = dqskin.centers_of_rotation(positions, triangles, influences, progress=lambda d, t: seen.append((d, t)))
+    np.testing.assert_array_equal(got, plain)  # watching does not change the result
+    assert len(seen) >= 2 and seen[-1][0] == seen[-1][1] and all(t == seen[0][1] for _, t in seen)
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+    calls = []
+
+    def stop_at_second(done, total):
+        calls.append(done)
+        return len(calls) < 2
+
+    with pytest.raises(dqskin.Cancelled, match="cancelled by its progress callback"):
+        dqskin.centers_of_rotation(positions, triangles, influences, progress=stop_at_second)
+    assert len(calls) == 2  # stopped at once
+
+    def fails(done, total):
+        raise RuntimeError("from the callback")
+
+    with pytest.raises(RuntimeError, match="from the callback"):
+        dqskin.centers_of_rotation(positions, triangles, influences, progress=fails)
+    with pytest.raises(TypeError, match="progress must be callable"):
+        dqskin.centers_of_rotation(positions, triangles, influences, progress=3)

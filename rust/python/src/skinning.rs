@@ -622,18 +622,23 @@ fn polygon_area(points: &Bound<'_, PyAny>) -> PyResult<f64> {
 /// - ``sigma``: the similarity width (0.1 in the paper), a finite number > 0;
 /// - ``with_mask``: also return a ``(V,)`` bool array, True where the vertex has a center.
 ///
+/// - ``progress``: called as ``progress(done, total)`` from the calling thread about a hundred
+///   times; returning ``False`` stops the work with :class:`Cancelled`, and an exception it
+///   raises stops it and is raised again.
+///
 /// A vertex without a center (fewer than two bones, or no triangle sharing two of them) gets its
 /// own position, with which centers-of-rotation skinning is exactly linear blend skinning.
 /// The GIL is released while it runs on dqskin's thread pool; Ctrl-C stops it
 /// (``KeyboardInterrupt``).
 #[pyfunction]
-#[pyo3(signature = (positions, triangles, influences, sigma = None, *, with_mask = None))]
+#[pyo3(signature = (positions, triangles, influences, sigma = None, *, with_mask = None, progress = None))]
 fn centers_of_rotation<'py>(
     positions: &Bound<'py, PyAny>,
     triangles: &Bound<'py, PyAny>,
     influences: &Bound<'py, PyAny>,
     sigma: Option<&Bound<'py, PyAny>>,
     with_mask: Option<&Bound<'py, PyAny>>,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
         let py = positions.py();
@@ -647,17 +652,41 @@ fn centers_of_rotation<'py>(
         let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
         let tris = triangle_indices(triangles)?;
         let points = as_points(pos.as_slice()?);
-        // Ctrl-C: between parts of the work the GIL is taken back to look for signals.
-        let mut interrupted = None;
-        let result = py.detach(|| {
-            dqskin_core::centers_of_rotation_with_progress(points, &tris, infl, sigma, &mut |_, _| {
-                if let Err(e) = Python::attach(|py| py.check_signals()) {
-                    interrupted = Some(e);
+        let callback = match progress {
+            Some(p) if !p.is_none() => {
+                if !p.is_callable() {
+                    let ty = p.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+                    return Err(PyTypeError::new_err(format!("progress must be callable as progress(done, total), got {ty}")));
                 }
-                interrupted.is_none()
+                Some(p.clone().unbind())
+            }
+            _ => None,
+        };
+        // Between parts of the work the GIL is taken back: Ctrl-C, then the callback.
+        let mut stopped: Option<PyErr> = None;
+        let result = py.detach(|| {
+            dqskin_core::centers_of_rotation_with_progress(points, &tris, infl, sigma, &mut |done, total| {
+                Python::attach(|py| {
+                    if let Err(e) = py.check_signals() {
+                        stopped = Some(e);
+                        return false;
+                    }
+                    let Some(cb) = &callback else { return true };
+                    match cb.bind(py).call1((done, total)) {
+                        Ok(r) if r.is_instance_of::<pyo3::types::PyBool>() && !r.is_truthy().unwrap_or(true) => {
+                            stopped = Some(Cancelled::new_err("centers_of_rotation was cancelled by its progress callback"));
+                            false
+                        }
+                        Ok(_) => true,
+                        Err(e) => {
+                            stopped = Some(e);
+                            false
+                        }
+                    }
+                })
             })
         });
-        if let Some(e) = interrupted {
+        if let Some(e) = stopped {
             return Err(e);
         }
         let centers = result.map_err(skin_error)?;
@@ -672,7 +701,15 @@ fn centers_of_rotation<'py>(
     })
 }
 
+pyo3::create_exception!(
+    dqskin,
+    Cancelled,
+    pyo3::exceptions::PyException,
+    "A long computation stopped because its progress callback returned False."
+);
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("Cancelled", m.py().get_type::<Cancelled>())?;
     m.add_function(wrap_pyfunction!(centers_of_rotation, m)?)?;
     m.add_class::<PyInfluences>()?;
     m.add_function(wrap_pyfunction!(skin, m)?)?;

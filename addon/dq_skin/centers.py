@@ -1,0 +1,254 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Optimized Centers of Rotation for the modifier: the per-vertex centers (computed by the Rust
+core from the rest mesh, its triangles and the weights) are computed once and kept, keyed by a
+digest of exactly what they depend on:
+
+- in memory, for every modifier and object that shares them (duplicates share a mesh);
+- on disk, in the extension's user folder, so opening a file again does not recompute them
+  (nothing is written into the user's file or mesh).
+
+Small meshes are computed on the spot. Large ones, in an interactive session, in a background
+thread (the core releases the GIL) while the modifier says so and Blender's own deformation
+stands in; the panel shows the progress and can cancel. In background mode (command line,
+render farms) they are computed on the spot with a progress bar, stopping on Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import threading
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from . import dqskin
+from .progress import Progress
+
+SIGMA = 0.1  # the paper's default similarity width
+# Up to this many vertices the centers are computed on the spot, even in the viewport (well
+# under half a second on two cores).
+INLINE_VERTICES = 30_000
+MEMORY_ENTRIES = 16
+DISK_BYTES = 1 << 30  # the on-disk cache is trimmed to this, oldest first
+FORMAT = 1  # bump when the centers' definition changes: old files are then ignored
+
+
+class Cancelled(Exception):
+    """The user cancelled the computation."""
+
+
+@dataclass
+class Job:
+    """A computation running in a background thread."""
+
+    key: str
+    vertices: int
+    done: int = 0
+    total: int = 1
+    cancel: bool = False
+    error: str = ""
+    finished: bool = False
+    owners: set = field(default_factory=set)  # object names waiting for it (redrawn after)
+
+    @property
+    def fraction(self) -> float:
+        return self.done / max(self.total, 1)
+
+
+def in_background() -> bool:
+    """No interactive session (command line, render farm): compute on the spot."""
+    return bpy.app.background
+
+
+_throttle = 0.0  # seconds to wait at each progress report (tests: a computation slow enough to cancel)
+
+
+def interrupted() -> bool:
+    """Replaced by the batch command line: whether Ctrl-C or SIGTERM came (stop computing)."""
+    return False
+
+
+_memory: OrderedDict[str, np.ndarray] = OrderedDict()
+_jobs: dict[str, Job] = {}
+_lock = threading.Lock()
+
+
+def triangles_of(mesh) -> np.ndarray:
+    """The mesh's triangles (Blender's own triangulation of its faces), `(T, 3)` uint32."""
+    mesh.calc_loop_triangles()
+    tris = np.empty(len(mesh.loop_triangles) * 3, np.uint32)
+    mesh.loop_triangles.foreach_get("vertices", tris)
+    return tris.reshape(-1, 3)
+
+
+def key_of(positions: np.ndarray, triangles: np.ndarray, influences, sigma: float = SIGMA) -> str:
+    """A digest of everything the centers depend on (rest positions, topology, weights, sigma)."""
+    h = hashlib.blake2b(digest_size=20)
+    h.update(f"dq_skin centers {FORMAT} {sigma!r} {len(positions)} {len(triangles)}".encode())
+    for a in (positions, triangles, influences.offsets, influences.bones, influences.weights):
+        h.update(np.ascontiguousarray(a).data)
+    return h.hexdigest()
+
+
+def _folder() -> Path | None:
+    try:
+        return Path(bpy.utils.extension_path_user(__package__, path="centers", create=True))
+    except (ValueError, OSError, AttributeError):
+        return None  # not installed as an extension (or no writable user folder): memory only
+
+
+def lookup(key: str, vertices: int) -> np.ndarray | None:
+    """The centers for `key` if they were computed before (in this session or an earlier one)."""
+    got = _memory.get(key)
+    if got is not None:
+        _memory.move_to_end(key)
+        return got
+    folder = _folder()
+    if folder is None:
+        return None
+    path = folder / f"{key}.npy"
+    try:
+        got = np.load(path, allow_pickle=False)
+    except (OSError, ValueError):
+        return None
+    if got.dtype != np.float32 or got.shape != (vertices, 3):
+        return None
+    os.utime(path)  # recently used: trimmed last
+    _remember(key, got)
+    return got
+
+
+def _remember(key: str, centers: np.ndarray) -> None:
+    centers.setflags(write=False)
+    _memory[key] = centers
+    _memory.move_to_end(key)
+    while len(_memory) > MEMORY_ENTRIES:
+        _memory.popitem(last=False)
+
+
+def _store(key: str, centers: np.ndarray) -> None:
+    _remember(key, centers)
+    folder = _folder()
+    if folder is None:
+        return
+    tmp = folder / f".{key}.{os.getpid()}.tmp.npy"
+    try:
+        np.save(tmp, centers, allow_pickle=False)
+        os.replace(tmp, folder / f"{key}.npy")
+        _trim(folder)
+    except OSError:
+        pass  # a cache: failing to keep it only costs a recomputation
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _trim(folder: Path) -> None:
+    files = sorted(folder.glob("*.npy"), key=lambda p: p.stat().st_mtime, reverse=True)
+    total = 0
+    for p in files:
+        total += p.stat().st_size
+        if total > DISK_BYTES:
+            p.unlink(missing_ok=True)
+
+
+def compute(positions, triangles, influences, key: str, label: str = "", check=None, job: Job | None = None) -> np.ndarray:
+    """Computes (and keeps) the centers now. `check()` may raise to stop (Ctrl-C on the command
+    line); `job.cancel` stops a background computation."""
+    progress = Progress(None, 100, label) if label else None
+    last = [0]
+
+    def report(done: int, total: int) -> bool:
+        if _throttle:
+            time.sleep(_throttle)
+        if job is not None:
+            job.done, job.total = done, total
+            if job.cancel:
+                return False
+        if progress is not None:
+            step = int(100 * done / max(total, 1))
+            if step > last[0]:
+                progress.set(step)
+                last[0] = step
+        if check is not None:
+            check()
+        return not interrupted()
+
+    try:
+        centers = dqskin.centers_of_rotation(positions, triangles, influences, sigma=SIGMA, progress=report)
+    except dqskin.Cancelled:
+        raise Cancelled() from None
+    finally:
+        if progress is not None:
+            progress.end()
+    centers = np.ascontiguousarray(centers, np.float32)
+    _store(key, centers)
+    return centers
+
+
+def start(positions, triangles, influences, key: str, owner: str) -> Job:
+    """The background computation of `key` (started if not running)."""
+    with _lock:
+        job = _jobs.get(key)
+        if job is not None and not job.finished:
+            job.owners.add(owner)
+            return job
+        job = _jobs[key] = Job(key, len(positions), owners={owner})
+    positions, triangles = positions.copy(), triangles.copy()
+
+    def work():
+        try:
+            compute(positions, triangles, influences, key, job=job)
+        except Cancelled:
+            job.error = "cancelled"
+        except Exception as e:  # reported on the modifier
+            job.error = f"{type(e).__name__}: {e}"
+        job.finished = True
+
+    threading.Thread(target=work, name=f"dq_skin centers {key[:8]}", daemon=True).start()
+    bpy.app.timers.register(_poll, first_interval=0.2)
+    return job
+
+
+def running() -> list[Job]:
+    return [j for j in _jobs.values() if not j.finished]
+
+
+def job_of(key: str) -> Job | None:
+    return _jobs.get(key)
+
+
+def cancel(key: str) -> None:
+    job = _jobs.get(key)
+    if job is not None:
+        job.cancel = True
+
+
+def forget_job(key: str) -> None:
+    """After a failure was shown: the next evaluation may try again."""
+    job = _jobs.get(key)
+    if job is not None and job.finished:
+        del _jobs[key]
+
+
+def _poll():
+    """While computations run: redraw their progress; when one ends, re-evaluate its objects."""
+    running = False
+    for job in list(_jobs.values()):
+        if job.finished and job.owners:
+            for name in job.owners:
+                obj = bpy.data.objects.get(name)
+                if obj is not None:
+                    obj.update_tag()  # evaluates again: now with the centers (or the error)
+            job.owners.clear()
+        running |= not job.finished
+    for window in getattr(bpy.context.window_manager, "windows", []):
+        for area in window.screen.areas:
+            if area.type in ("PROPERTIES", "VIEW_3D"):
+                area.tag_redraw()
+    return 0.25 if running else None

@@ -1,0 +1,188 @@
+"""The Optimized Centers method in Blender: the modifier equals the module's centers-of-rotation
+skinning of the same mesh, its centers are computed once and kept (in memory, then on disk for the
+next session), long precomputes run in the background with progress and can be cancelled, and
+the comparison shows what it is for: no candy wrapper, no bulge."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Quaternion
+
+from scenes import rig_tube
+from test_exactness import REL_TOL, evaluated_positions, import_character
+from test_modifier import add_dq_skin, relative_deviation
+
+
+def expected(dq_skin, obj, arm):
+    """Centers-of-rotation skinning of `obj` computed directly with the bundled module."""
+    rig, centers = dq_skin.rig, dq_skin.centers
+    mod = next(m for m in obj.modifiers if m.type == "ARMATURE")
+    binding = rig.bind(obj, arm, mod.vertex_group, mod.invert_vertex_group)
+    positions = rig.mesh_positions(obj.data)
+    c = dq_skin.dqskin.centers_of_rotation(positions, centers.triangles_of(obj.data), binding.influences)
+    f = rig.frame(binding, obj, arm)
+    return dq_skin.dqskin.skin(
+        positions, binding.influences, f.deform, f.rest, method="centers_of_rotation", centers=c,
+        premat=f.premat, postmat=f.postmat, mask=binding.mask,
+    )
+
+
+@pytest.fixture
+def counted(dq_skin, monkeypatch):
+    """Counts the centers actually computed (not found in memory or on disk)."""
+    calls = []
+    real = dq_skin.centers.compute
+
+    def compute(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(dq_skin.centers, "compute", compute)
+    return calls
+
+
+def test_modifier_equals_the_module_on_a_character(dq_skin, assets):
+    obj, arm_mod = import_character(assets / "CesiumMan.glb")
+    arm = arm_mod.object
+    add_dq_skin(obj, "CENTERS")
+    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
+    assert dq_skin.nodes.get_method(mod) == "Optimized Centers"
+    for frame in (1, 12, 30):
+        bpy.context.scene.frame_set(frame)
+        ours = evaluated_positions(obj)
+        assert relative_deviation(ours, expected(dq_skin, obj, arm)) <= REL_TOL
+    st = dq_skin.modifier.state(obj, mod)
+    assert st.live and st.describe().startswith("Optimized Centers:")
+
+
+def test_rest_pose_is_unchanged_and_translations_are_linear(dq_skin):
+    obj, arm, _ = rig_tube(bones=3, length=6.0)
+    rest = evaluated_positions(obj)
+    add_dq_skin(obj, "CENTERS")
+    bpy.context.scene.frame_set(1)
+    assert relative_deviation(evaluated_positions(obj), rest) <= REL_TOL
+    # Moving bones without rotating them: exactly what linear blend skinning does.
+    arm.pose.bones["Bone1"].location = (0.3, -0.2, 0.5)
+    arm.pose.bones["Bone2"].location = (-0.4, 0.1, 0.2)
+    bpy.context.view_layer.update()
+    ours = evaluated_positions(obj)
+    linear = dq_skin.rig.skin(dq_skin.rig.bind(obj, arm, "", False), obj, arm, dq_skin.rig.mesh_positions(obj.data), "linear")
+    assert relative_deviation(ours, linear) <= REL_TOL
+
+
+def test_candy_wrapper_and_elbow_against_linear_and_dual_quaternion(dq_skin):
+    """The point of the method, in the comparison's own measures on the built-in rigs."""
+    compare = dq_skin.compare
+    with bpy.context.temp_override(active_object=None, selected_objects=[]):
+        assert bpy.ops.object.dq_skin_comparison_scene() == {"FINISHED"}
+    collection = bpy.data.collections["DQ Skin Comparison"]
+    rows = []
+    for rig_name in ("Candy Wrapper Twist", "Elbow Bend", "Shoulder Raise"):
+        meshes = sorted((o for o in collection.objects if o.type == "MESH" and o.name.startswith(rig_name)), key=lambda o: o.matrix_world.translation.x)
+        rows.append(dict(zip((v[0] for v in compare.VARIANTS), meshes)))
+    result = compare.report(bpy.context, bpy.context.scene, rows, [compare.FRAMES[1]])
+    twist, elbow, shoulder = (r["methods"] for r in result)
+    ocor, lbs, dqs = "DQ Skin Optimized Centers", "DQ Skin Linear", "DQ Skin Dual Quaternion"
+    # Candy wrapper at 180°: Linear collapses the middle (its edges shrink, 6 % on average over
+    # the whole tube); the centers keep it (a twist about the axis: the centers are on the axis),
+    # and keep the volume as Dual Quaternion does. Measured: Linear 0.0596, centers 0.0.
+    assert twist[lbs]["edge_shrink_mean"] > 0.05
+    assert twist[ocor]["edge_shrink_mean"] < 0.005
+    assert twist[ocor]["volume_relative_to_rest"] > 0.95 > twist[lbs]["volume_relative_to_rest"]
+    # Bent joints: less collapse than Linear and less bulge than Dual Quaternion. Measured
+    # (shrink, stretch, volume): elbow 130° Linear 0.036/0.032/0.928, Dual Quaternion
+    # 0.019/0.041/0.995, centers 0.022/0.039/0.985; shoulder 150° Linear 0.024/0.026/0.943,
+    # Dual Quaternion 0.012/0.036/0.990, centers 0.012/0.033/0.981.
+    for bend in (elbow, shoulder):
+        assert bend[ocor]["edge_shrink_mean"] < bend[lbs]["edge_shrink_mean"]
+        assert bend[ocor]["edge_stretch_mean"] < bend[dqs]["edge_stretch_mean"]
+        assert abs(bend[ocor]["volume_relative_to_rest"] - 1) < abs(bend[lbs]["volume_relative_to_rest"] - 1)
+
+
+def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_skin, assets, tmp_path, counted):
+    obj, arm_mod = import_character(assets / "CesiumMan.glb")
+    dq_skin.centers._memory.clear()
+    add_dq_skin(obj, "CENTERS")
+    bpy.context.scene.frame_set(5)
+    evaluated_positions(obj)
+    first = len(counted)
+    assert first <= 1  # once (none if an earlier run left them on disk)
+    # A duplicate shares the mesh and weights: the same centers, not computed again.
+    with bpy.context.temp_override(active_object=obj, selected_objects=[obj], selected_editable_objects=[obj]):
+        bpy.ops.object.duplicate()
+    twin = bpy.context.active_object
+    assert twin is not obj
+    bpy.context.scene.frame_set(6)
+    assert relative_deviation(evaluated_positions(twin), evaluated_positions(obj)) <= REL_TOL
+    assert len(counted) == first
+    # Save, forget everything this session knew, open again: found on disk, not recomputed.
+    path, name = tmp_path / "centers.blend", obj.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    dq_skin.centers._memory.clear()
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    obj = bpy.data.objects[name]
+    bpy.context.scene.frame_set(7)
+    evaluated_positions(obj)
+    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
+    assert dq_skin.modifier.state(obj, mod).live
+    assert len(counted) == first
+    # A weight change is a new binding: new centers.
+    obj.vertex_groups[0].add([0], 0.5, "REPLACE")
+    bpy.context.scene.frame_set(8)
+    evaluated_positions(obj)
+    assert len(counted) == first + 1
+
+
+def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancelled(dq_skin, monkeypatch):
+    centers = dq_skin.centers
+    monkeypatch.setattr(centers, "INLINE_VERTICES", 10)
+    monkeypatch.setattr(centers, "in_background", lambda: False)  # as in an interactive session
+    centers._memory.clear()
+    obj, arm, _ = rig_tube(rings=80, segments=48, bones=3, length=6.0)
+    monkeypatch.setattr(centers, "_folder", lambda: None)  # not found on disk either
+    monkeypatch.setattr(centers, "_throttle", 0.01)  # about a second: still running when checked
+    add_dq_skin(obj, "CENTERS")
+    arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), math.radians(90))
+    bpy.context.view_layer.update()
+    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
+    st = dq_skin.modifier.state(obj, mod)
+    # Until the centers are ready, Blender's own deformation stands in and the modifier says so.
+    assert st.mode == "fallback" and "Optimized Centers: computing" in st.error
+    job = centers.running()[0] if centers.running() else next(iter(centers._jobs.values()))
+    assert obj.name in job.owners or job.finished
+    for _ in range(600):
+        if job.finished:
+            break
+        time.sleep(0.05)
+    assert job.finished and not job.error
+    centers._poll()  # the timer: re-evaluates the waiting objects
+    bpy.context.view_layer.update()
+    evaluated_positions(obj)
+    assert dq_skin.modifier.state(obj, mod).live
+    assert relative_deviation(evaluated_positions(obj), expected(dq_skin, obj, arm)) <= REL_TOL
+
+    # Cancelled: the modifier says so and Blender's deformation stays.
+    centers._memory.clear()
+    obj.vertex_groups[0].add([0], 0.25, "REPLACE")  # new weights, new centers
+    monkeypatch.setattr(centers, "_throttle", 0.1)  # slow enough to cancel mid-way
+    bpy.context.view_layer.update()
+    evaluated_positions(obj)
+    running = centers.running()
+    assert running, "a new computation started"
+    with bpy.context.temp_override(object=obj):
+        assert bpy.ops.object.dq_skin_cancel_centers() == {"FINISHED"}
+    for _ in range(600):
+        if running[0].finished:
+            break
+        time.sleep(0.05)
+    assert running[0].error == "cancelled"
+    centers._poll()
+    bpy.context.view_layer.update()
+    evaluated_positions(obj)
+    st = dq_skin.modifier.state(obj, mod)
+    assert st.mode == "fallback" and "cancelled" in st.error

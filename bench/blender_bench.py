@@ -273,6 +273,43 @@ def case_binding(vertices: int) -> dict:
     return {"case": f"dq_skin_add + first frame, {len(grid.data.vertices) // 1000}k", "vertices": len(grid.data.vertices), "seconds": seconds}
 
 
+def subdivided_cesium_man(levels: int):
+    """CesiumMan with a Subdivision Surface applied (weights interpolated by Blender)."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    bpy.ops.import_scene.gltf(filepath=str(ROOT.parent / "shared" / "assets" / "CesiumMan.glb"))
+    obj = next(o for o in bpy.data.objects if o.type == "MESH")
+    arm_mod = next(m for m in obj.modifiers if m.type == "ARMATURE")
+    sub = obj.modifiers.new("Subdivision", "SUBSURF")
+    sub.levels = sub.render_levels = levels
+    while obj.modifiers[0] != sub:
+        obj.modifiers.move(obj.modifiers.find(sub.name), 0)
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.modifier_apply(modifier=sub.name)
+    return obj, arm_mod
+
+
+def case_centers(levels: int) -> dict:
+    """Optimized Centers on CesiumMan subdivided: the precompute, on the inputs the modifier
+    gives it (the per-frame kernel is in the Rust benchmark, beside DQS)."""
+    from bl_ext.user_default.dq_skin import centers, dqskin, rig
+
+    obj, arm_mod = subdivided_cesium_man(levels)
+    binding = rig.bind(obj, arm_mod.object, "", False)
+    positions = rig.mesh_positions(obj.data)
+    triangles = centers.triangles_of(obj.data)
+    t = time.perf_counter()
+    dqskin.centers_of_rotation(positions, triangles, binding.influences)
+    precompute = time.perf_counter() - t
+    return {
+        "case": f"Optimized Centers precompute, CesiumMan subdivided ×{levels} ({len(positions) // 1000}k vertices)",
+        "vertices": len(positions),
+        "triangles": len(triangles),
+        "seconds": precompute,
+        "threads": dqskin.get_num_threads(),
+    }
+
+
 def case_weights(vertices: int, quick: bool) -> dict:
     """A weight change (`VertexGroup.add` on 1,000 vertices, like a brush stroke) until the
     evaluated mesh shows it, Armature modifier vs DQ Skin."""
@@ -401,11 +438,11 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "target" / "bench-blender.json")
     parser.add_argument("--quick", action="store_true", help="smaller meshes, fewer rounds")
-    parser.add_argument("--only", nargs="*", default=None, help="case groups: grid, later, binding, weights, crowd, small")
+    parser.add_argument("--only", nargs="*", default=None, help="case groups: grid, later, binding, weights, crowd, small, centers")
     args = parser.parse_args()
     if addon_utils.enable(ADDON, default_set=True) is None:
         raise SystemExit("the DQ Skin extension is not installed: run make setup")
-    only = set(args.only) if args.only else {"grid", "later", "binding", "weights", "crowd", "small"}
+    only = set(args.only) if args.only else {"grid", "later", "binding", "weights", "crowd", "small", "centers"}
     q = args.quick
     big = [250_000] if q else [250_000, 1_000_000]
     rows = []
@@ -432,6 +469,9 @@ def main() -> int:
         report(case_weights(250_000, q))
     if "crowd" in only:
         report(case_crowd(50 if q else 200, q))
+    if "centers" in only:
+        for levels in ([2] if q else [2, 3]):
+            report(case_centers(levels))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"blender": bpy.app.version_string, "threads": os.cpu_count(), "rows": rows}, indent=2))
     print(f"wrote {args.out}")

@@ -104,14 +104,17 @@ def test_candy_wrapper_and_elbow_against_linear_and_dual_quaternion(dq_skin):
         assert abs(bend[ocor]["volume_relative_to_rest"] - 1) < abs(bend[lbs]["volume_relative_to_rest"] - 1)
 
 
-def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_skin, assets, tmp_path, counted):
+def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_skin, assets, tmp_path, counted, monkeypatch):
+    folder = tmp_path / "cache"
+    folder.mkdir()
+    monkeypatch.setattr(dq_skin.centers, "_folder", lambda: folder)  # a cache of its own
     obj, arm_mod = import_character(assets / "CesiumMan.glb")
     dq_skin.centers._memory.clear()
     add_dq_skin(obj, "CENTERS")
     bpy.context.scene.frame_set(5)
     evaluated_positions(obj)
     first = len(counted)
-    assert first <= 1  # once (none if an earlier run left them on disk)
+    assert first == 1 and len(list(folder.glob("*.npy"))) == 1
     # A duplicate shares the mesh and weights: the same centers, not computed again.
     with bpy.context.temp_override(active_object=obj, selected_objects=[obj], selected_editable_objects=[obj]):
         bpy.ops.object.duplicate()
@@ -135,7 +138,7 @@ def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_ski
     obj.vertex_groups[0].add([0], 0.5, "REPLACE")
     bpy.context.scene.frame_set(8)
     evaluated_positions(obj)
-    assert len(counted) == first + 1
+    assert len(counted) == first + 1 and len(list(folder.glob("*.npy"))) == 2
 
 
 def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancelled(dq_skin, monkeypatch):

@@ -97,14 +97,14 @@ pub(super) fn centers_with(
     sigma: f32,
     progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<Centers, SkinError> {
-    centers_counted(simd, true, positions, triangles, influences, sigma, progress).map(|(c, _)| c)
+    centers_counted(simd, Some(cells::TOLERANCE), positions, triangles, influences, sigma, progress).map(|(c, _)| c)
 }
 
-/// [`centers_with`], with the fast path allowed or not, also returning how many distinct weight
-/// vectors took the fast path.
+/// [`centers_with`] with the fast path's tolerance on `E/D̃` (see `cells.rs`; `None`: exact sums
+/// only), also returning how many distinct weight vectors took the fast path.
 pub(super) fn centers_counted(
     simd: Simd,
-    allow_fast: bool,
+    tolerance: Option<f64>,
     positions: &[[f32; 3]],
     triangles: &[[u32; 3]],
     influences: &Influences,
@@ -128,11 +128,11 @@ pub(super) fn centers_counted(
     }
     let weights = WeightVectors::new(influences);
     let classes = VertexClasses::new(&weights);
-    let index = PairIndex::new(positions, triangles, &weights, f64::from(sigma), allow_fast);
+    let index = PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance);
     let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
 
     // Parts of roughly equal work, so progress advances evenly and cancelling is quick.
-    let work: Vec<usize> = classes.members.iter().map(|c| index.work(&weights, c.first)).collect();
+    let work: Vec<usize> = crate::pool::run(|| classes.members.par_iter().map(|c| index.work(&weights, c.first)).collect());
     let total: usize = work.iter().sum();
     let part_work = (total / 100).max(1 << 16);
     let mut parts = vec![0usize];
@@ -290,6 +290,8 @@ struct PairIndex {
     cells: Vec<cells::CellGroup>,
     /// Whether the fast path may be tried (σ large enough not to need the underflow shift).
     fast: bool,
+    /// The fast path's tolerance on `E/D̃`.
+    tolerance: f64,
 }
 
 /// Entry lists in padded structure-of-arrays form: list `id` is `starts[id]..starts[id + 1]`.
@@ -341,41 +343,59 @@ struct Entry {
 }
 
 impl PairIndex {
-    fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]], weights: &WeightVectors, sigma: f64, allow_fast: bool) -> Self {
+    fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]], weights: &WeightVectors, sigma: f64, tolerance: Option<f64>) -> Self {
         let inv_sigma2 = 1.0 / (sigma * sigma);
-        // Triangles merged by weight vector: Σ A and Σ A·c.
-        let mut merged: HashMap<WeightKey, (f64, [f64; 3])> = HashMap::new();
-        let mut mean: Vec<(u32, f64)> = Vec::new();
-        for t in triangles {
-            let [a, b, c] = t.map(|v| positions[v as usize].map(f64::from));
-            let (e1, e2) = (sub(b, a), sub(c, a));
-            let area = 0.5 * length(cross(e1, e2));
-            if !(area > 0.0) {
-                continue;
-            }
-            mean.clear();
-            for &v in t {
-                mean.extend_from_slice(weights.of(v as usize));
-            }
-            mean.sort_by_key(|e| e.0);
-            mean.dedup_by(|next, kept| {
-                let same = next.0 == kept.0;
-                if same {
-                    kept.1 += next.1;
+        // Per triangle (in parallel): its weight vector, area and area × centroid.
+        let each: Vec<(WeightKey, f64, [f64; 3])> = crate::pool::run(|| {
+            triangles
+                .par_iter()
+                .map_init(Vec::new, |mean: &mut Vec<(u32, f64)>, t| {
+                    let [a, b, c] = t.map(|v| positions[v as usize].map(f64::from));
+                    let (e1, e2) = (sub(b, a), sub(c, a));
+                    let area = 0.5 * length(cross(e1, e2));
+                    if !(area > 0.0) {
+                        return None;
+                    }
+                    mean.clear();
+                    for &v in t {
+                        mean.extend_from_slice(weights.of(v as usize));
+                    }
+                    mean.sort_by_key(|e| e.0);
+                    mean.dedup_by(|next, kept| {
+                        let same = next.0 == kept.0;
+                        if same {
+                            kept.1 += next.1;
+                        }
+                        same
+                    });
+                    if mean.len() < 2 {
+                        return None;
+                    }
+                    let key: WeightKey = mean.iter().map(|&(bone, w)| (bone, (w / 3.0).to_bits())).collect();
+                    let centroid = [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0, (a[2] + b[2] + c[2]) / 3.0];
+                    Some((key, area, centroid.map(|x| area * x)))
+                })
+                .flatten()
+                .collect()
+        });
+        // Triangles merged by weight vector: Σ A and Σ A·c (a stable sort keeps the sums in
+        // triangle order, so the result does not depend on the threads).
+        let mut each = each;
+        crate::pool::run(|| each.par_sort_by(|a, b| a.0.cmp(&b.0)));
+        let merged: Vec<(WeightKey, (f64, [f64; 3]))> = each
+            .chunk_by(|a, b| a.0 == b.0)
+            .map(|group| {
+                let mut sum = (0.0, [0.0; 3]);
+                for (_, area, area_c) in group {
+                    sum.0 += area;
+                    for k in 0..3 {
+                        sum.1[k] += area_c[k];
+                    }
                 }
-                same
-            });
-            if mean.len() < 2 {
-                continue;
-            }
-            let key: WeightKey = mean.iter().map(|&(bone, w)| (bone, (w / 3.0).to_bits())).collect();
-            let centroid = [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0, (a[2] + b[2] + c[2]) / 3.0];
-            let slot = merged.entry(key).or_insert((0.0, [0.0; 3]));
-            slot.0 += area;
-            for k in 0..3 {
-                slot.1[k] += area * centroid[k];
-            }
-        }
+                (group[0].0.clone(), sum)
+            })
+            .collect();
+        drop(each);
         // Lists per bone pair.
         let mut ids: HashMap<(u32, u32), usize> = HashMap::new();
         let mut lists: Vec<Vec<Entry>> = Vec::new();
@@ -394,30 +414,34 @@ impl PairIndex {
         }
         drop(merged);
         // Equal (bⱼ, bₖ) in one list merged; padded to WIDTH; split into cells.
-        let fast = allow_fast && inv_sigma2 <= SHIFT_THRESHOLD;
-        let mut index = Self { ids, exact: Soa::new(), raw: Soa::new(), cell_starts: vec![0], cells: Vec::new(), fast };
-        for list in &mut lists {
-            list.sort_by_key(|e| (e.bj.to_bits(), e.bk.to_bits()));
-            list.dedup_by(|next, kept| {
-                let same = next.bj.to_bits() == kept.bj.to_bits() && next.bk.to_bits() == kept.bk.to_bits();
-                if same {
-                    kept.p += next.p;
-                    for k in 0..3 {
-                        kept.pc[k] += next.pc[k];
-                    }
-                }
-                same
-            });
-            index.exact.push(list);
-            if fast {
-                let (raw, cells) = cells::build(list, sigma);
-                index.raw.push(&raw);
-                index.cells.extend(cells);
-            } else {
-                index.raw.push(&[]);
-            }
+        let fast = tolerance.is_some() && inv_sigma2 <= SHIFT_THRESHOLD;
+        let mut index = Self { ids, exact: Soa::new(), raw: Soa::new(), cell_starts: vec![0], cells: Vec::new(), fast, tolerance: tolerance.unwrap_or(0.0) };
+        // Lists are independent: sorted, merged and split in parallel, then packed in order.
+        let prepared: Vec<(Vec<Entry>, Vec<Entry>, Vec<cells::CellGroup>)> = crate::pool::run(|| {
+            lists
+                .into_par_iter()
+                .map(|mut list| {
+                    list.sort_unstable_by_key(|e| (e.bj.to_bits(), e.bk.to_bits()));
+                    list.dedup_by(|next, kept| {
+                        let same = next.bj.to_bits() == kept.bj.to_bits() && next.bk.to_bits() == kept.bk.to_bits();
+                        if same {
+                            kept.p += next.p;
+                            for k in 0..3 {
+                                kept.pc[k] += next.pc[k];
+                            }
+                        }
+                        same
+                    });
+                    let (raw, cells) = if fast { cells::build(&list, sigma) } else { (Vec::new(), Vec::new()) };
+                    (list, raw, cells)
+                })
+                .collect()
+        });
+        for (list, raw, cells) in prepared {
+            index.exact.push(&list);
+            index.raw.push(&raw);
+            index.cells.extend(cells);
             index.cell_starts.push(index.cells.len());
-            *list = Vec::new();
         }
         index
     }
@@ -433,7 +457,7 @@ impl PairIndex {
         })
     }
 
-    /// Work of vertex `v` on the fast path (entries, a cell counting as [`CELL_WORK`]).
+    /// Work of vertex `v` on the fast path (entries, a group of cells counting as [`CELL_WORK`]).
     fn work(&self, weights: &WeightVectors, v: usize) -> usize {
         self.pairs(weights, v)
             .map(|(id, _, _)| {
@@ -463,7 +487,7 @@ impl PairIndex {
                 }
                 bound += f * b;
             }
-            if total[0] > 0.0 && bound <= cells::TOLERANCE * total[0] {
+            if total[0] > 0.0 && bound <= self.tolerance * total[0] {
                 let d = total[0];
                 let c = [total[1] / d, total[2] / d, total[3] / d];
                 if c.iter().all(|x| x.is_finite()) {
@@ -497,8 +521,8 @@ impl PairIndex {
     }
 }
 
-/// Work of one expanded cell, in entries.
-const CELL_WORK: usize = 16;
+/// Work of one group of expanded cells, in entries (measured: about 6 entries per cell).
+const CELL_WORK: usize = 48;
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]

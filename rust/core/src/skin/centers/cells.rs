@@ -66,9 +66,10 @@ impl CellGroup {
 /// expanded (in groups of [`LANES`]), the entries of the others are returned as they are.
 pub(super) fn build(entries: &[Entry], sigma: f64) -> (Vec<Entry>, Vec<CellGroup>) {
     let side = CELL * sigma;
+    let mut keyed: Vec<((i64, i64), &Entry)> = entries.iter().map(|e| (((e.bj / side).floor() as i64, (e.bk / side).floor() as i64), e)).collect();
+    keyed.sort_unstable_by_key(|k| k.0);
+    let sorted: Vec<&Entry> = keyed.iter().map(|k| k.1).collect();
     let key = |e: &Entry| ((e.bj / side).floor() as i64, (e.bk / side).floor() as i64);
-    let mut sorted: Vec<&Entry> = entries.iter().collect();
-    sorted.sort_by_key(|e| key(e));
     let mut raw = Vec::new();
     let mut groups: Vec<CellGroup> = Vec::new();
     let mut count = 0;

@@ -12,7 +12,7 @@
 //! sharing two of its bones — the vertex has no center and is skinned by LBS (its row holds its
 //! own position, for which the per-frame formula is exactly LBS).
 //!
-//! # Algorithm (the exact sums, in a different order)
+//! # Algorithm
 //! A term of `s` is non-zero only for bones `j ≠ k` both in `a` and `b`, so
 //! `s(a, b) = Σ_{pairs j<k} 2·aⱼaₖ·bⱼbₖ·exp(…)`, and the two sums split into per-pair sums:
 //! 1. vertices with equal weight vectors share a center (computed once);
@@ -20,13 +20,21 @@
 //! 3. every merged triangle is listed under each pair of its bones, with `bⱼ`, `bₖ`,
 //!    `P = bⱼbₖ·A` and `P·c`; entries of a list with equal `(bⱼ, bₖ)` are merged again;
 //! 4. a vertex visits only the lists of its own bone pairs (a triangle sharing fewer than two
-//!    bones contributes 0 and is never visited), in parallel over unique weight vectors.
+//!    bones contributes 0 and is never visited), in parallel over unique weight vectors;
+//! 5. the fast path (`cells.rs`): each list is also split into small cells of `(bⱼ, bₖ)`
+//!    space; a cell with enough entries is summed through a Taylor expansion of the kernel about
+//!    its middle, from moments computed once, so a vertex pays per cell instead of per triangle.
+//!    Every vertex gets a certified bound on how far that moves its center; a vertex whose bound
+//!    exceeds 1e-7 × the bounding box diagonal is summed exactly (as is every vertex when σ is so
+//!    small that the exact sums need their underflow shift).
 //!
-//! Everything is accumulated in f64. No term is dropped; the only approximation is a
-//! vectorizable `exp` with a relative error below 1e-11, which moves a center (a weighted mean
-//! of centroids) by at most about 1e-11 × the bounding box diagonal (see `sums.rs`). The tests
-//! check the result against the naive O(V·T) sum with the library `exp`.
+//! Everything is accumulated in f64. Apart from the fast path's certified 1e-7, the only
+//! approximation is a vectorizable `exp` with a relative error below 1e-11, which moves a
+//! center (a weighted mean of centroids) by at most about 1e-11 × the bounding box diagonal
+//! (see `sums.rs`). The tests check the result against the naive O(V·T) sum with the library
+//! `exp`.
 
+mod cells;
 mod sums;
 
 use std::collections::HashMap;
@@ -36,6 +44,10 @@ use rayon::prelude::*;
 use super::kernels::Simd;
 use super::{Influences, SkinError, MIN_TOTAL_WEIGHT};
 use sums::{PairList, WIDTH};
+
+/// Above this `1/σ²` the exponents could underflow: the exact sums factor out the largest term
+/// (see [`PairIndex::center`]) and the fast path is not used.
+const SHIFT_THRESHOLD: f64 = 600.0;
 
 /// The paper's default σ.
 pub const DEFAULT_SIGMA: f32 = 0.1;
@@ -85,6 +97,20 @@ pub(super) fn centers_with(
     sigma: f32,
     progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<Centers, SkinError> {
+    centers_counted(simd, Some(cells::TOLERANCE), positions, triangles, influences, sigma, progress).map(|(c, _)| c)
+}
+
+/// [`centers_with`] with the fast path's tolerance on `E/D̃` (see `cells.rs`; `None`: exact sums
+/// only), also returning how many distinct weight vectors took the fast path.
+pub(super) fn centers_counted(
+    simd: Simd,
+    tolerance: Option<f64>,
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+) -> Result<(Centers, usize), SkinError> {
     let n = influences.vertex_count();
     if positions.len() != n {
         return Err(SkinError::LengthMismatch { what: "positions", expected: n, got: positions.len() });
@@ -102,11 +128,11 @@ pub(super) fn centers_with(
     }
     let weights = WeightVectors::new(influences);
     let classes = VertexClasses::new(&weights);
-    let index = PairIndex::new(positions, triangles, &weights);
+    let index = PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance);
     let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
 
     // Parts of roughly equal work, so progress advances evenly and cancelling is quick.
-    let work: Vec<usize> = classes.members.iter().map(|c| index.work(&weights, c.first)).collect();
+    let work: Vec<usize> = crate::pool::run(|| classes.members.par_iter().map(|c| index.work(&weights, c.first)).collect());
     let total: usize = work.iter().sum();
     let part_work = (total / 100).max(1 << 16);
     let mut parts = vec![0usize];
@@ -125,11 +151,11 @@ pub(super) fn centers_with(
     if !progress(0, total) {
         return Err(SkinError::Cancelled);
     }
-    let mut class_centers: Vec<Option<[f64; 3]>> = vec![None; classes.members.len()];
+    let mut class_centers: Vec<(Option<[f64; 3]>, bool)> = vec![(None, false); classes.members.len()];
     let mut done = 0;
     for part in parts.windows(2) {
         let range = part[0]..part[1];
-        let one = |(c, out): (usize, &mut Option<[f64; 3]>)| {
+        let one = |(c, out): (usize, &mut (Option<[f64; 3]>, bool))| {
             let v = classes.members[c].first;
             *out = index.center(simd, &weights, v, inv_sigma2);
         };
@@ -151,12 +177,13 @@ pub(super) fn centers_with(
     let mut centers = positions.to_vec();
     let mut has_center = vec![false; n];
     for (v, class) in classes.of_vertex.iter().enumerate() {
-        if let Some(c) = class.and_then(|c| class_centers[c as usize]) {
+        if let Some(c) = class.and_then(|c| class_centers[c as usize].0) {
             centers[v] = c.map(|x| x as f32);
             has_center[v] = true;
         }
     }
-    Ok(Centers { centers, has_center })
+    let fast = class_centers.iter().filter(|c| c.1).count();
+    Ok((Centers { centers, has_center }, fast))
 }
 
 /// Every vertex's weights, repeated bones added up, normalized to sum 1, sorted by bone, zero
@@ -249,15 +276,61 @@ impl VertexClasses {
 /// A weight vector bit for bit: `(bone, weight bits)` sorted by bone.
 type WeightKey = Vec<(u32, u64)>;
 
-/// Merged triangles listed under each pair of their bones, in padded structure-of-arrays form.
+/// Merged triangles listed under each pair of their bones, in padded structure-of-arrays form,
+/// and the same lists split into expanded cells and the remaining entries (the fast path).
 struct PairIndex {
-    /// Pair `(j, k)`, `j < k` → its entries `starts[id]..starts[id + 1]`.
+    /// Pair `(j, k)`, `j < k` → its id in `exact`, `raw` and `cell_starts`.
     ids: HashMap<(u32, u32), usize>,
+    /// Every entry.
+    exact: Soa,
+    /// The entries outside expanded cells.
+    raw: Soa,
+    /// Pair id → its cells `cell_starts[id]..cell_starts[id + 1]`.
+    cell_starts: Vec<usize>,
+    cells: Vec<cells::CellGroup>,
+    /// Whether the fast path may be tried (σ large enough not to need the underflow shift).
+    fast: bool,
+    /// The fast path's tolerance on `E/D̃`.
+    tolerance: f64,
+}
+
+/// Entry lists in padded structure-of-arrays form: list `id` is `starts[id]..starts[id + 1]`.
+struct Soa {
     starts: Vec<usize>,
     bj: Vec<f64>,
     bk: Vec<f64>,
     p: Vec<f64>,
     pc: [Vec<f64>; 3],
+}
+
+impl Soa {
+    fn new() -> Self {
+        Self { starts: vec![0], bj: Vec::new(), bk: Vec::new(), p: Vec::new(), pc: Default::default() }
+    }
+
+    fn push(&mut self, list: &[Entry]) {
+        let padding = Entry { bj: 0.0, bk: 0.0, p: 0.0, pc: [0.0; 3] };
+        let padded = list.len().next_multiple_of(WIDTH);
+        for e in list.iter().chain(std::iter::repeat_n(&padding, padded - list.len())) {
+            self.bj.push(e.bj);
+            self.bk.push(e.bk);
+            self.p.push(e.p);
+            for k in 0..3 {
+                self.pc[k].push(e.pc[k]);
+            }
+        }
+        self.starts.push(self.p.len());
+    }
+
+    fn list(&self, id: usize) -> PairList<'_> {
+        let r = self.starts[id]..self.starts[id + 1];
+        PairList {
+            bj: &self.bj[r.clone()],
+            bk: &self.bk[r.clone()],
+            p: &self.p[r.clone()],
+            pc: [&self.pc[0][r.clone()], &self.pc[1][r.clone()], &self.pc[2][r]],
+        }
+    }
 }
 
 /// One pair-list entry before packing.
@@ -270,40 +343,59 @@ struct Entry {
 }
 
 impl PairIndex {
-    fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]], weights: &WeightVectors) -> Self {
-        // Triangles merged by weight vector: Σ A and Σ A·c.
-        let mut merged: HashMap<WeightKey, (f64, [f64; 3])> = HashMap::new();
-        let mut mean: Vec<(u32, f64)> = Vec::new();
-        for t in triangles {
-            let [a, b, c] = t.map(|v| positions[v as usize].map(f64::from));
-            let (e1, e2) = (sub(b, a), sub(c, a));
-            let area = 0.5 * length(cross(e1, e2));
-            if !(area > 0.0) {
-                continue;
-            }
-            mean.clear();
-            for &v in t {
-                mean.extend_from_slice(weights.of(v as usize));
-            }
-            mean.sort_by_key(|e| e.0);
-            mean.dedup_by(|next, kept| {
-                let same = next.0 == kept.0;
-                if same {
-                    kept.1 += next.1;
+    fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]], weights: &WeightVectors, sigma: f64, tolerance: Option<f64>) -> Self {
+        let inv_sigma2 = 1.0 / (sigma * sigma);
+        // Per triangle (in parallel): its weight vector, area and area × centroid.
+        let each: Vec<(WeightKey, f64, [f64; 3])> = crate::pool::run(|| {
+            triangles
+                .par_iter()
+                .map_init(Vec::new, |mean: &mut Vec<(u32, f64)>, t| {
+                    let [a, b, c] = t.map(|v| positions[v as usize].map(f64::from));
+                    let (e1, e2) = (sub(b, a), sub(c, a));
+                    let area = 0.5 * length(cross(e1, e2));
+                    if !(area > 0.0) {
+                        return None;
+                    }
+                    mean.clear();
+                    for &v in t {
+                        mean.extend_from_slice(weights.of(v as usize));
+                    }
+                    mean.sort_by_key(|e| e.0);
+                    mean.dedup_by(|next, kept| {
+                        let same = next.0 == kept.0;
+                        if same {
+                            kept.1 += next.1;
+                        }
+                        same
+                    });
+                    if mean.len() < 2 {
+                        return None;
+                    }
+                    let key: WeightKey = mean.iter().map(|&(bone, w)| (bone, (w / 3.0).to_bits())).collect();
+                    let centroid = [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0, (a[2] + b[2] + c[2]) / 3.0];
+                    Some((key, area, centroid.map(|x| area * x)))
+                })
+                .flatten()
+                .collect()
+        });
+        // Triangles merged by weight vector: Σ A and Σ A·c (a stable sort keeps the sums in
+        // triangle order, so the result does not depend on the threads).
+        let mut each = each;
+        crate::pool::run(|| each.par_sort_by(|a, b| a.0.cmp(&b.0)));
+        let merged: Vec<(WeightKey, (f64, [f64; 3]))> = each
+            .chunk_by(|a, b| a.0 == b.0)
+            .map(|group| {
+                let mut sum = (0.0, [0.0; 3]);
+                for (_, area, area_c) in group {
+                    sum.0 += area;
+                    for k in 0..3 {
+                        sum.1[k] += area_c[k];
+                    }
                 }
-                same
-            });
-            if mean.len() < 2 {
-                continue;
-            }
-            let key: WeightKey = mean.iter().map(|&(bone, w)| (bone, (w / 3.0).to_bits())).collect();
-            let centroid = [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0, (a[2] + b[2] + c[2]) / 3.0];
-            let slot = merged.entry(key).or_insert((0.0, [0.0; 3]));
-            slot.0 += area;
-            for k in 0..3 {
-                slot.1[k] += area * centroid[k];
-            }
-        }
+                (group[0].0.clone(), sum)
+            })
+            .collect();
+        drop(each);
         // Lists per bone pair.
         let mut ids: HashMap<(u32, u32), usize> = HashMap::new();
         let mut lists: Vec<Vec<Entry>> = Vec::new();
@@ -321,86 +413,104 @@ impl PairIndex {
             }
         }
         drop(merged);
-        // Equal (bⱼ, bₖ) in one list merged; padded to WIDTH.
-        let mut starts = vec![0];
-        let total: usize = lists.iter().map(|l| l.len().next_multiple_of(WIDTH)).sum();
-        let mut index = Self {
-            ids,
-            starts: Vec::new(),
-            bj: Vec::with_capacity(total),
-            bk: Vec::with_capacity(total),
-            p: Vec::with_capacity(total),
-            pc: [Vec::with_capacity(total), Vec::with_capacity(total), Vec::with_capacity(total)],
-        };
-        for list in &mut lists {
-            list.sort_by_key(|e| (e.bj.to_bits(), e.bk.to_bits()));
-            list.dedup_by(|next, kept| {
-                let same = next.bj.to_bits() == kept.bj.to_bits() && next.bk.to_bits() == kept.bk.to_bits();
-                if same {
-                    kept.p += next.p;
-                    for k in 0..3 {
-                        kept.pc[k] += next.pc[k];
-                    }
-                }
-                same
-            });
-            let padding = Entry { bj: 0.0, bk: 0.0, p: 0.0, pc: [0.0; 3] };
-            let padded = list.len().next_multiple_of(WIDTH);
-            for e in list.iter().chain(std::iter::repeat_n(&padding, padded - list.len())) {
-                index.bj.push(e.bj);
-                index.bk.push(e.bk);
-                index.p.push(e.p);
-                for k in 0..3 {
-                    index.pc[k].push(e.pc[k]);
-                }
-            }
-            starts.push(index.p.len());
-            *list = Vec::new();
+        // Equal (bⱼ, bₖ) in one list merged; padded to WIDTH; split into cells.
+        let fast = tolerance.is_some() && inv_sigma2 <= SHIFT_THRESHOLD;
+        let mut index = Self { ids, exact: Soa::new(), raw: Soa::new(), cell_starts: vec![0], cells: Vec::new(), fast, tolerance: tolerance.unwrap_or(0.0) };
+        // Lists are independent: sorted, merged and split in parallel, then packed in order.
+        let prepared: Vec<(Vec<Entry>, Vec<Entry>, Vec<cells::CellGroup>)> = crate::pool::run(|| {
+            lists
+                .into_par_iter()
+                .map(|mut list| {
+                    list.sort_unstable_by_key(|e| (e.bj.to_bits(), e.bk.to_bits()));
+                    list.dedup_by(|next, kept| {
+                        let same = next.bj.to_bits() == kept.bj.to_bits() && next.bk.to_bits() == kept.bk.to_bits();
+                        if same {
+                            kept.p += next.p;
+                            for k in 0..3 {
+                                kept.pc[k] += next.pc[k];
+                            }
+                        }
+                        same
+                    });
+                    let (raw, cells) = if fast { cells::build(&list, sigma) } else { (Vec::new(), Vec::new()) };
+                    (list, raw, cells)
+                })
+                .collect()
+        });
+        for (list, raw, cells) in prepared {
+            index.exact.push(&list);
+            index.raw.push(&raw);
+            index.cells.extend(cells);
+            index.cell_starts.push(index.cells.len());
         }
-        index.starts = starts;
         index
     }
 
-    fn list(&self, j: u32, k: u32) -> Option<PairList<'_>> {
-        let id = *self.ids.get(&(j, k))?;
-        let r = self.starts[id]..self.starts[id + 1];
-        Some(PairList {
-            bj: &self.bj[r.clone()],
-            bk: &self.bk[r.clone()],
-            p: &self.p[r.clone()],
-            pc: [&self.pc[0][r.clone()], &self.pc[1][r.clone()], &self.pc[2][r]],
-        })
-    }
-
-    /// The bone pairs of vertex `v` with their list and weights `(aⱼ, aₖ)`.
-    fn pairs<'a>(&'a self, weights: &'a WeightVectors, v: usize) -> impl Iterator<Item = (PairList<'a>, f64, f64)> + 'a {
+    /// The bone pairs of vertex `v` with their id and weights `(aⱼ, aₖ)`.
+    fn pairs<'a>(&'a self, weights: &'a WeightVectors, v: usize) -> impl Iterator<Item = (usize, f64, f64)> + 'a {
         let a = weights.of(v);
         (0..a.len()).flat_map(move |x| {
             a[x + 1..].iter().filter_map(move |&(k, ak)| {
                 let (j, aj) = a[x];
-                self.list(j, k).map(|l| (l, aj, ak))
+                self.ids.get(&(j, k)).map(|&id| (id, aj, ak))
             })
         })
     }
 
-    /// Entries vertex `v` visits.
+    /// Work of vertex `v` on the fast path (entries, a group of cells counting as [`CELL_WORK`]).
     fn work(&self, weights: &WeightVectors, v: usize) -> usize {
-        self.pairs(weights, v).map(|(l, _, _)| l.p.len()).sum::<usize>() + 1
+        self.pairs(weights, v)
+            .map(|(id, _, _)| {
+                if self.fast {
+                    self.raw.list(id).p.len() + CELL_WORK * (self.cell_starts[id + 1] - self.cell_starts[id])
+                } else {
+                    self.exact.list(id).p.len()
+                }
+            })
+            .sum::<usize>()
+            + 1
     }
 
-    /// The center of vertex `v`, if its denominator is positive.
-    fn center(&self, simd: Simd, weights: &WeightVectors, v: usize, inv_sigma2: f64) -> Option<[f64; 3]> {
+    /// The center of vertex `v`, if its denominator is positive: from the expanded cells if
+    /// their certified bound allows (see `cells.rs`; then also `true`), else from the exact sums.
+    fn center(&self, simd: Simd, weights: &WeightVectors, v: usize, inv_sigma2: f64) -> (Option<[f64; 3]>, bool) {
+        if self.fast {
+            let inv_sigma = inv_sigma2.sqrt();
+            let mut total = [0.0f64; 4];
+            let mut bound = 0.0;
+            for (id, aj, ak) in self.pairs(weights, v) {
+                let s = sums::pair_sums(simd, &self.raw.list(id), aj, ak, inv_sigma2, 0.0);
+                let (c, b) = cells::cell_sums(simd, &self.cells[self.cell_starts[id]..self.cell_starts[id + 1]], aj, ak, inv_sigma);
+                let f = 2.0 * aj * ak;
+                for k in 0..4 {
+                    total[k] += f * (s[k] + c[k]);
+                }
+                bound += f * b;
+            }
+            if total[0] > 0.0 && bound <= self.tolerance * total[0] {
+                let d = total[0];
+                let c = [total[1] / d, total[2] / d, total[3] / d];
+                if c.iter().all(|x| x.is_finite()) {
+                    return (Some(c), true);
+                }
+            }
+        }
+        (self.exact_center(simd, weights, v, inv_sigma2), false)
+    }
+
+    /// The center of vertex `v` from the exact sums over every entry.
+    fn exact_center(&self, simd: Simd, weights: &WeightVectors, v: usize, inv_sigma2: f64) -> Option<[f64; 3]> {
         // With exponents that could underflow (tiny σ), factor out the largest exp(−u²/σ²) so it
         // becomes 1; the factor cancels in the ratio.
-        let shift = if inv_sigma2 > 600.0 {
-            let m = self.pairs(weights, v).map(|(l, aj, ak)| sums::min_cross_squared(&l, aj, ak)).fold(f64::INFINITY, f64::min);
+        let shift = if inv_sigma2 > SHIFT_THRESHOLD {
+            let m = self.pairs(weights, v).map(|(id, aj, ak)| sums::min_cross_squared(&self.exact.list(id), aj, ak)).fold(f64::INFINITY, f64::min);
             if m.is_finite() { m * inv_sigma2 } else { 0.0 }
         } else {
             0.0
         };
         let mut total = [0.0f64; 4];
-        for (list, aj, ak) in self.pairs(weights, v) {
-            let s = sums::pair_sums(simd, &list, aj, ak, inv_sigma2, shift);
+        for (id, aj, ak) in self.pairs(weights, v) {
+            let s = sums::pair_sums(simd, &self.exact.list(id), aj, ak, inv_sigma2, shift);
             let f = 2.0 * aj * ak;
             for k in 0..4 {
                 total[k] += f * s[k];
@@ -410,6 +520,9 @@ impl PairIndex {
         (d > 0.0).then(|| [total[1] / d, total[2] / d, total[3] / d]).filter(|c| c.iter().all(|x| x.is_finite()))
     }
 }
+
+/// Work of one group of expanded cells, in entries (measured: about 6 entries per cell).
+const CELL_WORK: usize = 48;
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]

@@ -11,6 +11,12 @@ use proptest::prelude::*;
 /// The precompute straight from the formula: every vertex against every triangle, dense weight
 /// vectors, the library `exp`, f64 throughout.
 fn naive_centers(positions: &[[f32; 3]], triangles: &[[u32; 3]], influences: &Influences, sigma: f64) -> Vec<Option<DVec3>> {
+    let all: Vec<usize> = (0..influences.vertex_count()).collect();
+    naive_centers_of(positions, triangles, influences, sigma, &all)
+}
+
+/// [`naive_centers`] of the given vertices only.
+fn naive_centers_of(positions: &[[f32; 3]], triangles: &[[u32; 3]], influences: &Influences, sigma: f64, vertices: &[usize]) -> Vec<Option<DVec3>> {
     let bones = influences.bone_count();
     let dense: Vec<Vec<f64>> = (0..influences.vertex_count())
         .map(|v| {
@@ -37,9 +43,10 @@ fn naive_centers(positions: &[[f32; 3]], triangles: &[[u32; 3]], influences: &In
             (area, centroid, w)
         })
         .collect();
-    dense
+    vertices
         .iter()
-        .map(|a| {
+        .map(|&v| {
+            let a = &dense[v];
             let (mut num, mut den) = (DVec3::ZERO, 0.0);
             // Terms with aⱼ = 0 or aₖ = 0 are 0: skipping them keeps the naive sum exact.
             let support: Vec<usize> = (0..bones).filter(|&j| a[j] != 0.0).collect();
@@ -127,6 +134,44 @@ fn precompute_matches_the_naive_formula_on_the_creature() {
     assert!(centers.has_center.iter().all(|&h| h), "every creature vertex has four bones");
     // A tiny σ goes through the underflow shift.
     check_against_naive(&c.positions, &c.triangles, &c.influences, 0.03);
+}
+
+#[test]
+fn the_fast_path_is_within_its_certified_bound_where_it_is_used() {
+    // Big enough that pair lists fill many cells (about 30 000 triangle weight vectors).
+    let c = Creature::new(15_000).unwrap();
+    let diag = diagonal(&c.positions);
+    let (p, t, i) = (&c.positions, &c.triangles, &c.influences);
+    let (exact, none) = centers_counted(Simd::detect(), None, p, t, i, DEFAULT_SIGMA, &mut |_, _| true).unwrap();
+    assert_eq!(none, 0);
+    // The certificate allows 1e-7 × diagonal; f32 rounding of the centers adds ~1e-7 of their size.
+    let tolerance = 1e-6 * diag;
+    for simd in Simd::available() {
+        let (fast, count) = centers_counted(simd, Some(cells::TOLERANCE), p, t, i, DEFAULT_SIGMA, &mut |_, _| true).unwrap();
+        // Nearly every vertex has its own weights; most should take the fast path.
+        assert!(count * 10 >= 8 * p.len(), "{simd:?}: only {count} of {} on the fast path", p.len());
+        assert_eq!(fast.has_center, exact.has_center);
+        let mut worst = 0.0f64;
+        for (a, b) in fast.centers.iter().zip(&exact.centers) {
+            worst = worst.max((Vec3::from_array(*a).as_dvec3() - Vec3::from_array(*b).as_dvec3()).length());
+        }
+        eprintln!("{simd:?}: {count} weight vectors on the fast path, largest difference to the exact sums {:.2e} × diagonal", worst / diag);
+        assert!(worst <= tolerance, "{simd:?}: {worst} > {tolerance}");
+    }
+    // A tolerance tight enough that some vertices fall back to the exact sums.
+    let (mixed, count) = centers_counted(Simd::detect(), Some(1e-10), p, t, i, DEFAULT_SIGMA, &mut |_, _| true).unwrap();
+    assert!(count > 0 && count * 10 < 9 * p.len(), "{count} of {} on the fast path", p.len());
+    for (a, b) in mixed.centers.iter().zip(&exact.centers) {
+        assert!((Vec3::from_array(*a).as_dvec3() - Vec3::from_array(*b).as_dvec3()).length() <= tolerance);
+    }
+    // And the exact sums against the formula itself, on a sample.
+    let sample: Vec<usize> = (0..p.len()).step_by(97).collect();
+    let want = naive_centers_of(p, t, i, f64::from(DEFAULT_SIGMA), &sample);
+    let fast = centers_of_rotation(p, t, i, DEFAULT_SIGMA).unwrap();
+    for (&v, w) in sample.iter().zip(&want) {
+        let err = (Vec3::from_array(fast.centers[v]).as_dvec3() - w.unwrap()).length();
+        assert!(err <= tolerance, "vertex {v}: error {err} > {tolerance}");
+    }
 }
 
 /// A small random mesh: positions, triangles over them, and 0..=5 influences per vertex (zero,

@@ -98,14 +98,16 @@ def build(context, sources, spacing: float | None = None):
     scene = context.scene
     collection = bpy.data.collections.new("DQ Skin Comparison")
     scene.collection.children.link(collection)
-    sizes = [Vector(src.dimensions) for src in sources]
-    # One column pitch for every row, so that columns line up and labels have one size.
-    step = spacing or max(max(s.x, s.y, s.z * 0.6) for s in sizes) * 1.35 + 0.3
-    label_size = step / 10
+    # One column pitch for every row, so that columns line up and labels have one size: as
+    # wide as the widest source gets over its animation (sampled), so that bent or striding
+    # meshes do not overlap and characters stay large in the picture.
+    extents = _animated_extents(context, sources)
+    step = spacing or max(max(w, 0.35 * h) * 1.25 + 0.06 * h for w, h in extents)
+    label_size = min(step / 9, max(h for _, h in extents) / 12)
     label_material = _flat_material("DQ Skin Label", (0.9, 0.9, 0.9))
     rows = []
     y = 0.0
-    for src, size in zip(sources, sizes):
+    for src, (_, height) in zip(sources, extents):
         arm_src = next(m for m in src.modifiers if m.type == "ARMATURE").object
         row = {}
         # Labels at one height per row: above the source as it stands now.
@@ -146,13 +148,33 @@ def build(context, sources, spacing: float | None = None):
             text.location = (middle + offset.x, 0.0, top + label_size * 2.2)
             row[label] = obj
         rows.append(row)
-        y += size.z * 1.3 + label_size * 3.5 + 0.2
+        y += height * 1.2 + label_size * 4.5
     for src in sources:  # the originals stay, hidden, so the comparison shows once
         src.hide_viewport = src.hide_render = True
         arm_src = next(m for m in src.modifiers if m.type == "ARMATURE").object
         arm_src.hide_viewport = arm_src.hide_render = True
     _camera_and_light(scene, collection)
     return collection, rows
+
+
+def _animated_extents(context, sources, samples: int = 9) -> list[tuple[float, float]]:
+    """The largest X (across the picture) and Z (up) extents of each source's deformed mesh
+    over the scene's frame range (sampled), in world space. The current frame is restored."""
+    scene = context.scene
+    current = scene.frame_current
+    extents = [(0.0, 0.0)] * len(sources)
+    start, end = scene.frame_start, max(scene.frame_end, scene.frame_start)
+    for i in range(samples):
+        scene.frame_set(round(start + (end - start) * i / max(samples - 1, 1)))
+        depsgraph = context.evaluated_depsgraph_get()
+        for k, src in enumerate(sources):
+            ev = src.evaluated_get(depsgraph)
+            corners = [src.matrix_world @ Vector(c) for c in ev.bound_box]
+            w = max(c.x for c in corners) - min(c.x for c in corners)
+            h = max(c.z for c in corners) - min(c.z for c in corners)
+            extents[k] = (max(extents[k][0], w), max(extents[k][1], h))
+    scene.frame_set(current)
+    return extents
 
 
 def _text(collection, name, body, size, material, align="CENTER"):

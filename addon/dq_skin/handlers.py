@@ -19,6 +19,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
+from . import nodes
 from .registry import REGISTRY
 
 _busy = False
@@ -57,6 +58,13 @@ def on_depsgraph_update_post(scene, depsgraph):
 
 @persistent
 def on_load_post(*_args):
+    # Files saved by an earlier DQ Skin: their node group's Method menu gets the newer methods.
+    for group in bpy.data.node_groups:
+        try:
+            if group.bl_idname == "GeometryNodeTree" and nodes.version_of(group) == nodes.VERSION:
+                nodes.add_missing_methods(group)
+        except (AttributeError, RuntimeError, TypeError) as e:  # never stop a file from loading
+            print(f"DQ Skin: could not update node group {group.name!r}: {e}")
     REGISTRY.reset()
 
 

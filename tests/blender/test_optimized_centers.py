@@ -205,3 +205,24 @@ def test_on_a_character_the_centers_collapse_less_than_linear(dq_skin, assets):
     ocor, lbs = m["DQ Skin Optimized Centers"], m["DQ Skin Linear"]
     assert ocor["edge_shrink_mean"] < 0.9 * lbs["edge_shrink_mean"]
     assert ocor["max_deviation_from_armature_linear"] > 1e-3  # a different method, visibly
+
+
+def test_files_from_before_the_method_get_it_on_load(dq_skin, tmp_path):
+    """A node group saved without the Optimized Centers item (DQ Skin before it): on load the
+    item is added, and the modifiers keep their methods."""
+    obj, arm, _ = rig_tube(bones=2)
+    add_dq_skin(obj, "LINEAR")
+    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
+    switch = mod.node_group.nodes["Method Items"]
+    switch.enum_items.remove(switch.enum_items[-1])  # as 0.1 saved it
+    dq_skin.nodes.forget_socket_ids()
+    assert [i.name for i in switch.enum_items] == ["Linear", "Dual Quaternion", "Blend"]
+    path, name = tmp_path / "old.blend", obj.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    obj = bpy.data.objects[name]
+    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
+    assert [i.name for i in mod.node_group.nodes["Method Items"].enum_items] == list(dq_skin.nodes.METHODS)
+    assert dq_skin.nodes.get_method(mod) == "Linear"
+    assert dq_skin.nodes.put_method(mod, "Optimized Centers") is not False
+    assert dq_skin.nodes.get_method(mod) == "Optimized Centers"

@@ -505,6 +505,7 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     let mut anchor = [_mm512_setzero_ps(); 3];
     let mut offset = [_mm512_setzero_ps(); 3];
     let mut real = [_mm512_setzero_ps(); 4];
+    let (mut q_prev, mut ws_prev) = ([_mm512_setzero_ps(); 4], _mm512_setzero_ps());
     let mut contrib = _mm512_setzero_ps();
     for slot in slots {
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
@@ -540,16 +541,37 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
             }
             [r[0], r[1], r[2], r[3]]
         };
-        let dot = _mm512_add_ps(
-            _mm512_fmadd_ps(q[1], real[1], _mm512_mul_ps(q[0], real[0])),
-            _mm512_fmadd_ps(q[3], real[3], _mm512_mul_ps(q[2], real[2])),
-        );
-        let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
-        let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
-        for k in 0..4 {
-            real[k] = _mm512_fmadd_ps(q[k], ws, real[k]);
+        // The sign chain, shortened: the running sum is `real + ws_prev·q_prev` (the previous
+        // term not added yet), so `q·sum = q·real + ws_prev·(q·q_prev)` where both dot products
+        // are off the chain and only one FMA waits for `ws_prev`.
+        let dot4 = |a: &[__m512; 4], b: &[__m512; 4]| {
+            _mm512_add_ps(
+                _mm512_fmadd_ps(a[1], b[1], _mm512_mul_ps(a[0], b[0])),
+                _mm512_fmadd_ps(a[3], b[3], _mm512_mul_ps(a[2], b[2])),
+            )
+        };
+        // Worth it where the slot's other work is long (scaled poses); rigid poses are bound by
+        // throughput, and the extra products cost more than the shorter chain saves.
+        if SCALED {
+            let dot = _mm512_fmadd_ps(ws_prev, dot4(&q, &q_prev), dot4(&q, &real));
+            let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
+            let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
+            for k in 0..4 {
+                real[k] = _mm512_fmadd_ps(q_prev[k], ws_prev, real[k]);
+            }
+            (q_prev, ws_prev) = (q, ws);
+        } else {
+            let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot4(&q, &real), _mm512_setzero_ps());
+            let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
+            for k in 0..4 {
+                real[k] = _mm512_fmadd_ps(q[k], ws, real[k]);
+            }
         }
         contrib = _mm512_add_ps(contrib, w);
+    }
+    for k in 0..4 {
+        // Adds the last term (scaled poses; zero otherwise).
+        real[k] = _mm512_fmadd_ps(q_prev[k], ws_prev, real[k]);
     }
     let zero = _mm512_setzero_ps();
     let one = _mm512_set1_ps(1.0);

@@ -213,26 +213,44 @@ fn add_signed_rotation(real: &mut [__m256; 4], q: &[__m256], w: __m256) {
     }
 }
 
-/// `p` rotated by the unit quaternions `q = (v, w)`: `p + 2·(w·(v × p) + v × (v × p))`.
+/// `½·(R·p + t − p)` for the unit quaternions `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v ×
+/// a + h)` with `a = v × p` (see `rotation_offset` in `kernels.rs`).
 #[inline]
 #[target_feature(enable = "avx2,fma")]
-fn rotate(q: &[__m256; 4], p: &[__m256; 3]) -> [__m256; 3] {
-    let cross = |a: &[__m256; 3], b: &[__m256; 3]| {
-        [
-            _mm256_fmsub_ps(a[1], b[2], _mm256_mul_ps(a[2], b[1])),
-            _mm256_fmsub_ps(a[2], b[0], _mm256_mul_ps(a[0], b[2])),
-            _mm256_fmsub_ps(a[0], b[1], _mm256_mul_ps(a[1], b[0])),
-        ]
-    };
-    let v = [q[0], q[1], q[2]];
-    let a = cross(&v, p);
-    let b = cross(&v, &a);
-    let two = _mm256_set1_ps(2.0);
-    core::array::from_fn(|k| _mm256_fmadd_ps(two, _mm256_fmadd_ps(q[3], a[k], b[k]), p[k]))
+fn rotation_offset(q: &[__m256], h: &[__m256], p: &[__m256; 3]) -> [__m256; 3] {
+    let a = [
+        _mm256_fmsub_ps(q[1], p[2], _mm256_mul_ps(q[2], p[1])),
+        _mm256_fmsub_ps(q[2], p[0], _mm256_mul_ps(q[0], p[2])),
+        _mm256_fmsub_ps(q[0], p[1], _mm256_mul_ps(q[1], p[0])),
+    ];
+    let b = [
+        _mm256_fmsub_ps(q[1], a[2], _mm256_fmsub_ps(q[2], a[1], h[0])),
+        _mm256_fmsub_ps(q[2], a[0], _mm256_fmsub_ps(q[0], a[2], h[1])),
+        _mm256_fmsub_ps(q[0], a[1], _mm256_fmsub_ps(q[1], a[0], h[2])),
+    ];
+    core::array::from_fn(|k| _mm256_fmadd_ps(q[3], a[k], b[k]))
+}
+
+/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), gathered.
+///
+/// # Safety
+/// Every `bones[l]` must index `cor`, and `32·bones[l]` must fit an `i32` (fewer than 2²⁶
+/// bones).
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn gather_s22(cor: &[CorBone], bones: &[u32]) -> __m256 {
+    const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4 && core::mem::size_of::<CorBone>() == 32 * 4) };
+    debug_assert!(bones.len() >= HALF);
+    // SAFETY: the caller guarantees the indices are in range; 8 u32 are 32 bytes.
+    unsafe {
+        let index = _mm256_slli_epi32::<5>(_mm256_loadu_si256(bones.as_ptr() as *const __m256i));
+        _mm256_i32gather_ps::<4>((cor.as_ptr() as *const f32).add(24), index)
+    }
 }
 
 /// Sums for skinning with centers of rotation (see `kernels.rs`): where each bone puts the
-/// center, the sign-aligned rotations, and with `scaled` the blended scale/shear of `co − c`.
+/// center (rigid: how far it moves it), the sign-aligned rotations, and with `scaled` the
+/// blended scale/shear of `co − c`.
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA, and every bone index in `slots` must index `cor` and
@@ -266,19 +284,19 @@ pub(super) unsafe fn accumulate_centers(
             let w = unsafe { _mm256_loadu_ps(slot.weights[lanes.clone()].as_ptr()) };
             if !scaled {
                 // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
-                // rotation, the translation and a zero.
+                // rotation, half the translation and a zero.
                 let r = unsafe { load_columns(cor_rigid, bones, 0) };
-                let q = [r[0], r[1], r[2], r[3]];
-                let moved = rotate(&q, &c);
+                let moved = rotation_offset(&r[0..4], &r[4..7], &c);
+                let w2 = _mm256_add_ps(w, w);
                 for k in 0..3 {
-                    anchor[k] = _mm256_fmadd_ps(w, _mm256_add_ps(moved[k], r[4 + k]), anchor[k]);
+                    anchor[k] = _mm256_fmadd_ps(w2, moved[k], anchor[k]);
                 }
-                add_signed_rotation(&mut real, &q, w);
+                add_signed_rotation(&mut real, &r[0..4], w);
                 contrib = _mm256_add_ps(contrib, w);
                 continue;
             }
-            // SAFETY: indices are in range (validated); a CorBone is 32 floats: matrix rows 0–1,
-            // row 2 and the rotation, stretch rows 0–1, stretch row 2 and zeros.
+            // SAFETY: indices are in range (validated); a CorBone's first 24 floats are matrix
+            // rows 0–1, row 2 and the rotation, and the first 8 entries of its scale/shear part.
             let a = unsafe { load_columns(cor, bones, 0) };
             let b = unsafe { load_columns(cor, bones, 8) };
             let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
@@ -289,8 +307,9 @@ pub(super) unsafe fn accumulate_centers(
             }
             {
                 let s = unsafe { load_columns(cor, bones, 16) };
-                let t = unsafe { load_columns(cor, bones, 24) };
-                let rows = [[s[0], s[1], s[2]], [s[4], s[5], s[6]], [t[0], t[1], t[2]]];
+                // SAFETY: as above; fewer than 2²⁶ bones (the pose holds 128 bytes per bone).
+                let s22 = unsafe { gather_s22(cor, bones) };
+                let rows = [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], s22]];
                 for r in 0..3 {
                     let m = rows[r];
                     let stretched = _mm256_fmadd_ps(m[0], d[0], _mm256_fmadd_ps(m[1], d[1], _mm256_mul_ps(m[2], d[2])));

@@ -438,22 +438,38 @@ pub(super) unsafe fn batch<const KIND: u8>(
     }
 }
 
-/// `p` rotated by the unit quaternions `q = (v, w)`: `p + 2·(w·(v × p) + v × (v × p))`.
+/// `½·(R·p + t − p)` for the unit quaternions `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v ×
+/// a + h)` with `a = v × p` (see `rotation_offset` in `kernels.rs`).
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-fn rotate(q: &[__m512; 4], p: &[__m512; 3]) -> [__m512; 3] {
-    let cross = |a: &[__m512; 3], b: &[__m512; 3]| {
-        [
-            _mm512_fmsub_ps(a[1], b[2], _mm512_mul_ps(a[2], b[1])),
-            _mm512_fmsub_ps(a[2], b[0], _mm512_mul_ps(a[0], b[2])),
-            _mm512_fmsub_ps(a[0], b[1], _mm512_mul_ps(a[1], b[0])),
-        ]
-    };
-    let v = [q[0], q[1], q[2]];
-    let a = cross(&v, p);
-    let b = cross(&v, &a);
-    let two = _mm512_set1_ps(2.0);
-    core::array::from_fn(|k| _mm512_fmadd_ps(two, _mm512_fmadd_ps(q[3], a[k], b[k]), p[k]))
+fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
+    let a = [
+        _mm512_fmsub_ps(q[1], p[2], _mm512_mul_ps(q[2], p[1])),
+        _mm512_fmsub_ps(q[2], p[0], _mm512_mul_ps(q[0], p[2])),
+        _mm512_fmsub_ps(q[0], p[1], _mm512_mul_ps(q[1], p[0])),
+    ];
+    let b = [
+        _mm512_fmsub_ps(q[1], a[2], _mm512_fmsub_ps(q[2], a[1], h[0])),
+        _mm512_fmsub_ps(q[2], a[0], _mm512_fmsub_ps(q[0], a[2], h[1])),
+        _mm512_fmsub_ps(q[0], a[1], _mm512_fmsub_ps(q[1], a[0], h[2])),
+    ];
+    core::array::from_fn(|k| _mm512_fmadd_ps(q[3], a[k], b[k]))
+}
+
+/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), gathered: one float
+/// per lane does not pay for a transpose.
+///
+/// # Safety
+/// Every bone index must index `cor`, and `32·index` must fit an `i32` (fewer than 2²⁶ bones).
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn gather_s22(cor: &[CorBone], bones: &[u32; LANES]) -> __m512 {
+    const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4 && core::mem::size_of::<CorBone>() == 32 * 4) };
+    // SAFETY: the caller guarantees the indices are in range; 16 u32 are 64 bytes.
+    unsafe {
+        let index = _mm512_slli_epi32::<5>(_mm512_loadu_si512(bones.as_ptr() as *const __m512i));
+        _mm512_i32gather_ps::<4>(index, (cor.as_ptr() as *const f32).add(24))
+    }
 }
 
 /// Everything skinning with centers of rotation does to one full batch of 16 vertices, in
@@ -489,12 +505,13 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     let mut anchor = [_mm512_setzero_ps(); 3];
     let mut offset = [_mm512_setzero_ps(); 3];
     let mut real = [_mm512_setzero_ps(); 4];
+    let (mut q_prev, mut ws_prev) = ([_mm512_setzero_ps(); 4], _mm512_setzero_ps());
     let mut contrib = _mm512_setzero_ps();
     for slot in slots {
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
         let q = if SCALED {
-            // SAFETY: indices are in range (validated); a CorBone is 32 floats: matrix rows 0–1,
-            // row 2 and the rotation, stretch rows 0–1, stretch row 2 and zeros.
+            // SAFETY: indices are in range (validated); a CorBone's first 24 floats are matrix
+            // rows 0–1, row 2 and the rotation, and the first 8 entries of its scale/shear part.
             let a = unsafe { load_columns(job.cor, &slot.bones, 0) };
             let b = unsafe { load_columns(job.cor, &slot.bones, 8) };
             let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
@@ -504,8 +521,9 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
                 anchor[r] = _mm512_fmadd_ps(w, moved, anchor[r]);
             }
             let s = unsafe { load_columns(job.cor, &slot.bones, 16) };
-            let t = unsafe { load_columns(job.cor, &slot.bones, 24) };
-            let rows = [[s[0], s[1], s[2]], [s[4], s[5], s[6]], [t[0], t[1], t[2]]];
+            // SAFETY: as above; fewer than 2²⁶ bones (the pose holds 128 bytes per bone).
+            let s22 = unsafe { gather_s22(job.cor, &slot.bones) };
+            let rows = [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], s22]];
             for r in 0..3 {
                 let m = rows[r];
                 let stretched = _mm512_fmadd_ps(m[0], d[0], _mm512_fmadd_ps(m[1], d[1], _mm512_mul_ps(m[2], d[2])));
@@ -514,25 +532,46 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
             [b[4], b[5], b[6], b[7]]
         } else {
             // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
-            // rotation, the translation and a zero.
+            // rotation, half the translation and a zero.
             let r = unsafe { load_columns(job.cor_rigid, &slot.bones, 0) };
-            let q = [r[0], r[1], r[2], r[3]];
-            let moved = rotate(&q, &c);
+            let moved = rotation_offset(&r[0..4], &r[4..7], &c);
+            let w2 = _mm512_add_ps(w, w);
             for k in 0..3 {
-                anchor[k] = _mm512_fmadd_ps(w, _mm512_add_ps(moved[k], r[4 + k]), anchor[k]);
+                anchor[k] = _mm512_fmadd_ps(w2, moved[k], anchor[k]);
             }
-            q
+            [r[0], r[1], r[2], r[3]]
         };
-        let dot = _mm512_add_ps(
-            _mm512_fmadd_ps(q[1], real[1], _mm512_mul_ps(q[0], real[0])),
-            _mm512_fmadd_ps(q[3], real[3], _mm512_mul_ps(q[2], real[2])),
-        );
-        let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
-        let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
-        for k in 0..4 {
-            real[k] = _mm512_fmadd_ps(q[k], ws, real[k]);
+        // The sign chain, shortened: the running sum is `real + ws_prev·q_prev` (the previous
+        // term not added yet), so `q·sum = q·real + ws_prev·(q·q_prev)` where both dot products
+        // are off the chain and only one FMA waits for `ws_prev`.
+        let dot4 = |a: &[__m512; 4], b: &[__m512; 4]| {
+            _mm512_add_ps(
+                _mm512_fmadd_ps(a[1], b[1], _mm512_mul_ps(a[0], b[0])),
+                _mm512_fmadd_ps(a[3], b[3], _mm512_mul_ps(a[2], b[2])),
+            )
+        };
+        // Worth it where the slot's other work is long (scaled poses); rigid poses are bound by
+        // throughput, and the extra products cost more than the shorter chain saves.
+        if SCALED {
+            let dot = _mm512_fmadd_ps(ws_prev, dot4(&q, &q_prev), dot4(&q, &real));
+            let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
+            let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
+            for k in 0..4 {
+                real[k] = _mm512_fmadd_ps(q_prev[k], ws_prev, real[k]);
+            }
+            (q_prev, ws_prev) = (q, ws);
+        } else {
+            let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot4(&q, &real), _mm512_setzero_ps());
+            let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
+            for k in 0..4 {
+                real[k] = _mm512_fmadd_ps(q[k], ws, real[k]);
+            }
         }
         contrib = _mm512_add_ps(contrib, w);
+    }
+    for k in 0..4 {
+        // Adds the last term (scaled poses; zero otherwise).
+        real[k] = _mm512_fmadd_ps(q_prev[k], ws_prev, real[k]);
     }
     let zero = _mm512_setzero_ps();
     let one = _mm512_set1_ps(1.0);
@@ -561,11 +600,20 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     ];
     let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::MIN_TOTAL_WEIGHT))
         & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
-    let fa = _mm512_maskz_div_ps(valid, a, contrib);
-    let fr = _mm512_maskz_div_ps(valid, a, if SCALED { mul(len2, contrib) } else { len2 });
-    let keep = _mm512_mask_sub_ps(one, valid, one, a);
-    // anchor·(a/contrib) + n·(a/|q|²) + co·(1 − a)
-    let moved: [__m512; 3] = core::array::from_fn(|k| _mm512_fmadd_ps(anchor[k], fa, _mm512_fmadd_ps(n[k], fr, mul(p[k], keep))));
+    // One division serves both factors: a/contrib = inv·|q|², a/|q|² = inv·contrib.
+    let inv = _mm512_maskz_div_ps(valid, a, mul(len2, contrib));
+    let fa = mul(inv, len2);
+    let fr = if SCALED { inv } else { mul(inv, contrib) };
+    let base: [__m512; 3] = if SCALED {
+        let keep = _mm512_mask_sub_ps(one, valid, one, a);
+        core::array::from_fn(|k| mul(p[k], keep))
+    } else {
+        // co + a·(c − co): the rigid anchor is Σ wᵢ·(Mᵢ·c − c).
+        let av = _mm512_maskz_mov_ps(valid, a);
+        core::array::from_fn(|k| _mm512_fnmadd_ps(av, d[k], p[k]))
+    };
+    // anchor·(a/contrib) + n·(a/|q|²) + base
+    let moved: [__m512; 3] = core::array::from_fn(|k| _mm512_fmadd_ps(anchor[k], fa, _mm512_fmadd_ps(n[k], fr, base[k])));
     let mut r = match job.postmat {
         Some(m) => Affine::new(m).apply(moved),
         None => moved,

@@ -494,8 +494,10 @@ fn finish_dual_quaternion<const ISA: u8>(co: &Points, s: &DqSum, strength: &Lane
     r
 }
 
-/// Per-lane sums for centers of rotation: `Σ wᵢ·Mᵢ·c` (where LBS puts the center), the
-/// sign-aligned quaternion sum, `Σ wᵢ·Sᵢ·(co − c)` (scaled poses only) and the total weight.
+/// Per-lane sums for centers of rotation: where LBS puts the center, `Σ wᵢ·Mᵢ·c` (scaled poses)
+/// or how far it moves it, `Σ wᵢ·(Mᵢ·c − c)` (rigid poses, where that is cheaper: see
+/// [`rotation_offset`]); the sign-aligned quaternion sum, `Σ wᵢ·Sᵢ·(co − c)` (scaled poses only)
+/// and the total weight.
 pub(super) struct CorSum {
     pub anchor: [Lanes; 3],
     pub real: [Lanes; 4],
@@ -522,32 +524,32 @@ fn accumulate_centers<const ISA: u8, const SCALED: bool>(
     let mut s = CorSum { anchor: [ZERO; 3], real: [ZERO; 4], offset: [ZERO; 3], contrib: ZERO };
     for slot in slots {
         for l in 0..LANES {
-            let b = bone(cor, slot.bones[l]);
             let w = slot.weights[l];
             let (cx, cy, cz) = (center.x[l], center.y[l], center.z[l]);
-            let moved = if SCALED {
-                let m = |r: usize| {
+            let q = if SCALED {
+                let b = bone(cor, slot.bones[l]);
+                for r in 0..3 {
                     let row = b.matrix.rows[r];
-                    madd::<ISA>(row.x, cx, madd::<ISA>(row.y, cy, madd::<ISA>(row.z, cz, row.w)))
-                };
-                [m(0), m(1), m(2)]
-            } else {
-                let r = bone(cor_rigid, slot.bones[l]);
-                let p = rotate::<ISA>(r.real, [cx, cy, cz]);
-                [p[0] + r.translation.x, p[1] + r.translation.y, p[2] + r.translation.z]
-            };
-            for r in 0..3 {
-                s.anchor[r][l] = madd::<ISA>(w, moved[r], s.anchor[r][l]);
-            }
-            if SCALED {
+                    let moved = madd::<ISA>(row.x, cx, madd::<ISA>(row.y, cy, madd::<ISA>(row.z, cz, row.w)));
+                    s.anchor[r][l] = madd::<ISA>(w, moved, s.anchor[r][l]);
+                }
                 let (dx, dy, dz) = (co.x[l] - cx, co.y[l] - cy, co.z[l] - cz);
                 for r in 0..3 {
-                    let row = b.stretch.rows[r];
-                    let stretched = madd::<ISA>(row.x, dx, madd::<ISA>(row.y, dy, row.z * dz));
+                    let row = b.stretch_row(r);
+                    let stretched = madd::<ISA>(row[0], dx, madd::<ISA>(row[1], dy, row[2] * dz));
                     s.offset[r][l] = madd::<ISA>(w, stretched, s.offset[r][l]);
                 }
-            }
-            let q = [b.real.x, b.real.y, b.real.z, b.real.w];
+                b.real
+            } else {
+                let r = bone(cor_rigid, slot.bones[l]);
+                let moved = rotation_offset::<ISA>(r.real, r.half_translation, [cx, cy, cz]);
+                let w2 = w + w;
+                for k in 0..3 {
+                    s.anchor[k][l] = madd::<ISA>(w2, moved[k], s.anchor[k][l]);
+                }
+                r.real
+            };
+            let q = [q.x, q.y, q.z, q.w];
             let dot = q[0] * s.real[0][l] + q[1] * s.real[1][l] + q[2] * s.real[2][l] + q[3] * s.real[3][l];
             let ws = if dot < 0.0 { -w } else { w };
             for c in 0..4 {
@@ -559,26 +561,32 @@ fn accumulate_centers<const ISA: u8, const SCALED: bool>(
     s
 }
 
-/// `p` rotated by the unit quaternion `q = (v, w)`: `p + 2·(w·(v × p) + v × (v × p))`.
+/// `½·(R·p + t − p)` for the unit quaternion `q = (v, w)` of `R`, given `h = t/2`:
+/// `R·p = p + 2·(w·(v × p) + v × (v × p))`, so this is `w·a + (v × a + h)` with `a = v × p`,
+/// where `h` enters as the addend of `v × a`'s second product (no extra instruction). Weighted by
+/// `2·wᵢ` it sums to `Σ wᵢ·(Mᵢ·c − c)`; the `c` comes back once per vertex (`contrib·c`).
 #[inline(always)]
-fn rotate<const ISA: u8>(q: Vec4, p: [f32; 3]) -> [f32; 3] {
-    let cross = |a: [f32; 3], b: [f32; 3]| {
-        [
-            madd::<ISA>(a[1], b[2], -(a[2] * b[1])),
-            madd::<ISA>(a[2], b[0], -(a[0] * b[2])),
-            madd::<ISA>(a[0], b[1], -(a[1] * b[0])),
-        ]
-    };
+fn rotation_offset<const ISA: u8>(q: Vec4, h: Vec4, p: [f32; 3]) -> [f32; 3] {
     let v = [q.x, q.y, q.z];
-    let a = cross(v, p);
-    let b = cross(v, a);
-    core::array::from_fn(|k| madd::<ISA>(2.0, madd::<ISA>(q.w, a[k], b[k]), p[k]))
+    let a = [
+        madd::<ISA>(v[1], p[2], -(v[2] * p[1])),
+        madd::<ISA>(v[2], p[0], -(v[0] * p[2])),
+        madd::<ISA>(v[0], p[1], -(v[1] * p[0])),
+    ];
+    let b = [
+        madd::<ISA>(v[1], a[2], -madd::<ISA>(v[2], a[1], -h.x)),
+        madd::<ISA>(v[2], a[0], -madd::<ISA>(v[0], a[2], -h.y)),
+        madd::<ISA>(v[0], a[1], -madd::<ISA>(v[1], a[0], -h.z)),
+    ];
+    core::array::from_fn(|k| madd::<ISA>(q.w, a[k], b[k]))
 }
 
-/// `co' = anchor/contrib + R·d` with `R` the rotation of the summed quaternion (its matrix
-/// divided by `|q|²`, as `mul_v3m3_dq` does) and `d = co − c` (rigid) or `offset/contrib`
-/// (scaled); then the strength: `co + a·(co' − co)`; `co` where `contrib ≤ 0.0001` or the sum
-/// is zero. Selects, not branches, so the lane loop vectorizes.
+/// `co' = c + anchor/contrib + R·d` (rigid: `anchor = Σ wᵢ·(Mᵢ·c − c)`, `d = co − c`) or
+/// `co' = anchor/contrib + R·d` (scaled: `anchor = Σ wᵢ·Mᵢ·c`, `d = offset/contrib`), `R` the
+/// rotation of the summed quaternion (its matrix divided by `|q|²`, as `mul_v3m3_dq` does); then
+/// the strength: `co + a·(co' − co)`; `co` where `contrib ≤ 0.0001` or the sum is zero. One
+/// division, `a/(|q|²·contrib)`, serves both factors. Selects, not branches, so the lane loop
+/// vectorizes.
 #[inline(always)]
 fn finish_centers<const ISA: u8, const SCALED: bool>(co: &Points, center: &Points, s: &CorSum, strength: &Lanes) -> Points {
     let mut r = *co;
@@ -586,11 +594,8 @@ fn finish_centers<const ISA: u8, const SCALED: bool>(co: &Points, center: &Point
         let (x, y, z, w) = (s.real[0][l], s.real[1][l], s.real[2][l], s.real[3][l]);
         let len2 = w * w + x * x + y * y + z * z;
         let (px, py, pz) = (co.x[l], co.y[l], co.z[l]);
-        let (dx, dy, dz) = if SCALED {
-            (s.offset[0][l], s.offset[1][l], s.offset[2][l])
-        } else {
-            (px - center.x[l], py - center.y[l], pz - center.z[l])
-        };
+        let (cx, cy, cz) = (px - center.x[l], py - center.y[l], pz - center.z[l]);
+        let (dx, dy, dz) = if SCALED { (s.offset[0][l], s.offset[1][l], s.offset[2][l]) } else { (cx, cy, cz) };
         let m00 = w * w + x * x - y * y - z * z;
         let m11 = w * w + y * y - x * x - z * z;
         let m22 = w * w + z * z - x * x - y * y;
@@ -601,12 +606,20 @@ fn finish_centers<const ISA: u8, const SCALED: bool>(co: &Points, center: &Point
         let contrib = s.contrib[l];
         let valid = contrib > MIN_TOTAL_WEIGHT && len2 > 0.0;
         let a = strength[l];
-        let fa = if valid { a / contrib } else { 0.0 };
-        let fr = if valid { if SCALED { a / (len2 * contrib) } else { a / len2 } } else { 0.0 };
-        let keep = if valid { 1.0 - a } else { 1.0 };
-        r.x[l] = madd::<ISA>(s.anchor[0][l], fa, madd::<ISA>(nx, fr, px * keep));
-        r.y[l] = madd::<ISA>(s.anchor[1][l], fa, madd::<ISA>(ny, fr, py * keep));
-        r.z[l] = madd::<ISA>(s.anchor[2][l], fa, madd::<ISA>(nz, fr, pz * keep));
+        let inv = if valid { a / (len2 * contrib) } else { 0.0 };
+        let fa = inv * len2;
+        let fr = if SCALED { inv } else { inv * contrib };
+        let (bx, by, bz) = if SCALED {
+            let keep = if valid { 1.0 - a } else { 1.0 };
+            (px * keep, py * keep, pz * keep)
+        } else {
+            // co + a·(c − co), the `c` the rigid anchor leaves out.
+            let av = if valid { a } else { 0.0 };
+            (madd::<ISA>(-av, cx, px), madd::<ISA>(-av, cy, py), madd::<ISA>(-av, cz, pz))
+        };
+        r.x[l] = madd::<ISA>(s.anchor[0][l], fa, madd::<ISA>(nx, fr, bx));
+        r.y[l] = madd::<ISA>(s.anchor[1][l], fa, madd::<ISA>(ny, fr, by));
+        r.z[l] = madd::<ISA>(s.anchor[2][l], fa, madd::<ISA>(nz, fr, bz));
     }
     r
 }

@@ -55,28 +55,46 @@ pub(crate) struct PivotBone {
 }
 
 /// A bone for skinning with centers of rotation: its full deform matrix (which moves the
-/// center, as LBS would), its rotation (the one DQS uses), and the rows of its scale/shear part
-/// `S = Rᵀ·M₃` (exactly the identity for bones that do not take the scale path). The first
-/// 64-byte line is all that rigid poses read.
+/// center, as LBS would), its rotation (the one DQS uses), and its scale/shear part `S = Rᵀ·M₃`
+/// row by row (exactly the identity for bones that do not take the scale path). The first
+/// 24 floats are three 8-float windows that SIMD code transposes; `s22` alone, the last entry of
+/// `S`, is gathered (a fourth window for one float would cost a whole transpose).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct CorBone {
     pub matrix: AffineRows,
     pub real: Vec4,
-    pub stretch: AffineRows,
-    /// Zeros, so that SIMD code can load the last 8-float window of the record.
-    pub padding: Vec4,
+    /// `S` row-major without its last entry: `s00 s01 s02 s10 s11 s12 s20 s21`.
+    pub stretch: [f32; 8],
+    pub s22: f32,
+    /// Zeros, so that the record is two 64-byte lines.
+    pub padding: [f32; 7],
 }
 
-/// A rigid bone for skinning with centers of rotation: its rotation (x, y, z, w) and
+impl CorBone {
+    /// Row `r` of the scale/shear part `S`.
+    #[inline(always)]
+    pub fn stretch_row(&self, r: usize) -> [f32; 3] {
+        match r {
+            0 => [self.stretch[0], self.stretch[1], self.stretch[2]],
+            1 => [self.stretch[3], self.stretch[4], self.stretch[5]],
+            _ => [self.stretch[6], self.stretch[7], self.s22],
+        }
+    }
+}
+
+/// A rigid bone for skinning with centers of rotation: its rotation (x, y, z, w) and half its
 /// translation (x, y, z, 0). 8 floats, so SIMD code loads a lane's record in one window; the
-/// kernels rotate the center by `real` rather than read a 3×3 matrix.
+/// kernels rotate the center by `real` rather than read a 3×3 matrix, and add `t/2` inside the
+/// rotation's `½·(R·c − c)` (see `kernels.rs`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(32))]
 pub(crate) struct CorRigidBone {
     pub real: Vec4,
-    pub translation: Vec4,
+    pub half_translation: Vec4,
 }
+
+const _: () = assert!(core::mem::size_of::<CorBone>() == 128 && core::mem::size_of::<CorRigidBone>() == 32);
 
 /// Per-frame bone data for all skinning methods.
 #[derive(Clone, Debug)]
@@ -138,13 +156,15 @@ impl Pose {
                 );
                 pivot.push(PivotBone { translation: AffineRows::from_mat4(&p), real: Vec4::from(q) });
                 let stretch = if is_scaled { Mat3::from_quat(q).transpose() * Mat3::from_mat4(*m) } else { Mat3::IDENTITY };
+                let (s0, s1, s2) = (stretch.row(0), stretch.row(1), stretch.row(2));
                 cor.push(CorBone {
                     matrix: AffineRows::from_mat4(m),
                     real: Vec4::from(q),
-                    stretch: AffineRows::from_mat4(&Mat4::from_mat3(stretch)),
-                    padding: Vec4::ZERO,
+                    stretch: [s0.x, s0.y, s0.z, s1.x, s1.y, s1.z, s2.x, s2.y],
+                    s22: s2.z,
+                    padding: [0.0; 7],
                 });
-                cor_rigid.push(CorRigidBone { real: Vec4::from(q), translation: t.extend(0.0) });
+                cor_rigid.push(CorRigidBone { real: Vec4::from(q), half_translation: (0.5 * t).extend(0.0) });
                 scaled.push(is_scaled);
             }
         }

@@ -35,7 +35,14 @@ unsafe fn load_columns<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [
         // SAFETY: the caller guarantees the index and the offset are in range.
         unsafe { _mm256_loadu_ps(base.add(bones[l] as usize * stride + offset)) }
     };
-    let r: [__m512; 8] = core::array::from_fn(|i| join(row(i), row(i + 8)));
+    transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
+}
+
+/// Transposes eight rows `[record l | record l + 8]` (8 floats each) into eight 16-lane
+/// component vectors.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn transpose(r: [__m512; 8]) -> [__m512; 8] {
     let t0 = _mm512_unpacklo_ps(r[0], r[1]);
     let t1 = _mm512_unpackhi_ps(r[0], r[1]);
     let t2 = _mm512_unpacklo_ps(r[2], r[3]);
@@ -456,6 +463,39 @@ fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
     core::array::from_fn(|k| _mm512_fmadd_ps(q[3], a[k], b[k]))
 }
 
+/// Float offsets of the lanes' bone records in `table`, for [`load_columns_at`]. The indices are
+/// read one by one as scalars (volatile reads keep the compiler from loading them as a vector
+/// and extracting each lane, which costs two shuffles a lane on the vector ports the transpose
+/// needs); the scalar loads and shifts run on the integer side.
+///
+/// # Safety
+/// Every bone index must index `table`.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn record_offsets<T>(table: &[T], bones: &[u32; LANES]) -> [usize; LANES] {
+    let stride = core::mem::size_of::<T>() / 4;
+    core::array::from_fn(|l| {
+        // SAFETY: a valid reference to an initialized u32.
+        let b = unsafe { core::ptr::read_volatile(&bones[l]) } as usize;
+        debug_assert!(b < table.len());
+        b * stride
+    })
+}
+
+/// [`load_columns`] from record offsets given by [`record_offsets`].
+///
+/// # Safety
+/// The offsets must come from [`record_offsets`] on `table`, and `offset + 8` floats must lie
+/// inside a record.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn load_columns_at<T>(table: &[T], records: &[usize; LANES], offset: usize) -> [__m512; 8] {
+    let base = table.as_ptr() as *const f32;
+    // SAFETY: the caller guarantees the offsets are in range.
+    let row = |l: usize| unsafe { _mm256_loadu_ps(base.add(records[l] + offset)) };
+    transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
+}
+
 /// The last entry `s22` of each lane's scale/shear part (see `CorBone`), gathered: one float
 /// per lane does not pay for a transpose.
 ///
@@ -512,15 +552,16 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         let q = if SCALED {
             // SAFETY: indices are in range (validated); a CorBone's first 24 floats are matrix
             // rows 0–1, row 2 and the rotation, and the first 8 entries of its scale/shear part.
-            let a = unsafe { load_columns(job.cor, &slot.bones, 0) };
-            let b = unsafe { load_columns(job.cor, &slot.bones, 8) };
+            let records = unsafe { record_offsets(job.cor, &slot.bones) };
+            let a = unsafe { load_columns_at(job.cor, &records, 0) };
+            let b = unsafe { load_columns_at(job.cor, &records, 8) };
             let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
             for r in 0..3 {
                 let m = rows[r];
                 let moved = _mm512_fmadd_ps(m[0], c[0], _mm512_fmadd_ps(m[1], c[1], _mm512_fmadd_ps(m[2], c[2], m[3])));
                 anchor[r] = _mm512_fmadd_ps(w, moved, anchor[r]);
             }
-            let s = unsafe { load_columns(job.cor, &slot.bones, 16) };
+            let s = unsafe { load_columns_at(job.cor, &records, 16) };
             // SAFETY: as above; fewer than 2²⁶ bones (the pose holds 128 bytes per bone).
             let s22 = unsafe { gather_s22(job.cor, &slot.bones) };
             let rows = [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], s22]];
@@ -533,7 +574,8 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         } else {
             // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
             // rotation, half the translation and a zero.
-            let r = unsafe { load_columns(job.cor_rigid, &slot.bones, 0) };
+            let records = unsafe { record_offsets(job.cor_rigid, &slot.bones) };
+            let r = unsafe { load_columns_at(job.cor_rigid, &records, 0) };
             let moved = rotation_offset(&r[0..4], &r[4..7], &c);
             let w2 = _mm512_add_ps(w, w);
             for k in 0..3 {

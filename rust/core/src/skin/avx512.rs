@@ -496,20 +496,21 @@ unsafe fn load_columns_at<T>(table: &[T], records: &[usize; LANES], offset: usiz
     transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
 }
 
-/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), gathered: one float
-/// per lane does not pay for a transpose.
+/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), by scalar loads
+/// through a small buffer: all on the load/store side, none on the vector ports that the
+/// transposes fill (faster here than the gather; a fourth window would cost a whole transpose).
 ///
 /// # Safety
-/// Every bone index must index `cor`, and `32·index` must fit an `i32` (fewer than 2²⁶ bones).
+/// The offsets must come from [`record_offsets`] on `cor`.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn gather_s22(cor: &[CorBone], bones: &[u32; LANES]) -> __m512 {
-    const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4 && core::mem::size_of::<CorBone>() == 32 * 4) };
-    // SAFETY: the caller guarantees the indices are in range; 16 u32 are 64 bytes.
-    unsafe {
-        let index = _mm512_slli_epi32::<5>(_mm512_loadu_si512(bones.as_ptr() as *const __m512i));
-        _mm512_i32gather_ps::<4>(index, (cor.as_ptr() as *const f32).add(24))
-    }
+unsafe fn load_s22(cor: &[CorBone], records: &[usize; LANES]) -> __m512 {
+    const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4) };
+    let base = cor.as_ptr() as *const f32;
+    // SAFETY: the caller guarantees the offsets are in range.
+    let values: [f32; LANES] = core::array::from_fn(|l| unsafe { *base.add(records[l] + 24) });
+    // SAFETY: 16 floats.
+    unsafe { _mm512_loadu_ps(values.as_ptr()) }
 }
 
 /// Everything skinning with centers of rotation does to one full batch of 16 vertices, in
@@ -563,7 +564,7 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
             }
             let s = unsafe { load_columns_at(job.cor, &records, 16) };
             // SAFETY: as above; fewer than 2²⁶ bones (the pose holds 128 bytes per bone).
-            let s22 = unsafe { gather_s22(job.cor, &slot.bones) };
+            let s22 = unsafe { load_s22(job.cor, &records) };
             let rows = [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], s22]];
             for r in 0..3 {
                 let m = rows[r];

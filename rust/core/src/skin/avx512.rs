@@ -463,36 +463,31 @@ fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
     core::array::from_fn(|k| _mm512_fmadd_ps(q[3], a[k], b[k]))
 }
 
-/// Float offsets of the lanes' bone records in `table`, for [`load_columns_at`]. The indices are
-/// read one by one as scalars (volatile reads keep the compiler from loading them as a vector
-/// and extracting each lane, which costs two shuffles a lane on the vector ports the transpose
-/// needs); the scalar loads and shifts run on the integer side.
+/// Float offset of lane `l`'s bone record in `table`. The index is read as a scalar (a
+/// volatile read keeps the compiler from loading all sixteen as a vector and extracting each
+/// lane, two shuffles a lane on the vector ports the transposes need) right where the record is
+/// loaded, so that no index waits in a register (or a spill slot) for its turn.
 ///
 /// # Safety
-/// Every bone index must index `table`.
-#[inline]
-#[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn record_offsets<T>(table: &[T], bones: &[u32; LANES]) -> [usize; LANES] {
-    let stride = core::mem::size_of::<T>() / 4;
-    core::array::from_fn(|l| {
-        // SAFETY: a valid reference to an initialized u32.
-        let b = unsafe { core::ptr::read_volatile(&bones[l]) } as usize;
-        debug_assert!(b < table.len());
-        b * stride
-    })
+/// `bones[l]` must index `table`.
+#[inline(always)]
+unsafe fn record_offset<T>(table: &[T], bones: &[u32; LANES], l: usize) -> usize {
+    // SAFETY: a valid reference to an initialized u32.
+    let b = unsafe { core::ptr::read_volatile(&bones[l]) } as usize;
+    debug_assert!(b < table.len());
+    b * (core::mem::size_of::<T>() / 4)
 }
 
-/// [`load_columns`] from record offsets given by [`record_offsets`].
+/// [`load_columns`] with the indices read as scalars (see [`record_offset`]).
 ///
 /// # Safety
-/// The offsets must come from [`record_offsets`] on `table`, and `offset + 8` floats must lie
-/// inside a record.
+/// As [`load_columns`].
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn load_columns_at<T>(table: &[T], records: &[usize; LANES], offset: usize) -> [__m512; 8] {
+unsafe fn load_columns_scalar<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [__m512; 8] {
     let base = table.as_ptr() as *const f32;
-    // SAFETY: the caller guarantees the offsets are in range.
-    let row = |l: usize| unsafe { _mm256_loadu_ps(base.add(records[l] + offset)) };
+    // SAFETY: the caller guarantees the indices and the offset are in range.
+    let row = |l: usize| unsafe { _mm256_loadu_ps(base.add(record_offset(table, bones, l) + offset)) };
     transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
 }
 
@@ -501,14 +496,14 @@ unsafe fn load_columns_at<T>(table: &[T], records: &[usize; LANES], offset: usiz
 /// transposes fill (faster here than the gather; a fourth window would cost a whole transpose).
 ///
 /// # Safety
-/// The offsets must come from [`record_offsets`] on `cor`.
+/// Every bone index must index `cor`.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn load_s22(cor: &[CorBone], records: &[usize; LANES]) -> __m512 {
+unsafe fn load_s22(cor: &[CorBone], bones: &[u32; LANES]) -> __m512 {
     const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4) };
     let base = cor.as_ptr() as *const f32;
     // SAFETY: the caller guarantees the offsets are in range.
-    let values: [f32; LANES] = core::array::from_fn(|l| unsafe { *base.add(records[l] + 24) });
+    let values: [f32; LANES] = core::array::from_fn(|l| unsafe { *base.add(record_offset(cor, bones, l) + 24) });
     // SAFETY: 16 floats.
     unsafe { _mm512_loadu_ps(values.as_ptr()) }
 }
@@ -553,18 +548,17 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         let q = if SCALED {
             // SAFETY: indices are in range (validated); a CorBone's first 24 floats are matrix
             // rows 0–1, row 2 and the rotation, and the first 8 entries of its scale/shear part.
-            let records = unsafe { record_offsets(job.cor, &slot.bones) };
-            let a = unsafe { load_columns_at(job.cor, &records, 0) };
-            let b = unsafe { load_columns_at(job.cor, &records, 8) };
+            let a = unsafe { load_columns_scalar(job.cor, &slot.bones, 0) };
+            let b = unsafe { load_columns_scalar(job.cor, &slot.bones, 8) };
             let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
             for r in 0..3 {
                 let m = rows[r];
                 let moved = _mm512_fmadd_ps(m[0], c[0], _mm512_fmadd_ps(m[1], c[1], _mm512_fmadd_ps(m[2], c[2], m[3])));
                 anchor[r] = _mm512_fmadd_ps(w, moved, anchor[r]);
             }
-            let s = unsafe { load_columns_at(job.cor, &records, 16) };
+            let s = unsafe { load_columns_scalar(job.cor, &slot.bones, 16) };
             // SAFETY: as above; fewer than 2²⁶ bones (the pose holds 128 bytes per bone).
-            let s22 = unsafe { load_s22(job.cor, &records) };
+            let s22 = unsafe { load_s22(job.cor, &slot.bones) };
             let rows = [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], s22]];
             for r in 0..3 {
                 let m = rows[r];
@@ -575,8 +569,7 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         } else {
             // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
             // rotation, half the translation and a zero.
-            let records = unsafe { record_offsets(job.cor_rigid, &slot.bones) };
-            let r = unsafe { load_columns_at(job.cor_rigid, &records, 0) };
+            let r = unsafe { load_columns_scalar(job.cor_rigid, &slot.bones, 0) };
             let moved = rotation_offset(&r[0..4], &r[4..7], &c);
             let w2 = _mm512_add_ps(w, w);
             for k in 0..3 {

@@ -35,7 +35,14 @@ unsafe fn load_columns<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [
         // SAFETY: the caller guarantees the index and the offset are in range.
         unsafe { _mm256_loadu_ps(base.add(bones[l] as usize * stride + offset)) }
     };
-    let r: [__m512; 8] = core::array::from_fn(|i| join(row(i), row(i + 8)));
+    transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
+}
+
+/// Transposes eight rows `[record l | record l + 8]` (8 floats each) into eight 16-lane
+/// component vectors.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn transpose(r: [__m512; 8]) -> [__m512; 8] {
     let t0 = _mm512_unpacklo_ps(r[0], r[1]);
     let t1 = _mm512_unpackhi_ps(r[0], r[1]);
     let t2 = _mm512_unpacklo_ps(r[2], r[3]);
@@ -456,20 +463,49 @@ fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
     core::array::from_fn(|k| _mm512_fmadd_ps(q[3], a[k], b[k]))
 }
 
-/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), gathered: one float
-/// per lane does not pay for a transpose.
+/// Float offset of lane `l`'s bone record in `table`. The index is read as a scalar (a
+/// volatile read keeps the compiler from loading all sixteen as a vector and extracting each
+/// lane, two shuffles a lane on the vector ports the transposes need) right where the record is
+/// loaded, so that no index waits in a register (or a spill slot) for its turn.
 ///
 /// # Safety
-/// Every bone index must index `cor`, and `32·index` must fit an `i32` (fewer than 2²⁶ bones).
+/// `bones[l]` must index `table`.
+#[inline(always)]
+unsafe fn record_offset<T>(table: &[T], bones: &[u32; LANES], l: usize) -> usize {
+    // SAFETY: a valid reference to an initialized u32.
+    let b = unsafe { core::ptr::read_volatile(&bones[l]) } as usize;
+    debug_assert!(b < table.len());
+    b * (core::mem::size_of::<T>() / 4)
+}
+
+/// [`load_columns`] with the indices read as scalars (see [`record_offset`]).
+///
+/// # Safety
+/// As [`load_columns`].
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn gather_s22(cor: &[CorBone], bones: &[u32; LANES]) -> __m512 {
-    const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4 && core::mem::size_of::<CorBone>() == 32 * 4) };
-    // SAFETY: the caller guarantees the indices are in range; 16 u32 are 64 bytes.
-    unsafe {
-        let index = _mm512_slli_epi32::<5>(_mm512_loadu_si512(bones.as_ptr() as *const __m512i));
-        _mm512_i32gather_ps::<4>(index, (cor.as_ptr() as *const f32).add(24))
-    }
+unsafe fn load_columns_scalar<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [__m512; 8] {
+    let base = table.as_ptr() as *const f32;
+    // SAFETY: the caller guarantees the indices and the offset are in range.
+    let row = |l: usize| unsafe { _mm256_loadu_ps(base.add(record_offset(table, bones, l) + offset)) };
+    transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
+}
+
+/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), by scalar loads
+/// through a small buffer: all on the load/store side, none on the vector ports that the
+/// transposes fill (faster here than the gather; a fourth window would cost a whole transpose).
+///
+/// # Safety
+/// Every bone index must index `cor`.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn load_s22(cor: &[CorBone], bones: &[u32; LANES]) -> __m512 {
+    const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4) };
+    let base = cor.as_ptr() as *const f32;
+    // SAFETY: the caller guarantees the offsets are in range.
+    let values: [f32; LANES] = core::array::from_fn(|l| unsafe { *base.add(record_offset(cor, bones, l) + 24) });
+    // SAFETY: 16 floats.
+    unsafe { _mm512_loadu_ps(values.as_ptr()) }
 }
 
 /// Everything skinning with centers of rotation does to one full batch of 16 vertices, in
@@ -512,17 +548,17 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         let q = if SCALED {
             // SAFETY: indices are in range (validated); a CorBone's first 24 floats are matrix
             // rows 0–1, row 2 and the rotation, and the first 8 entries of its scale/shear part.
-            let a = unsafe { load_columns(job.cor, &slot.bones, 0) };
-            let b = unsafe { load_columns(job.cor, &slot.bones, 8) };
+            let a = unsafe { load_columns_scalar(job.cor, &slot.bones, 0) };
+            let b = unsafe { load_columns_scalar(job.cor, &slot.bones, 8) };
             let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
             for r in 0..3 {
                 let m = rows[r];
                 let moved = _mm512_fmadd_ps(m[0], c[0], _mm512_fmadd_ps(m[1], c[1], _mm512_fmadd_ps(m[2], c[2], m[3])));
                 anchor[r] = _mm512_fmadd_ps(w, moved, anchor[r]);
             }
-            let s = unsafe { load_columns(job.cor, &slot.bones, 16) };
+            let s = unsafe { load_columns_scalar(job.cor, &slot.bones, 16) };
             // SAFETY: as above; fewer than 2²⁶ bones (the pose holds 128 bytes per bone).
-            let s22 = unsafe { gather_s22(job.cor, &slot.bones) };
+            let s22 = unsafe { load_s22(job.cor, &slot.bones) };
             let rows = [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], s22]];
             for r in 0..3 {
                 let m = rows[r];
@@ -533,7 +569,7 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         } else {
             // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
             // rotation, half the translation and a zero.
-            let r = unsafe { load_columns(job.cor_rigid, &slot.bones, 0) };
+            let r = unsafe { load_columns_scalar(job.cor_rigid, &slot.bones, 0) };
             let moved = rotation_offset(&r[0..4], &r[4..7], &c);
             let w2 = _mm512_add_ps(w, w);
             for k in 0..3 {

@@ -200,7 +200,7 @@ fn skin_with(
         Method::CentersOfRotation { centers: c } => {
             let kind = needs_rest(kernels::Kind::CentersOfRotation)?;
             check_len("centers", n, c.len())?;
-            if let Some(index) = c.iter().position(|p| !p.iter().all(|x| x.is_finite())) {
+            if let Some(index) = first_not_finite(c) {
                 return Err(SkinError::NotFinite { what: "centers", index });
             }
             centers = Some(c);
@@ -272,6 +272,27 @@ fn check_len(what: &'static str, expected: usize, got: usize) -> Result<(), Skin
         return Err(SkinError::LengthMismatch { what, expected, got });
     }
     Ok(())
+}
+
+/// Index of the first point with a NaN or infinite coordinate. Scans blocks branch-free (the
+/// largest exponent field of a block, which is all ones only for a non-finite value), so the
+/// scan vectorizes, and in parallel on the pool for large arrays: a serial scalar scan costs
+/// about a tenth of a skinning pass and does not shrink with more threads. Only a failing block
+/// is searched for the exact index.
+fn first_not_finite(points: &[[f32; 3]]) -> Option<usize> {
+    const BLOCK: usize = 1024;
+    const EXPONENT: u32 = 0x7f80_0000;
+    let bad = |block: &[[f32; 3]]| {
+        block.as_flattened().iter().fold(0u32, |m, x| m.max(x.to_bits() & EXPONENT)) == EXPONENT
+    };
+    let block = if points.len() <= kernels::CHUNK {
+        points.chunks(BLOCK).position(bad)
+    } else {
+        use rayon::prelude::*;
+        crate::pool::run(|| points.par_chunks(BLOCK).position_first(bad))
+    }?;
+    let start = block * BLOCK;
+    points[start..].iter().position(|p| !p.iter().all(|x| x.is_finite())).map(|i| start + i)
 }
 
 fn check_unit_interval(what: &'static str, values: &[f32]) -> Result<(), SkinError> {

@@ -231,21 +231,36 @@ fn rotation_offset(q: &[__m256], h: &[__m256], p: &[__m256; 3]) -> [__m256; 3] {
     core::array::from_fn(|k| _mm256_fmadd_ps(q[3], a[k], b[k]))
 }
 
-/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), gathered.
+/// Float offset of lane `l`'s bone record in `table`. The index is read as a scalar (a
+/// volatile read keeps the compiler from loading the eight as a vector and extracting each
+/// lane) right where the record is loaded, so that no index waits in a register for its turn.
 ///
 /// # Safety
-/// Every `bones[l]` must index `cor`, and `32·bones[l]` must fit an `i32` (fewer than 2²⁶
-/// bones).
+/// `bones[l]` must index `table`.
+#[inline(always)]
+unsafe fn record_offset<T>(table: &[T], bones: &[u32], l: usize) -> usize {
+    // SAFETY: a valid reference to an initialized u32.
+    let b = unsafe { core::ptr::read_volatile(&bones[l]) } as usize;
+    debug_assert!(b < table.len());
+    b * (core::mem::size_of::<T>() / 4)
+}
+
+/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), by scalar loads
+/// through a small buffer: all on the load/store side, none on the vector ports that the
+/// transposes fill (faster here than the gather).
+///
+/// # Safety
+/// Every `bones[l]` must index `cor`.
 #[inline]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn gather_s22(cor: &[CorBone], bones: &[u32]) -> __m256 {
-    const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4 && core::mem::size_of::<CorBone>() == 32 * 4) };
+unsafe fn load_s22(cor: &[CorBone], bones: &[u32]) -> __m256 {
+    const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4) };
     debug_assert!(bones.len() >= HALF);
-    // SAFETY: the caller guarantees the indices are in range; 8 u32 are 32 bytes.
-    unsafe {
-        let index = _mm256_slli_epi32::<5>(_mm256_loadu_si256(bones.as_ptr() as *const __m256i));
-        _mm256_i32gather_ps::<4>((cor.as_ptr() as *const f32).add(24), index)
-    }
+    let base = cor.as_ptr() as *const f32;
+    // SAFETY: the caller guarantees the indices are in range.
+    let values: [f32; HALF] = core::array::from_fn(|l| unsafe { *base.add(record_offset(cor, bones, l) + 24) });
+    // SAFETY: 8 floats.
+    unsafe { _mm256_loadu_ps(values.as_ptr()) }
 }
 
 /// Sums for skinning with centers of rotation (see `kernels.rs`): where each bone puts the
@@ -307,8 +322,8 @@ pub(super) unsafe fn accumulate_centers(
             }
             {
                 let s = unsafe { load_columns(cor, bones, 16) };
-                // SAFETY: as above; fewer than 2²⁶ bones (the pose holds 128 bytes per bone).
-                let s22 = unsafe { gather_s22(cor, bones) };
+                // SAFETY: as above.
+                let s22 = unsafe { load_s22(cor, bones) };
                 let rows = [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], s22]];
                 for r in 0..3 {
                     let m = rows[r];

@@ -58,8 +58,8 @@ pub(crate) struct PivotBone {
 /// center, as LBS would), its rotation (the one DQS uses), and its scale/shear part `S = Rᵀ·M₃`
 /// row by row (exactly the identity for bones that do not take the scale path). The first
 /// 24 floats are three 8-float windows that SIMD code transposes; `s22` alone, the last entry of
-/// `S`, is loaded on its own (gathered, or by scalar loads in the AVX-512 copy; a fourth window
-/// for one float would cost a whole transpose).
+/// `S`, is loaded on its own (by scalar loads in the SIMD copies; a fourth window for one float
+/// would cost a whole transpose).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct CorBone {

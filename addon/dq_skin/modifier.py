@@ -315,22 +315,9 @@ def _quick(obj, mod, st: State, ctx: Context, source: str):
         return None  # the pose did not change: the result is already this
     premat, postmat = st.spaces
     signature = (old[0], old[1], raw) + old[3:]
-    job = (
-        data.positions,
-        binding.influences,
-        np.ascontiguousarray(deform),
-        binding.rest,
-        s.method,
-        premat,
-        postmat,
-        binding.mask,
-        st.blend if s.method == "blend" else None,
-        s.blend_factor,
-        st.out,
-        st.centers if s.method == "centers_of_rotation" else None,
-    )
     if s.method == "centers_of_rotation" and (st.centers is None or st.centers_key != st.binding_key):
         return False
+    job = _job(st, s, data.positions, binding.influences, deform, binding.rest, premat, postmat)
     return Plan(obj, mod, st, s, st.result, nodes.RESULT_REPLACE, signature, job, time.perf_counter(), quick=True)
 
 
@@ -399,7 +386,8 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
         st.uses_bbones = bool(st.segments.max(initial=0) > 1)
     st.needs_effective = s.use_envelopes or st.uses_envelopes or st.uses_bbones
     binding = st.binding
-    centers_now = _centers(obj, st, data, binding, ctx) if s.method == "centers_of_rotation" else None
+    if s.method == "centers_of_rotation":
+        _centers(obj, st, data, binding, ctx)  # kept in st.centers
     if len(positions) != binding.vertex_count:
         raise SkinError(
             f"An earlier modifier changed the vertex count ({binding.vertex_count} → {len(positions)}); "
@@ -439,7 +427,13 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
         )
         matrices = rig.with_bbone_joints(matrices, arm_eval, binding, st.segments)
         deform, rest = matrices.deform, matrices.rest
-    job = (
+    job = _job(st, s, positions, influences, deform, rest, premat, postmat)
+    return Plan(obj, mod, st, s, result, mode, signature, job, start)
+
+
+def _job(st: State, s: Settings, positions, influences, deform, rest, premat, postmat) -> tuple:
+    """The arguments of `dqskin.skin_many` for one modifier: its settings, kept data and output."""
+    return (
         positions,
         influences,
         np.ascontiguousarray(deform),
@@ -447,23 +441,22 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
         s.method,
         premat,
         postmat,
-        binding.mask,
+        st.binding.mask,
         st.blend if s.method == "blend" else None,
         s.blend_factor,
         st.out,
-        centers_now,
+        st.centers if s.method == "centers_of_rotation" else None,
     )
-    return Plan(obj, mod, st, s, result, mode, signature, job, start)
 
 
-def _centers(obj, st: State, data, binding, ctx: Context) -> np.ndarray:
-    """The Optimized Centers of Rotation for this binding: kept, found in the cache, computed now
-    (small meshes, command line, renders), or started in the background (the SkinError that
-    says so lets Blender's deformation stand in until they are ready)."""
+def _centers(obj, st: State, data, binding, ctx: Context) -> None:
+    """Puts the Optimized Centers of Rotation for this binding in `st.centers`: kept, found in the
+    cache, computed now (small meshes, command line, renders), or started in the background (the
+    SkinError that says so lets Blender's deformation stand in until they are ready)."""
     if st.needs_effective:
         raise SkinError("Optimized Centers works with vertex groups only, not with envelopes or B-Bones: choose another method")
     if st.centers is not None and st.centers_key == st.binding_key:
-        return st.centers
+        return
     triangles = centers.triangles_of(obj.data)
     key = centers.key_of(data.positions, triangles, binding.influences)
     got = centers.lookup(key, data.vertex_count)
@@ -484,7 +477,6 @@ def _centers(obj, st: State, data, binding, ctx: Context) -> np.ndarray:
                 "Blender's deformation shows until they are ready"
             )
     st.centers, st.centers_key = got, st.binding_key
-    return got
 
 
 def finish(plan: Plan) -> None:

@@ -117,19 +117,15 @@ def _frames(text: str | None, scene) -> tuple[int, int]:
 
 
 def _bpy(user_resources: str | None):
-    if _embedded_in():
-        import bpy  # inside Blender, which has loaded the extension this runs from
-
-        watch_signals()
-        _addon("centers").interrupted = lambda: bool(_signalled)
-        return bpy
-    if user_resources:
+    embedded = _embedded_in()
+    if not embedded and user_resources:
         os.environ["BLENDER_USER_RESOURCES"] = str(Path(user_resources).resolve())
-    import bpy  # noqa: F401  (after BLENDER_USER_RESOURCES)
+    import bpy  # noqa: F401  (after BLENDER_USER_RESOURCES; inside Blender, already loaded)
     import addon_utils
 
     watch_signals()  # again: importing bpy installs Blender's handlers
-    if addon_utils.enable(EXTENSION, default_set=True) is None:
+    # Inside Blender the extension this runs from is loaded already.
+    if not embedded and addon_utils.enable(EXTENSION, default_set=True) is None:
         raise Failure(
             f"the DQ Skin extension is not installed in {os.environ.get('BLENDER_USER_RESOURCES', 'the default user folder')}"
         )

@@ -65,17 +65,25 @@ unsafe fn load_columns<T>(table: &[T], bones: &[u32], offset: usize) -> [__m256;
     transpose8([row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7)])
 }
 
+/// `w`, negated in the lanes where `q·sum < 0`: a quaternion's sign chosen against the running
+/// sum. The dot product in two independent halves: the sign choice is the serial chain, so keep
+/// it short.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+fn signed_weight(q: &[__m256], sum: &[__m256; 4], w: __m256) -> __m256 {
+    let dot = _mm256_add_ps(
+        _mm256_fmadd_ps(q[1], sum[1], _mm256_mul_ps(q[0], sum[0])),
+        _mm256_fmadd_ps(q[3], sum[3], _mm256_mul_ps(q[2], sum[2])),
+    );
+    let negative = _mm256_cmp_ps::<_CMP_LT_OQ>(dot, _mm256_setzero_ps());
+    _mm256_xor_ps(w, _mm256_and_ps(negative, _mm256_set1_ps(-0.0)))
+}
+
 /// Adds `±w·(q, d)` to the sums, the sign chosen by `q·sum < 0` per lane.
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 fn add_signed(real: &mut [__m256; 4], dual: &mut [__m256; 4], q: &[__m256], d: &[__m256], w: __m256) {
-    // Two independent halves: the sign choice is the serial chain, so keep it short.
-    let dot = _mm256_add_ps(
-        _mm256_fmadd_ps(q[1], real[1], _mm256_mul_ps(q[0], real[0])),
-        _mm256_fmadd_ps(q[3], real[3], _mm256_mul_ps(q[2], real[2])),
-    );
-    let negative = _mm256_cmp_ps::<_CMP_LT_OQ>(dot, _mm256_setzero_ps());
-    let ws = _mm256_xor_ps(w, _mm256_and_ps(negative, _mm256_set1_ps(-0.0)));
+    let ws = signed_weight(q, real, w);
     for c in 0..4 {
         real[c] = _mm256_fmadd_ps(q[c], ws, real[c]);
         dual[c] = _mm256_fmadd_ps(d[c], ws, dual[c]);
@@ -202,12 +210,7 @@ unsafe fn scaled_half(
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 fn add_signed_rotation(real: &mut [__m256; 4], q: &[__m256], w: __m256) {
-    let dot = _mm256_add_ps(
-        _mm256_fmadd_ps(q[1], real[1], _mm256_mul_ps(q[0], real[0])),
-        _mm256_fmadd_ps(q[3], real[3], _mm256_mul_ps(q[2], real[2])),
-    );
-    let negative = _mm256_cmp_ps::<_CMP_LT_OQ>(dot, _mm256_setzero_ps());
-    let ws = _mm256_xor_ps(w, _mm256_and_ps(negative, _mm256_set1_ps(-0.0)));
+    let ws = signed_weight(q, real, w);
     for c in 0..4 {
         real[c] = _mm256_fmadd_ps(q[c], ws, real[c]);
     }

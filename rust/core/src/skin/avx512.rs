@@ -74,17 +74,30 @@ fn transpose(r: [__m512; 8]) -> [__m512; 8] {
     ]
 }
 
+/// `a·b` of quaternions per lane, in two independent halves: the sign choice that waits on it is
+/// the serial chain, so keep it short.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn dot4(a: &[__m512], b: &[__m512]) -> __m512 {
+    _mm512_add_ps(
+        _mm512_fmadd_ps(a[1], b[1], _mm512_mul_ps(a[0], b[0])),
+        _mm512_fmadd_ps(a[3], b[3], _mm512_mul_ps(a[2], b[2])),
+    )
+}
+
+/// `w`, negated in the lanes where `dot < 0`: a quaternion's sign chosen against the running sum.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn signed_weight(dot: __m512, w: __m512) -> __m512 {
+    let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
+    _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w)
+}
+
 /// Adds `±w·(q, d)` to the sums, the sign chosen by `q·sum < 0` per lane.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 fn add_signed(real: &mut [__m512; 4], dual: &mut [__m512; 4], q: &[__m512], d: &[__m512], w: __m512) {
-    // Two independent halves: the sign choice is the serial chain, so keep it short.
-    let dot = _mm512_add_ps(
-        _mm512_fmadd_ps(q[1], real[1], _mm512_mul_ps(q[0], real[0])),
-        _mm512_fmadd_ps(q[3], real[3], _mm512_mul_ps(q[2], real[2])),
-    );
-    let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
-    let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
+    let ws = signed_weight(dot4(q, real), w);
     for c in 0..4 {
         real[c] = _mm512_fmadd_ps(q[c], ws, real[c]);
         dual[c] = _mm512_fmadd_ps(d[c], ws, dual[c]);
@@ -427,22 +440,8 @@ pub(super) unsafe fn batch<const KIND: u8>(
         (None, Some(d)) => d,
         (None, None) => p,
     };
-    let mut r = match job.postmat {
-        Some(m) => Affine::new(m).apply(moved),
-        None => moved,
-    };
-    // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
-    let untouched = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(a, zero);
-    for k in 0..3 {
-        r[k] = _mm512_mask_mov_ps(r[k], untouched, o[k]);
-    }
-    let mut result = Points { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
-    unsafe {
-        _mm512_storeu_ps(result.x.as_mut_ptr(), r[0]);
-        _mm512_storeu_ps(result.y.as_mut_ptr(), r[1]);
-        _mm512_storeu_ps(result.z.as_mut_ptr(), r[2]);
-        store_points(&result, out);
-    }
+    // SAFETY: as this function's own contract.
+    unsafe { write_batch(job, moved, a, o, out) }
 }
 
 /// `½·(R·p + t − p)` for the unit quaternions `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v ×
@@ -506,6 +505,32 @@ unsafe fn load_s22(cor: &[CorBone], bones: &[u32; LANES]) -> __m512 {
     let values: [f32; LANES] = core::array::from_fn(|l| unsafe { *base.add(record_offset(cor, bones, l) + 24) });
     // SAFETY: 16 floats.
     unsafe { _mm512_loadu_ps(values.as_ptr()) }
+}
+
+/// The end of every batch: `postmat`, the lanes with strength `a = 0` left bit-identical to the
+/// originals `o` (no space round trip), store.
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn write_batch(job: &BatchJob<'_>, moved: [__m512; 3], a: __m512, o: [__m512; 3], out: &mut [[f32; 3]; LANES]) {
+    let mut r = match job.postmat {
+        Some(m) => Affine::new(m).apply(moved),
+        None => moved,
+    };
+    let untouched = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(a, _mm512_setzero_ps());
+    for k in 0..3 {
+        r[k] = _mm512_mask_mov_ps(r[k], untouched, o[k]);
+    }
+    let mut result = Points { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
+    // SAFETY: the arrays have exactly 16 lanes.
+    unsafe {
+        _mm512_storeu_ps(result.x.as_mut_ptr(), r[0]);
+        _mm512_storeu_ps(result.y.as_mut_ptr(), r[1]);
+        _mm512_storeu_ps(result.z.as_mut_ptr(), r[2]);
+        store_points(&result, out);
+    }
 }
 
 /// Everything skinning with centers of rotation does to one full batch of 16 vertices, in
@@ -580,25 +605,16 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         // The sign chain, shortened: the running sum is `real + ws_prev·q_prev` (the previous
         // term not added yet), so `q·sum = q·real + ws_prev·(q·q_prev)` where both dot products
         // are off the chain and only one FMA waits for `ws_prev`.
-        let dot4 = |a: &[__m512; 4], b: &[__m512; 4]| {
-            _mm512_add_ps(
-                _mm512_fmadd_ps(a[1], b[1], _mm512_mul_ps(a[0], b[0])),
-                _mm512_fmadd_ps(a[3], b[3], _mm512_mul_ps(a[2], b[2])),
-            )
-        };
         // Worth it where the slot's other work is long (scaled poses); rigid poses are bound by
         // throughput, and the extra products cost more than the shorter chain saves.
         if SCALED {
-            let dot = _mm512_fmadd_ps(ws_prev, dot4(&q, &q_prev), dot4(&q, &real));
-            let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
-            let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
+            let ws = signed_weight(_mm512_fmadd_ps(ws_prev, dot4(&q, &q_prev), dot4(&q, &real)), w);
             for k in 0..4 {
                 real[k] = _mm512_fmadd_ps(q_prev[k], ws_prev, real[k]);
             }
             (q_prev, ws_prev) = (q, ws);
         } else {
-            let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot4(&q, &real), _mm512_setzero_ps());
-            let ws = _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w);
+            let ws = signed_weight(dot4(&q, &real), w);
             for k in 0..4 {
                 real[k] = _mm512_fmadd_ps(q[k], ws, real[k]);
             }
@@ -650,20 +666,6 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     };
     // anchor·(a/contrib) + n·(a/|q|²) + base
     let moved: [__m512; 3] = core::array::from_fn(|k| _mm512_fmadd_ps(anchor[k], fa, _mm512_fmadd_ps(n[k], fr, base[k])));
-    let mut r = match job.postmat {
-        Some(m) => Affine::new(m).apply(moved),
-        None => moved,
-    };
-    // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
-    let untouched = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(a, zero);
-    for k in 0..3 {
-        r[k] = _mm512_mask_mov_ps(r[k], untouched, o[k]);
-    }
-    let mut result = Points { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
-    unsafe {
-        _mm512_storeu_ps(result.x.as_mut_ptr(), r[0]);
-        _mm512_storeu_ps(result.y.as_mut_ptr(), r[1]);
-        _mm512_storeu_ps(result.z.as_mut_ptr(), r[2]);
-        store_points(&result, out);
-    }
+    // SAFETY: as this function's own contract.
+    unsafe { write_batch(job, moved, a, o, out) }
 }

@@ -202,14 +202,7 @@ impl WeightVectors {
         for v in 0..influences.vertex_count() {
             list.clear();
             list.extend(influences.of_vertex(v).iter().filter(|i| i.weight > 0.0).map(|i| (i.bone, f64::from(i.weight))));
-            list.sort_by_key(|e| e.0);
-            list.dedup_by(|next, kept| {
-                let same = next.0 == kept.0;
-                if same {
-                    kept.1 += next.1;
-                }
-                same
-            });
+            add_up_repeated_bones(&mut list);
             let total: f64 = list.iter().map(|e| e.1).sum();
             if total > f64::from(MIN_TOTAL_WEIGHT) {
                 entries.extend(list.iter().map(|&(b, w)| (b, w / total)));
@@ -360,14 +353,7 @@ impl PairIndex {
                     for &v in t {
                         mean.extend_from_slice(weights.of(v as usize));
                     }
-                    mean.sort_by_key(|e| e.0);
-                    mean.dedup_by(|next, kept| {
-                        let same = next.0 == kept.0;
-                        if same {
-                            kept.1 += next.1;
-                        }
-                        same
-                    });
+                    add_up_repeated_bones(mean);
                     if mean.len() < 2 {
                         return None;
                     }
@@ -534,6 +520,19 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 fn length(a: [f64; 3]) -> f64 {
     (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}
+
+/// Sorts `(bone, weight)` pairs by bone and adds up the weights of a bone listed more than once
+/// (stable: equal bones keep their order, so the sums are the same on every run).
+fn add_up_repeated_bones(list: &mut Vec<(u32, f64)>) {
+    list.sort_by_key(|e| e.0);
+    list.dedup_by(|next, kept| {
+        let same = next.0 == kept.0;
+        if same {
+            kept.1 += next.1;
+        }
+        same
+    });
 }
 
 #[cfg(test)]

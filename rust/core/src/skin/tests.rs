@@ -296,10 +296,16 @@ fn case() -> impl Strategy<Value = (Rig, Vec<[f32; 3]>, Vec<Vec<(u32, f32)>>, Ve
 fn run(method: Method<'_>, positions: &[[f32; 3]], lists: &[Vec<(u32, f32)>], rig: &Rig, options: &SkinOptions<'_>) -> Vec<[f32; 3]> {
     let influences = Influences::from_lists(lists, rig.rest.len()).unwrap();
     let pose = Pose::new(&rig.deform, Some(&rig.rest)).unwrap();
+    skin_all(method, positions, &influences, &pose, options)
+}
+
+/// Skins with every compiled copy of the kernels (they must agree to round-off); returns the
+/// last one's result.
+pub(in crate::skin) fn skin_all(method: Method<'_>, positions: &[[f32; 3]], influences: &Influences, pose: &Pose, options: &SkinOptions<'_>) -> Vec<[f32; 3]> {
     let mut results = Vec::new();
     for simd in kernels::Simd::available() {
         let mut out = vec![[f32::NAN; 3]; positions.len()];
-        skin_with(simd, method, positions, &influences, &pose, options, &mut out).unwrap();
+        skin_with(simd, method, positions, influences, pose, options, &mut out).unwrap();
         results.push(out);
     }
     let last = results.pop().unwrap();

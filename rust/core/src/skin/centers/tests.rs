@@ -2,7 +2,8 @@
 //! kernel against a scalar f64 reference and the properties the method promises.
 
 use super::super::kernels::Simd;
-use super::super::{skin_with, Method, Pose, SkinError, SkinOptions};
+use super::super::tests::skin_all;
+use super::super::{Method, Pose, SkinError, SkinOptions};
 use super::*;
 use crate::rigs::{polygon_area, Creature, TwistCylinder};
 use glam::{DMat3, DQuat, DVec3, Mat4, Quat, Vec3};
@@ -298,25 +299,6 @@ fn reference(positions: &[[f32; 3]], centers: &[[f32; 3]], lists: &[Vec<(u32, f3
             post.transform_point3(co + (moved - co) * a)
         })
         .collect()
-}
-
-/// Skins with every compiled copy of the kernels (they must agree to round-off); returns the
-/// last one's result.
-fn skin_all(method: Method<'_>, positions: &[[f32; 3]], influences: &Influences, pose: &Pose, options: &SkinOptions<'_>) -> Vec<[f32; 3]> {
-    let mut results = Vec::new();
-    for simd in Simd::available() {
-        let mut out = vec![[f32::NAN; 3]; positions.len()];
-        skin_with(simd, method, positions, influences, pose, options, &mut out).unwrap();
-        results.push(out);
-    }
-    let last = results.pop().unwrap();
-    for other in &results {
-        for (a, b) in other.iter().zip(&last) {
-            let (a, b) = (Vec3::from_array(*a), Vec3::from_array(*b));
-            assert!((a - b).length() <= 1e-5 * (1.0 + b.length()), "compiled copies disagree: {a} vs {b}");
-        }
-    }
-    last
 }
 
 fn unit_quat() -> impl Strategy<Value = Quat> {

@@ -9,6 +9,8 @@ result the handlers (see `handlers`) keep current.
 import bpy
 
 from . import animation, bake, cli, compare, handlers, operators, rig, ui  # noqa: F401
+# Found by the glTF exporter in every enabled add-on's module (see `exports`).
+from .exports import glTF2ExportUserExtension  # noqa: F401
 
 CLASSES = (*operators.CLASSES, *bake.CLASSES, *compare.CLASSES, *animation.CLASSES, *ui.CLASSES)
 

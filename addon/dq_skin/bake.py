@@ -10,6 +10,7 @@ import bpy
 import numpy as np
 
 from . import modifier, operators
+from .state import Mode
 from .progress import Progress
 from .dqskin import pc2
 
@@ -46,9 +47,9 @@ def bake(context, obj, mod, path, frame_start: int, frame_end: int, check=None) 
                 if check is not None:
                     check()
                 depsgraph = context.evaluated_depsgraph_get()
-                st = modifier.state(obj, mod)
-                if st.error:
-                    raise RuntimeError(f"frame {frame}: {st.error}")
+                status = modifier.status_of(obj, mod)
+                if status.mode is not Mode.LIVE:
+                    raise RuntimeError(f"frame {frame}: DQ Skin is not deforming: {status.message}")
                 writer.add(_positions(obj, depsgraph))
                 progress.step()
     finally:
@@ -107,8 +108,7 @@ class OBJECT_OT_dq_skin_bake(operators.ActiveMeshOperator):
             return {"CANCELLED"}
         add_cache_modifier(obj, mod, path, start)
         if self.disable_dq_skin:
-            mod.show_viewport = False
-            mod.show_render = False
+            modifier.switch_off(obj, mod)
         self.report({"INFO"}, f"Baked {header.samples} frames of {header.points} points to {path}")
         return {"FINISHED"}
 

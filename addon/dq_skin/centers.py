@@ -65,9 +65,6 @@ def in_background() -> bool:
     return bpy.app.background
 
 
-_throttle = 0.0  # seconds to wait at each progress report (tests: a computation slow enough to cancel)
-
-
 def interrupted() -> bool:
     """Replaced by the batch command line: whether Ctrl-C or SIGTERM came (stop computing)."""
     return False
@@ -164,8 +161,6 @@ def compute(positions, triangles, influences, key: str, label: str = "", check=N
     last = [0]
 
     def report(done: int, total: int) -> bool:
-        if _throttle:
-            time.sleep(_throttle)
         if job is not None:
             job.done, job.total = done, total
             if job.cancel:
@@ -227,13 +222,6 @@ def cancel(key: str) -> None:
     job = _jobs.get(key)
     if job is not None:
         job.cancel = True
-
-
-def forget_job(key: str) -> None:
-    """After a failure was shown: the next evaluation may try again."""
-    job = _jobs.get(key)
-    if job is not None and job.finished:
-        del _jobs[key]
 
 
 def _poll():

@@ -1,23 +1,27 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The companion: the Armature modifier kept right after each DQ Skin modifier.
+"""The companion: the Armature modifier kept right after each DQ Skin modifier, Blender's own
+deformation for wherever DQ Skin does not deform.
 
-`dq_skin_add` keeps the Armature modifier it replaces and moves it right after DQ Skin. It is
-what deforms the mesh whenever DQ Skin cannot:
-- in files opened where the extension is not installed (a render farm node): every file is
-  saved with the companion *active* (enabled, set up like DQ Skin) and no DQ Skin result, so
-  Blender shows its own deformation (the same as DQ Skin's for Linear and Dual Quaternion);
-- in linked data without a library override, which the add-on cannot change;
-- whenever DQ Skin reports an error.
+`dq_skin_add` keeps the Armature modifier it replaces and moves it right after DQ Skin. DQ Skin
+and its companion are two ways of one deformation, and exactly one of them deforms the mesh in
+each kind of evaluation (viewport, render):
 
-While DQ Skin is deforming, the companion is *parked*: disabled, and with vertex groups and
-envelopes off so that it does not make the mesh depend on the pose (a disabled modifier still
-adds its relations, and with them the mesh would be evaluated again on every frame for nothing).
-
-DQ Skin remembers the companion's name and its settings from before `dq_skin_add`; removing DQ
-Skin puts them back exactly.
+- where DQ Skin deforms, the companion is switched off; while it is off in both, its vertex
+  groups and envelopes are off too (*parked*): even a disabled Armature modifier makes Blender
+  evaluate the mesh again whenever a bone moves, for nothing;
+- where DQ Skin does not (switched off by the user, handed over to Blender's deformation for a
+  reason the panel gives, an error), the companion is on, set up like DQ Skin: the same
+  armature, vertex groups, envelopes and mask, Preserve Volume for every method but Linear;
+- switching the companion on by hand where DQ Skin deforms switches DQ Skin off there (Blender's
+  deformation shows, once), and switching DQ Skin back on switches the companion off;
+- files are saved with the companion on wherever DQ Skin is on, so a file opened without the
+  add-on (a render farm) shows Blender's deformation, and removing DQ Skin puts the companion
+  back exactly as it was before `dq_skin_add`.
 """
 
 from __future__ import annotations
+
+import bpy
 
 from . import nodes
 
@@ -25,6 +29,8 @@ from . import nodes
 SETTINGS = (
     "show_viewport",
     "show_render",
+    "show_in_editmode",
+    "show_on_cage",
     "object",
     "use_vertex_groups",
     "use_bone_envelopes",
@@ -52,7 +58,7 @@ def find(obj, mod, info: dict | None = None):
     if named is not None and named.type == "ARMATURE":
         return named
     mods = obj.modifiers
-    index = list(mods).index(mod) if mod.name in mods else -1
+    index = mods.find(mod.name)
     if 0 <= index < len(mods) - 1 and mods[index + 1].type == "ARMATURE":
         return mods[index + 1]
     return None
@@ -63,38 +69,40 @@ def _set(arm_mod, name: str, value) -> None:
         setattr(arm_mod, name, value)
 
 
-def park(arm_mod) -> None:
-    """Disabled and without bone relations (DQ Skin is deforming)."""
-    _set(arm_mod, "show_viewport", False)
-    _set(arm_mod, "show_render", False)
-    _set(arm_mod, "use_vertex_groups", False)
-    _set(arm_mod, "use_bone_envelopes", False)
-    _set(arm_mod, "use_multi_modifier", False)
+def shown(arm_mod) -> tuple[bool, bool]:
+    return (arm_mod.show_viewport, arm_mod.show_render)
 
 
-def is_parked(arm_mod) -> bool:
-    return not (arm_mod.show_viewport or arm_mod.show_render or arm_mod.use_vertex_groups or arm_mod.use_bone_envelopes)
+def configure(arm_mod, mod, settings, show: tuple[bool, bool]) -> None:
+    """The companion on where `show` says (viewport, render), set up like DQ Skin; parked where
+    it is on nowhere."""
+    viewport, render = show
+    if viewport or render:
+        _set(arm_mod, "object", settings.armature)
+        _set(arm_mod, "use_vertex_groups", settings.use_vertex_groups)
+        _set(arm_mod, "use_bone_envelopes", settings.use_envelopes)
+        _set(arm_mod, "use_deform_preserve_volume", settings.preserve_volume)
+        _set(arm_mod, "use_multi_modifier", False)
+        _set(arm_mod, "vertex_group", settings.mask_group)
+        _set(arm_mod, "invert_vertex_group", settings.invert_mask)
+        _set(arm_mod, "show_in_editmode", mod.show_in_editmode)
+        _set(arm_mod, "show_on_cage", mod.show_on_cage)
+    else:
+        _set(arm_mod, "use_vertex_groups", False)
+        _set(arm_mod, "use_bone_envelopes", False)
+        _set(arm_mod, "use_multi_modifier", False)
+    _set(arm_mod, "show_viewport", viewport)
+    _set(arm_mod, "show_render", render)
 
 
-def activate(arm_mod, mod, settings) -> None:
-    """Deforming as DQ Skin would with Blender's own math: the same armature, groups, envelopes
-    and mask, Preserve Volume for Dual Quaternion (and Blend, the closest Blender has), enabled
-    where DQ Skin is."""
-    _set(arm_mod, "object", settings.armature)
-    _set(arm_mod, "use_vertex_groups", settings.use_vertex_groups)
-    _set(arm_mod, "use_bone_envelopes", settings.use_envelopes)
-    _set(arm_mod, "use_deform_preserve_volume", settings.method != "linear")
-    _set(arm_mod, "use_multi_modifier", False)
-    _set(arm_mod, "vertex_group", settings.mask_group)
-    _set(arm_mod, "invert_vertex_group", settings.invert_mask)
+def configure_without_settings(arm_mod, mod) -> None:
+    """On where DQ Skin is on, as it is (the modifier's settings could not be read)."""
     _set(arm_mod, "show_viewport", mod.show_viewport)
     _set(arm_mod, "show_render", mod.show_render)
 
 
 def restore(arm_mod, original: dict) -> None:
     """Back to how it was before `dq_skin_add`."""
-    import bpy
-
     for name in SETTINGS:
         if name not in original:
             continue

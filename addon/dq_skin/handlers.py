@@ -7,65 +7,79 @@
   evaluation shows the new frame with no lag. Objects Blender would evaluate in the first pass
   anyway output nothing there (see `Registry.frame_pre`), so the modifiers after DQ Skin run
   once per frame.
-- `depsgraph_update_post` (posing, editing settings, painting weights): only what the update
-  concerns is evaluated again (see `registry`).
-- `save_pre` / `save_post`: files are written with every companion Armature modifier active and
-  no results (see `companion`), then put back.
+- `depsgraph_update_post` (posing, editing settings, painting weights, mode changes): only what
+  the update concerns is evaluated again, once the scene settles (see `registry`).
+- `save_pre` / `save_post`: files are written with every companion Armature modifier on where
+  DQ Skin is and no results (see `companion`), then put back.
 - `load_post`, `undo_post`, `redo_post`: the registry is rebuilt.
+- An exporter starting or ending (see `exports`): every DQ Skin object is evaluated again.
+
+Nothing raised here reaches Blender's console as a traceback: a failure is shown once, in one
+line (`DQSKIN_DEBUG=1` prints the traceback), and on the panel.
 """
 
 from __future__ import annotations
 
+import os
+import traceback
+
 import bpy
 from bpy.app.handlers import persistent
 
-from . import nodes
+from . import exports, nodes
 from .registry import REGISTRY
 
 _busy = False
-_saved: list = []
+last_error = ""  # the last unexpected failure of a handler (the panel shows it)
 
 
-def _guarded(fn):
-    def run(*args):
-        global _busy
-        if _busy:
-            return
-        _busy = True
-        try:
-            fn(*args)
-        finally:
-            _busy = False
-
-    return run
+def _guarded(fn, *args) -> None:
+    global _busy, last_error
+    if _busy:
+        return
+    _busy = True
+    try:
+        fn(*args)
+    except Exception as e:  # a bug of the add-on: say it once, never stop Blender's work
+        message = f"{type(e).__name__}: {e}"
+        if message != last_error:
+            print(f"DQ Skin: internal error in {getattr(fn, '__name__', 'a handler')}: {message}")
+            if os.environ.get("DQSKIN_DEBUG"):
+                traceback.print_exc()
+        last_error = message
+    finally:
+        _busy = False
 
 
 @persistent
 def on_frame_change_pre(scene, depsgraph=None):
-    _guarded(lambda: REGISTRY.frame_pre())()
+    _guarded(REGISTRY.frame_pre)
 
 
 @persistent
 def on_frame_change_post(scene, depsgraph=None):
-    dg = depsgraph or bpy.context.evaluated_depsgraph_get()
-    _guarded(lambda: REGISTRY.frame(dg))()
+    _guarded(REGISTRY.frame, depsgraph or bpy.context.evaluated_depsgraph_get())
 
 
 @persistent
 def on_depsgraph_update_post(scene, depsgraph):
-    _guarded(lambda: REGISTRY.updates(depsgraph))()
+    _guarded(REGISTRY.updates, depsgraph)
+
+
+def _upgrade_node_groups() -> None:
+    for group in bpy.data.node_groups:
+        try:
+            if group.bl_idname == "GeometryNodeTree" and nodes.version_of(group) == nodes.VERSION:
+                nodes.upgrade(group)
+        except (AttributeError, RuntimeError, TypeError) as e:  # never stop a file from loading
+            print(f"DQ Skin: could not update node group {group.name!r}: {e}")
 
 
 @persistent
 def on_load_post(*_args):
-    # Files saved by an earlier DQ Skin: their node group's Method menu gets the newer methods.
-    for group in bpy.data.node_groups:
-        try:
-            if group.bl_idname == "GeometryNodeTree" and nodes.version_of(group) == nodes.VERSION:
-                nodes.add_missing_methods(group)
-        except (AttributeError, RuntimeError, TypeError) as e:  # never stop a file from loading
-            print(f"DQ Skin: could not update node group {group.name!r}: {e}")
+    _upgrade_node_groups()
     REGISTRY.reset()
+    exports.wrap_operators()  # exporters enabled by the file's preferences
 
 
 @persistent
@@ -75,26 +89,18 @@ def on_undo(*_args):
 
 @persistent
 def on_save_pre(*_args):
-    global _saved
-    _saved = REGISTRY.deactivate_all(detach=True)
+    _guarded(REGISTRY.deactivate_all, True)
 
 
 @persistent
 def on_save_post(*_args):
-    global _saved
-    from . import nodes
+    _guarded(REGISTRY.reactivate_all)
 
-    for obj, mod_name, result in _saved:
-        try:
-            mod = obj.modifiers.get(mod_name)
-            if mod is not None and result is not None:
-                nodes.put(mod, "Result", result)
-        except ReferenceError:
-            pass
-    _saved = []
-    # The next update evaluates everything again (results, companions parked).
-    for rec in REGISTRY.records.values():
-        rec.pending = True
+
+def _export_changed() -> None:
+    """An exporter starts or ends: hand every DQ Skin over, or take it back."""
+    depsgraph = bpy.context.view_layer.depsgraph
+    _guarded(REGISTRY.evaluate_all, depsgraph)
 
 
 HANDLERS = (
@@ -114,16 +120,19 @@ def register():
         if fn not in handlers:
             # First, so that other add-ons' frame handlers run after DQ Skin wrote its results.
             handlers.insert(0, fn)
+    if _export_changed not in exports._on_change:
+        exports._on_change.append(_export_changed)
+    exports.wrap_operators()
 
 
 def unregister():
+    exports.unwrap_operators()
+    while _export_changed in exports._on_change:
+        exports._on_change.remove(_export_changed)
     for handlers, fn in HANDLERS:
         while fn in handlers:
             handlers.remove(fn)
     # Without the add-on, Blender's own deformation takes over (as in a saved file), and the
     # results are let go (never saved).
-    try:
-        REGISTRY.deactivate_all(detach=True)
-    except Exception:
-        pass
+    _guarded(REGISTRY.deactivate_all, True)
     REGISTRY.reset()

@@ -202,6 +202,11 @@ def peek(obj) -> MeshData | None:
     return None if uid in _stale else _cache.get(uid)
 
 
+def peek_any(obj) -> MeshData | None:
+    """The cached data of `obj`'s mesh, current or not (no read)."""
+    return _cache.get(obj.data.session_uid)
+
+
 def get(obj, verify: bool = False) -> MeshData:
     """The data of `obj`'s mesh, read if unknown, or re-read and compared with `verify` (after
     Blender said the mesh may have changed); the version only changes when something did."""

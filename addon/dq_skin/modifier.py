@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Evaluating the DQ Skin modifiers of one object: what reaches each, skinning it, writing the
-result, or falling back to Blender's own deformation with the reason on the modifier.
+"""Evaluating the DQ Skin modifiers of one object: what reaches each, whether DQ Skin deforms
+(or Blender's own deformation does, for a reason), skinning, writing the result.
 
 What reaches a DQ Skin modifier (its *source*):
 - ``mesh``: nothing enabled before it: the mesh's coordinates with its shape keys mixed as
@@ -12,9 +12,10 @@ What reaches a DQ Skin modifier (its *source*):
 
 For ``mesh`` and ``chain`` the result is a full copy of the mesh with skinned positions, output
 as is by the node group; for ``capture`` it is points whose positions the node group sets.
-Everything that does not change between frames is cached: mesh data per mesh (`meshdata`),
-influences per mesh version, armature and settings. Nothing is recomputed or written when
-nothing changed, which also keeps Blender's update loop from cycling.
+Where DQ Skin does not deform (switched off, handed over, an error), the node group passes the
+mesh through and the companion deforms it (see `companion`). Everything that does not change
+between frames is kept (see `state`); nothing is computed or written when nothing changed,
+which also keeps Blender's update loop from cycling.
 """
 
 from __future__ import annotations
@@ -22,56 +23,15 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import bpy
 import numpy as np
 
-from . import centers, companion, compat, dqskin, meshdata, nodes, results, rig
+from . import centers, companion, compat, consumers, dqskin, exports, meshdata, nodes, results, rig, settings
+from .state import STATES, BindingKey, FrameKey, Mode, ModifierState
 
 
 class SkinError(Exception):
-    """A problem the user can fix, shown in the panel and operator reports."""
+    """A problem the user can fix, shown on the panel and in operator reports."""
 
-
-@dataclass
-class Settings:
-    armature: object
-    method: str
-    blend_group: str
-    blend_factor: float
-    use_vertex_groups: bool
-    use_envelopes: bool
-    mask_group: str
-    invert_mask: bool
-
-    def key(self) -> tuple:
-        arm = self.armature.session_uid if self.armature is not None else 0
-        return (arm, self.method, self.blend_group, self.blend_factor, self.use_vertex_groups, self.use_envelopes, self.mask_group, self.invert_mask)
-
-
-def settings(mod) -> Settings:
-    return Settings(
-        armature=nodes.get(mod, "Armature"),
-        method=nodes.METHOD_KEYS[nodes.get_method(mod)],
-        blend_group=nodes.get_attribute(mod, "Blend Amount"),
-        blend_factor=float(nodes.get(mod, "Blend Factor")),
-        use_vertex_groups=bool(nodes.get(mod, "Use Vertex Groups")),
-        use_envelopes=bool(nodes.get(mod, "Use Envelopes")),
-        mask_group=nodes.get_attribute(mod, "Mask"),
-        invert_mask=bool(nodes.get(mod, "Invert Mask")),
-    )
-
-
-def _settings(mod, st: "State") -> Settings:
-    """`settings(mod)`, rebuilt only when the modifier's raw values changed (they can be keyed,
-    so they are read on every evaluation)."""
-    raw = nodes.raw_settings(mod)
-    if st.settings is None or raw != st.raw_settings:
-        st.settings = settings(mod)
-        st.raw_settings = raw
-    return st.settings
-
-
-LIVE = ("replace", "positions")
 
 # Modifiers that never add or remove vertices.
 KEEP_VERTEX_COUNT = {
@@ -82,98 +42,23 @@ KEEP_VERTEX_COUNT = {
 }
 
 
-@dataclass
-class State:
-    """What the add-on knows about one DQ Skin modifier between evaluations."""
-
-    mode: str = ""  # replace, positions, fallback, linked, off, or "" before the first evaluation
-    source: str = ""
-    status: str = ""
-    error: str = ""
-    seconds: float = 0.0
-    binding: rig.Binding | None = None
-    binding_key: tuple = ()
-    blend: np.ndarray | None = field(default=None, repr=False)
-    envelopes: np.ndarray | None = field(default=None, repr=False)
-    out: np.ndarray | None = field(default=None, repr=False)
-    mixed: np.ndarray | None = field(default=None, repr=False)
-    signature: tuple | None = field(default=None, repr=False)
-    generation: int = 0  # counts the outputs computed (a following DQ Skin's input signature)
-    result_version: int = 0  # mesh version the replace-mode result was copied from
-    armature_signature: tuple | None = field(default=None, repr=False)
-    check_armature: bool = True
-    result: object = field(default=None, repr=False)  # the result object last written
-    settings: Settings | None = field(default=None, repr=False)
-    raw_settings: tuple = ()
-    companion: str = ""  # name of the companion Armature modifier, once found
-    needs_effective: bool = False  # envelopes or B-Bones: influences change with the pose
-    segments: np.ndarray | None = field(default=None, repr=False)
-    uses_envelopes: bool = False
-    uses_bbones: bool = False
-    spaces: tuple | None = field(default=None, repr=False)  # (premat, postmat) last computed
-    capture_on: bool | None = None
-    parked: bool = False  # the companion was parked by the last write
-    method: str = ""
-    centers: np.ndarray | None = field(default=None, repr=False)  # Optimized Centers, for binding_key
-    centers_key: tuple = ()
-
-    def describe(self) -> str:
-        """The panel's status line."""
-        if self.status or not self.live or self.binding is None:
-            return self.status
-        method = {v: k for k, v in nodes.METHOD_KEYS.items()}.get(self.method, self.method)
-        line = f"{method}: {len(self.binding.bone_names)} bones, {len(self.binding.influences)} influences, {self.seconds * 1e3:.1f} ms"
-        if not self.companion:
-            line += " · no Armature modifier after it for Blender without DQ Skin"
-        return line
-
-    @property
-    def live(self) -> bool:
-        return self.mode in LIVE
-
-
-_states: dict[tuple, State] = {}
-
-
-def state(obj, mod) -> State:
-    return _states.setdefault((obj.session_uid, compat.modifier_uid(mod)), State())
-
-
-def drop_state(key: tuple) -> None:
-    _states.pop(key, None)
-
-
-def forget(obj_names=None) -> None:
-    """Drops cached bindings (all, or those of the named objects), e.g. after a load."""
-    if obj_names is None:
-        _states.clear()
-        meshdata.forget()
-        return
-    uids = {o.session_uid for o in bpy.data.objects if o.name_full in obj_names}
-    for key in [k for k in _states if k[0] in uids]:
-        del _states[key]
-
-
 def dq_skin_modifiers(obj):
     return [m for m in obj.modifiers if nodes.is_dq_skin(m)] if obj.type == "MESH" else []
 
 
-# -- one object ---------------------------------------------------------------------------------
+def state_of(obj, mod) -> ModifierState:
+    return STATES.get(obj.session_uid, compat.modifier_uid(mod))
 
-@dataclass
-class Plan:
-    """One skinning to run: the kernel's inputs and where its result goes."""
 
-    obj: object
-    mod: object
-    st: "State"
-    s: Settings
-    result: object
-    mode: int
-    signature: tuple
-    job: tuple  # the arguments of `dqskin.skin_many`
-    start: float
-    quick: bool = False  # steady playback: only the positions change
+def status_of(obj, mod):
+    """The panel's view of a modifier (`state.Status`)."""
+    return state_of(obj, mod).status
+
+
+def find_status(obj, mod):
+    """`status_of` without creating a state (drawing a panel must not)."""
+    st = STATES.find(obj.session_uid, compat.modifier_uid(mod))
+    return st.status if st is not None else None
 
 
 @dataclass
@@ -181,84 +66,93 @@ class Context:
     """What one handler call shares between objects."""
 
     depsgraph: object
-    claimed: dict
-    batch: list | None = None  # plans to run together (see `Registry.frame`)
+    structure: int = 0  # the registry's structure version (see `consumers.Scan`)
+    batch: list | None = None  # plans to skin together (see `run_batch`)
     unchanged: set = field(default_factory=set)  # objects Blender did not update: cached settings hold
     unmoved: set = field(default_factory=set)  # objects whose transform did not change
     poses: dict = field(default_factory=dict)  # armature uid -> this evaluation's pose matrices
 
+    @property
+    def render(self) -> bool:
+        return self.depsgraph.mode == "RENDER"
 
-def evaluate_object(obj, depsgraph, claimed: dict, force: bool = False, ctx: Context | None = None) -> bool:
-    """Evaluates every DQ Skin modifier of `obj` for `depsgraph`, in stack order. `claimed`:
-    result object uid -> owner key, shared by all objects (see `results`). With `ctx.batch`, the
-    skinning of an object with one DQ Skin is queued there instead of run (see `run_batch`).
-    Returns whether a result was written or queued (the object will be evaluated again)."""
-    ctx = ctx or Context(depsgraph, claimed)
-    render = depsgraph.mode == "RENDER"
-    obj_eval = obj.evaluated_get(depsgraph)
+
+@dataclass
+class Plan:
+    """One skinning to run: the kernel's job and where its result goes."""
+
+    obj: object
+    mod: object
+    st: ModifierState
+    s: settings.Settings
+    result: object
+    kind: int
+    key: FrameKey
+    job: tuple  # the arguments of `dqskin.skin_many`
+    deforms: tuple  # (viewport, render): where DQ Skin deforms (the companion is off there)
+    start: float
+    quick: bool = False  # steady playback: only the positions change
+    render: bool = False  # a render's evaluation (only the render side of the companion changes)
+
+
+def evaluate_object(obj, ctx: Context, force: bool = False) -> bool:
+    """Evaluates every DQ Skin modifier of `obj`, in stack order. With `ctx.batch`, the skinning
+    of an object with one DQ Skin is queued there instead of run (see `run_batch`). Returns
+    whether a result was written or queued."""
+    obj_eval = obj.evaluated_get(ctx.depsgraph)
     wrote = False
-    what_reaches = "mesh"  # mesh, dq (a live DQ Skin's output), other
-    previous: State | None = None
-    mods = [m for m in obj.modifiers if nodes.is_dq_skin(m)]
+    reaching = "mesh"  # mesh, dq (a live DQ Skin's output), other
+    previous: ModifierState | None = None
+    mods = dq_skin_modifiers(obj)
     batchable = ctx.batch is not None and len(mods) == 1
     for mod in obj.modifiers:
-        enabled = mod.show_render if render else mod.show_viewport
+        enabled = mod.show_render if ctx.render else mod.show_viewport
         if not nodes.is_dq_skin(mod):
             if enabled:
-                what_reaches = "other"
+                reaching = "other"
             continue
-        st = state(obj, mod)
-        if not enabled:
-            _off(obj, mod, st, render)
-            continue
-        source = {"mesh": "mesh", "dq": "chain"}.get(what_reaches, "capture")
+        st = state_of(obj, mod)
         if nodes.version_of(mod.node_group) != nodes.VERSION:
-            _note(st, "fallback", "Made with an older DQ Skin: remove it and add it again")
-            what_reaches = "other"
+            _report(st, Mode.FALLBACK, "Made with an older DQ Skin: remove it and add it again")
+            reaching = "other"
             continue
+        source = {"mesh": "mesh", "dq": "chain"}.get(reaching, "capture")
         wrote |= _evaluate(obj, obj_eval, mod, st, ctx, source, previous, force, batchable)
-        what_reaches = "dq" if st.live else "other"
+        reaching = "dq" if st.status.live else "other"
         previous = st
     return wrote
 
 
-def _note(st: State, mode: str, message: str = "", status: str = "") -> None:
-    st.mode, st.error, st.status, st.signature, st.parked = mode, message, status, None, False
+def _report(st: ModifierState, mode: Mode, message: str = "") -> None:
+    st.status.mode, st.status.message = mode, message
+    st.output.invalidate()
 
 
-def _off(obj, mod, st: State, render: bool) -> None:
-    """DQ Skin switched off (for this kind of evaluation): nothing to compute; the companion
-    stays out of the way, as an Armature modifier switched off would not deform either."""
-    other = mod.show_viewport if render else mod.show_render
-    where = "renders" if render else "the viewport"
-    status = f"Off in {where}" + (" (on in the other: skinned there)" if other else "")
-    _note(st, "off", status=status)
-    if obj.library is None:
-        c = companion.find(obj, mod)
-        if c is not None:
-            companion.park(c)
-
-
-def _evaluate(obj, obj_eval, mod, st: State, ctx: Context, source: str, previous: State | None, force: bool, batchable: bool) -> bool:
+def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: str, previous, force: bool, batchable: bool) -> bool:
     start = time.perf_counter()
-    st.source = source
+    st.status.source = source
     if obj.library is not None:
         lib = obj.library.filepath or obj.library.name
-        _note(st, "linked", status=f"Linked from {lib}: Blender's Armature modifier deforms it (make a Library Override to use DQ Skin)")
+        _report(st, Mode.LINKED, f"Linked from {lib}: Blender's Armature modifier deforms it (make a Library Override to use DQ Skin)")
         return False
     s = None
     try:
-        plan = _quick(obj, mod, st, ctx, source) if batchable and not force else False
-        if plan is None:
-            return False
-        if plan is not False:
-            ctx.batch.append(plan)
-            return True
-        if st.settings is not None and obj.session_uid in ctx.unchanged:
-            s = st.settings
-        else:
-            s = _settings(mod, st)
-        plan = _prepare(obj, obj_eval, mod, st, s, ctx, source, previous, force, start)
+        if batchable and not force:
+            plan = _quick(obj, mod, st, ctx)
+            if plan is None:
+                return False
+            if plan is not False:
+                ctx.batch.append(plan)
+                return True
+        s = st.settings.value if st.settings.value is not None and obj.session_uid in ctx.unchanged else settings.cached(mod, st.settings)
+        _follow_the_users_companion(obj, mod, st)
+        deforms, reason = _where_it_deforms(obj, mod, st, s, ctx)
+        if not (mod.show_render if ctx.render else mod.show_viewport):
+            where = "renders" if ctx.render else "the viewport"
+            return _step_aside(obj, mod, st, s, deforms, Mode.OFF, f"Off in {where}: Blender's Armature modifier deforms the mesh there", ctx.render)
+        if reason:
+            return _step_aside(obj, mod, st, s, deforms, Mode.HANDED_OVER, reason + _instead(s), ctx.render)
+        plan = _prepare(obj, obj_eval, mod, st, s, ctx, source, previous, force, deforms, start)
         if plan is None:
             return False
         if batchable and not st.needs_effective:
@@ -270,27 +164,134 @@ def _evaluate(obj, obj_eval, mod, st: State, ctx: Context, source: str, previous
         finish(plan)
         return True
     except SkinError as e:
-        return _fallback(obj, mod, st, s, str(e))
+        return _fallback(obj, mod, st, s, str(e), ctx.render)
     except Exception as e:  # never a traceback in the user's face; say what happened
-        return _fallback(obj, mod, st, s, f"{type(e).__name__}: {e}")
+        return _fallback(obj, mod, st, s, f"{type(e).__name__}: {e}", ctx.render)
 
 
-def _quick(obj, mod, st: State, ctx: Context, source: str):
+def _instead(s: settings.Settings) -> str:
+    """What shows instead of a method Blender does not have."""
+    if s.method.kernel in settings.BLENDER_METHODS:
+        return ""
+    return f" ({s.method.label} shows as Preserve Volume meanwhile)"
+
+
+def _where_it_deforms(obj, mod, st: ModifierState, s: settings.Settings, ctx: Context) -> tuple[tuple[bool, bool], str]:
+    """Where DQ Skin would deform ((viewport, render), as far as this evaluation can tell), and
+    why it hands over in this evaluation ("" if it does not)."""
+    reasons = consumers.reasons(obj, mod, s.armature, ctx.structure, exports.active())
+    st.decided_structure = ctx.structure
+    deforms = (mod.show_viewport and not reasons.viewport, mod.show_render and not reasons.render)
+    return deforms, reasons.for_render(ctx.render)
+
+
+def _follow_the_users_companion(obj, mod, st: ModifierState) -> None:
+    """The user switched the companion on where DQ Skin deforms: they asked for Blender's
+    deformation there, so DQ Skin switches off there (both would deform the mesh twice)."""
+    known = st.companion
+    if known.shown is None or known.deforms is None or exports.active():
+        return
+    c = _companion(obj, mod, st)
+    if c is None:
+        return
+    now = companion.shown(c)
+    for i, attr in enumerate(("show_viewport", "show_render")):
+        if now[i] and not known.shown[i] and known.deforms[i] and getattr(mod, attr):
+            setattr(mod, attr, False)
+
+
+def _companion(obj, mod, st: ModifierState):
+    c = obj.modifiers.get(st.companion.name) if st.companion.name else None
+    if c is None or c.type != "ARMATURE":
+        c = companion.find(obj, mod)
+        st.companion.name = c.name if c is not None else ""
+    return c
+
+
+def settle_companion(obj, mod, st: ModifierState, s, deforms: tuple[bool, bool], render: bool = False) -> None:
+    """Switches the companion where DQ Skin's part changed since the last decision: off where
+    DQ Skin now deforms, on where it now does not; elsewhere as the user left it. A render
+    evaluation only touches the render side."""
+    c = _companion(obj, mod, st)
+    if c is None:
+        return
+    known = st.companion
+    show = list(companion.shown(c))
+    for i in range(2):
+        if render and i == 0:
+            continue
+        if known.deforms is None or known.deforms[i] != deforms[i] or (deforms[i] and show[i]):
+            show[i] = not deforms[i]
+    if s is None:
+        companion.configure_without_settings(c, mod)
+        show = list(companion.shown(c))
+    else:
+        companion.configure(c, mod, s, tuple(show))
+    merged = list(deforms)
+    if render and known.deforms is not None:
+        merged[0] = known.deforms[0]
+    known.deforms, known.shown = tuple(merged), tuple(show)
+
+
+def _step_aside(obj, mod, st: ModifierState, s, deforms, mode: Mode, message: str, render: bool) -> bool:
+    """DQ Skin does not deform in this evaluation: the mesh passes through, the companion
+    deforms (where the user has not switched it off)."""
+    if obj.library is None:
+        _pass_through(mod)
+        settle_companion(obj, mod, st, s, deforms, render=render)
+    _report(st, mode, message)
+    if mode is Mode.OFF and not _companion(obj, mod, st):
+        st.status.message = "Off: no Armature modifier after it, the mesh is not deformed"
+    return False
+
+
+def _pass_through(mod) -> None:
+    result = nodes.get(mod, "Result")
+    if results.is_result(result) and result.library is None:
+        results.set_mode(result, nodes.RESULT_OFF)
+
+
+def _fallback(obj, mod, st: ModifierState, s, message: str, render: bool = False) -> bool:
+    """DQ Skin cannot deform: the input passes through and the companion deforms as Blender
+    does; the panel shows why."""
+    try:
+        _pass_through(mod)
+        if s is None:
+            try:
+                s = settings.read(mod)
+            except Exception:  # a damaged modifier: the companion as it is
+                s = None
+        settle_companion(obj, mod, st, s, (False, False), render=render)
+    except Exception as e:  # nothing of this may reach Blender's console
+        message += f" (and the companion could not be set up: {type(e).__name__}: {e})"
+    _report(st, Mode.FALLBACK, message)
+    c = _companion(obj, mod, st) if obj.library is None else None
+    st.status.instead = f"Blender's Armature modifier '{c.name}' deforms the mesh instead" if c is not None else "No Armature modifier after it: the mesh is not deformed"
+    return False
+
+
+# -- steady playback ----------------------------------------------------------------------------
+
+def _quick(obj, mod, st: ModifierState, ctx: Context):
     """The steady state of playback, cheaply: a live DQ Skin on the mesh's own coordinates
-    (no shape keys), plain vertex groups, nothing about the object or its armature changed but
-    the pose. Returns a plan, None (nothing to do), or False (take the full path)."""
-    s = st.settings
+    (no shape keys), plain vertex groups, nothing about the object, its armature or the scene's
+    structure changed but the pose. Returns a plan, None (nothing to do), or False (take the
+    full path)."""
+    s = st.settings.value
+    out = st.output
     if (
         s is None
-        or st.mode != "replace"
-        or source != "mesh"
+        or st.status.mode is not Mode.LIVE
+        or st.status.source != "mesh"
         or st.needs_effective
-        or st.binding is None
-        or st.result is None
-        or st.spaces is None
-        or st.signature is None
+        or st.binding.binding is None
+        or out.result is None
+        or out.spaces is None
+        or out.written is None
+        or st.decided_structure != ctx.structure
         or obj.session_uid not in ctx.unchanged
         or obj.session_uid not in ctx.unmoved
+        or exports.active()
     ):
         return False
     arm = s.armature
@@ -299,95 +300,94 @@ def _quick(obj, mod, st: State, ctx: Context, source: str):
         if uid not in ctx.unmoved or arm.mode == "EDIT":
             return False
         data = meshdata.peek(obj)
-        if data is None or data.keys is not None or data.version != st.result_version:
+        if data is None or data.keys is not None or data.version != out.copied_version:
             return False
         deform = ctx.poses.get(uid)
         if deform is None:
             deform = ctx.poses[uid] = rig.pose_matrices(arm.evaluated_get(ctx.depsgraph))
     except ReferenceError:
         return False
-    binding = st.binding
+    binding = st.binding.binding
     if len(binding.bone_indices) != len(deform):
         deform = deform[binding.bone_indices]
     raw = deform.tobytes()
-    old = st.signature
-    if raw == old[2]:
+    old = out.written
+    if raw == old.pose:
         return None  # the pose did not change: the result is already this
-    premat, postmat = st.spaces
-    signature = (old[0], old[1], raw) + old[3:]
-    if s.method == "centers_of_rotation" and (st.centers is None or st.centers_key != st.binding_key):
+    if s.method.kernel == "centers_of_rotation" and st.binding.centers is None:
         return False
+    premat, postmat = out.spaces
+    key = FrameKey(old.settings, old.source, raw, old.spaces, old.result, old.mesh_version)
     job = _job(st, s, data.positions, binding.influences, deform, binding.rest, premat, postmat)
-    return Plan(obj, mod, st, s, st.result, nodes.RESULT_REPLACE, signature, job, time.perf_counter(), quick=True)
+    deforms = st.companion.deforms or (True, True)
+    return Plan(obj, mod, st, s, out.result, nodes.RESULT_REPLACE, key, job, deforms, time.perf_counter(), quick=True, render=ctx.render)
 
 
 def run_batch(plans: list) -> None:
     """Skins every queued plan in one call (in parallel across objects) and writes the results."""
     if not plans:
         return
-    errors = dqskin.skin_many([p.job for p in plans])
+    try:
+        errors = dqskin.skin_many([p.job for p in plans])
+    except (TypeError, ValueError):
+        # One job's inputs are bad (e.g. a bone scaled to NaN): skin them one by one, so that
+        # only that modifier falls back, with its own message.
+        errors = []
+        for p in plans:
+            try:
+                errors.append(dqskin.skin_many([p.job])[0])
+            except (TypeError, ValueError) as e:
+                errors.append(str(e).removeprefix("jobs[0]: "))
     for plan, error in zip(plans, errors):
         try:
             if error is not None:
                 raise SkinError(error)
             finish(plan)
-        except SkinError as e:
-            _fallback(plan.obj, plan.mod, plan.st, plan.s, str(e))
         except Exception as e:
-            _fallback(plan.obj, plan.mod, plan.st, plan.s, f"{type(e).__name__}: {e}")
+            message = str(e) if isinstance(e, SkinError) else f"{type(e).__name__}: {e}"
+            # Steady playback plans carry no modifier (an object with one DQ Skin).
+            mod = plan.mod or next(iter(dq_skin_modifiers(plan.obj)), None)
+            if mod is not None:
+                _fallback(plan.obj, mod, plan.st, plan.s, message, plan.render)
 
 
-def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, previous, force, start) -> Plan | None:
+# -- the full path ------------------------------------------------------------------------------
+
+def _prepare(obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: Context, source, previous, force, deforms, start) -> Plan | None:
     """Everything before the kernel: checks, what reaches the modifier, influences, this frame's
     matrices; None when the result is already this."""
     arm = s.armature
-    if arm is None or arm.type != "ARMATURE":
+    if arm is None:
         raise SkinError("No armature object set")
-    if arm.mode == "EDIT" or arm.data.is_editmode:
-        raise SkinError(f"Armature {arm.name} is in Edit Mode")
-    if obj.mode == "EDIT":
-        raise SkinError(f"{obj.name} is in Edit Mode: DQ Skin resumes in Object Mode")
-    depsgraph = ctx.depsgraph
+    if arm.type != "ARMATURE":
+        raise SkinError(f"'{arm.name}' is not an armature")
+    if obj.mode == "EDIT" or obj.data.is_editmode:
+        raise SkinError("The mesh is in Edit Mode")
     data = meshdata.get(obj)
     if data.vertex_count == 0:
-        raise SkinError(f"{obj.name}'s mesh has no vertices: nothing to skin")
-    arm_eval = arm.evaluated_get(depsgraph)
+        raise SkinError("The mesh has no vertices")
+    arm_eval = arm.evaluated_get(ctx.depsgraph)
+    if arm_eval.pose is None:
+        raise SkinError(f"The armature '{arm.name}' has no pose")
 
     # What reaches the modifier.
     if source == "mesh":
         try:
-            positions, input_key = _mesh_input(obj, obj_eval, mod, st, data, depsgraph)
+            positions, input_key = _mesh_input(obj, obj_eval, st, data, ctx.depsgraph)
         except _CaptureNeeded:
-            source = st.source = "capture"  # keys DQ Skin cannot mix: read Blender's
+            source = st.status.source = "capture"
     if source == "capture":
-        positions, input_key = _captured(obj, obj_eval, mod, data)
+        positions, input_key = _captured(obj, obj_eval, mod, st, data, ctx)
     elif source == "chain":
-        if previous is None or previous.out is None or len(previous.out) != data.vertex_count:
+        out = previous.output if previous is not None else None
+        if out is None or out.buffer is None or len(out.buffer) != data.vertex_count:
             raise SkinError("The DQ Skin modifier before this one has no result")
-        positions, input_key = previous.out, ("chain", id(previous), previous.generation)
+        positions, input_key = out.buffer, ("chain", id(previous), out.generation)
     if source != "capture" and st.capture_on is not False:
         _set_capture(mod, False)
         st.capture_on = False
 
-    # What does not change between frames.
-    if st.check_armature or st.armature_signature is None:
-        st.armature_signature = _armature_signature(arm)
-        st.check_armature = False
-    key = (data.uid, data.version, arm.session_uid, st.armature_signature, s.mask_group, s.invert_mask, s.blend_group, s.use_vertex_groups)
-    if st.binding is None or st.binding_key != key:
-        st.binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups, data=data)
-        st.envelopes = rig.envelopes(arm, st.binding)
-        st.blend = data.group_weights(s.blend_group) if s.blend_group else None
-        st.binding_key = key
-        st.signature = None
-        st.centers = None
-        st.segments = rig.bbone_segments(arm, st.binding)
-        st.uses_envelopes = bool(st.envelopes[:, 10].any())
-        st.uses_bbones = bool(st.segments.max(initial=0) > 1)
-    st.needs_effective = s.use_envelopes or st.uses_envelopes or st.uses_bbones
-    binding = st.binding
-    if s.method == "centers_of_rotation":
-        _centers(obj, st, data, binding, ctx)  # kept in st.centers
+    binding = _binding(obj, arm, st, s, data, ctx)
     if len(positions) != binding.vertex_count:
         raise SkinError(
             f"An earlier modifier changed the vertex count ({binding.vertex_count} → {len(positions)}); "
@@ -398,64 +398,89 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
         deform = ctx.poses[arm.session_uid] = rig.pose_matrices(arm_eval)
     if len(binding.bone_indices) != len(deform):
         deform = deform[binding.bone_indices]
-    if st.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
-        st.spaces = rig.spaces(obj_eval, arm_eval)
-    premat, postmat = st.spaces
-    mode = nodes.RESULT_POSITIONS if source == "capture" else nodes.RESULT_REPLACE
-    result = st.result if st.result is not None and _still(st.result, mod, ctx.claimed) else _own_result(obj, mod, ctx.claimed)
-    signature = (s.key(), input_key, deform.tobytes(), premat.tobytes(), result.session_uid, data.version)
-    current = results.mode_of(result)
-    if not force and signature == st.signature and st.live and current == mode:
+    out = st.output
+    if out.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
+        out.spaces = rig.spaces(obj_eval, arm_eval)
+    premat, postmat = out.spaces
+    kind = nodes.RESULT_POSITIONS if source == "capture" else nodes.RESULT_REPLACE
+    result = _own_result(obj, mod, st)
+    key = FrameKey(s.key(), input_key, deform.tobytes(), premat.tobytes(), result.session_uid, data.version)
+    if not force and key == out.written and st.status.live and results.mode_of(result) == kind:
         return None  # the result is already this
-    if st.out is None or len(st.out) != binding.vertex_count:
-        st.out = np.empty((binding.vertex_count, 3), np.float32)
+    if out.buffer is None or len(out.buffer) != binding.vertex_count:
+        out.buffer = np.empty((binding.vertex_count, 3), np.float32)
     influences, rest = binding.influences, binding.rest
     if st.needs_effective:
         # Envelopes and B-Bone segments depend on where the vertices are: this frame's
         # influences, over the bones followed by the B-Bones' segment joints.
+        cache = st.binding
         matrices = rig.Frame(np.ascontiguousarray(deform), binding.rest, premat, postmat)
         influences = binding.influences.effective(
             positions,
             premat,
-            envelopes=st.envelopes,
+            envelopes=cache.envelopes,
             use_vertex_groups=s.use_vertex_groups,
             use_envelopes=s.use_envelopes,
-            bbone_segments=st.segments,
+            bbone_segments=cache.segments,
             rest=binding.rest,
             lengths=rig.bone_lengths(arm_eval, binding),
             bbone_mapping=rig.curved_bbone_mapping(arm_eval, binding, positions, premat, s.use_envelopes),
         )
-        matrices = rig.with_bbone_joints(matrices, arm_eval, binding, st.segments)
+        matrices = rig.with_bbone_joints(matrices, arm_eval, binding, cache.segments)
         deform, rest = matrices.deform, matrices.rest
     job = _job(st, s, positions, influences, deform, rest, premat, postmat)
-    return Plan(obj, mod, st, s, result, mode, signature, job, start)
+    return Plan(obj, mod, st, s, result, kind, key, job, deforms, start, render=ctx.render)
 
 
-def _job(st: State, s: Settings, positions, influences, deform, rest, premat, postmat) -> tuple:
+def _binding(obj, arm, st: ModifierState, s: settings.Settings, data, ctx: Context):
+    """The influences of this mesh on this armature, kept while what they depend on holds
+    (the armature's bones are compared on every full evaluation, whatever changed them)."""
+    cache = st.binding
+    key = BindingKey(data.uid, data.version, arm.session_uid, rig.armature_signature(arm), s.mask_group, s.invert_mask, s.blend_group, s.use_vertex_groups)
+    if cache.binding is None or cache.key != key:
+        cache.clear()
+        binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups, data=data)
+        cache.binding = binding
+        cache.envelopes = rig.envelopes(arm, binding)
+        cache.blend = data.group_weights(s.blend_group) if s.blend_group else None
+        cache.segments = rig.bbone_segments(arm, binding)
+        cache.uses_envelopes = bool(cache.envelopes[:, 10].any())
+        cache.uses_bbones = bool(cache.segments.max(initial=0) > 1)
+        cache.key = key
+        st.output.invalidate()
+    st.needs_effective = s.use_envelopes or cache.uses_envelopes or cache.uses_bbones
+    if s.method.kernel == "centers_of_rotation":
+        _centers(obj, st, data, cache.binding, ctx)
+    return cache.binding
+
+
+def _job(st: ModifierState, s: settings.Settings, positions, influences, deform, rest, premat, postmat) -> tuple:
     """The arguments of `dqskin.skin_many` for one modifier: its settings, kept data and output."""
+    kernel = s.method.kernel
     return (
         positions,
         influences,
         np.ascontiguousarray(deform),
         rest,
-        s.method,
+        kernel,
         premat,
         postmat,
-        st.binding.mask,
-        st.blend if s.method == "blend" else None,
+        st.binding.binding.mask,
+        st.binding.blend if kernel == "blend" else None,
         s.blend_factor,
-        st.out,
-        st.centers if s.method == "centers_of_rotation" else None,
+        st.output.buffer,
+        st.binding.centers if kernel == "centers_of_rotation" else None,
     )
 
 
-def _centers(obj, st: State, data, binding, ctx: Context) -> None:
-    """Puts the Optimized Centers of Rotation for this binding in `st.centers`: kept, found in the
-    cache, computed now (small meshes, command line, renders), or started in the background (the
-    SkinError that says so lets Blender's deformation stand in until they are ready)."""
+def _centers(obj, st: ModifierState, data, binding, ctx: Context) -> None:
+    """Puts the Optimized Centers of Rotation for this binding in `st.binding.centers`: kept,
+    found in the cache, computed now (small meshes, command line, renders), or started in the
+    background (the SkinError that says so lets Blender's deformation stand in until they are
+    ready)."""
     if st.needs_effective:
         raise SkinError("Optimized Centers works with vertex groups only, not with envelopes or B-Bones: choose another method")
-    if st.centers is not None and st.centers_key == st.binding_key:
+    if st.binding.centers is not None:
         return
     triangles = centers.triangles_of(obj.data)
     key = centers.key_of(data.positions, triangles, binding.influences)
@@ -464,7 +489,7 @@ def _centers(obj, st: State, data, binding, ctx: Context) -> None:
         job = centers.job_of(key)
         if job is not None and job.finished and job.error:
             raise SkinError(f"Optimized Centers: {job.error} (change the method or any setting to try again)")
-        if data.vertex_count <= centers.INLINE_VERTICES or centers.in_background() or ctx.depsgraph.mode == "RENDER":
+        if data.vertex_count <= centers.INLINE_VERTICES or centers.in_background() or ctx.render:
             label = f"Optimized Centers for {obj.name} ({data.vertex_count} vertices)" if centers.in_background() else ""
             try:
                 got = centers.compute(data.positions, triangles, binding.influences, key, label=label)
@@ -476,69 +501,70 @@ def _centers(obj, st: State, data, binding, ctx: Context) -> None:
                 f"Optimized Centers: computing for {data.vertex_count} vertices ({job.fraction:.0%}); "
                 "Blender's deformation shows until they are ready"
             )
-    st.centers, st.centers_key = got, st.binding_key
+    st.binding.centers = got
 
 
 def finish(plan: Plan) -> None:
-    """Writes the result, then takes the companion out of the way (in this order, so that no
-    evaluation sees both or neither)."""
-    obj, mod, st, result, mode = plan.obj, plan.mod, plan.st, plan.result, plan.mode
-    st.generation += 1
+    """Writes the result, then switches the companion off where DQ Skin deforms (in this order,
+    so that no evaluation sees both or neither)."""
+    obj, mod, st, result, kind = plan.obj, plan.mod, plan.st, plan.result, plan.kind
+    out = st.output
+    out.generation += 1
     if plan.quick:
-        results.write_positions(result, st.out)
-        st.signature = plan.signature
-        st.seconds = time.perf_counter() - plan.start
+        results.write_positions(result, out.buffer)
+        out.written = plan.key
+        st.status.seconds = time.perf_counter() - plan.start
         return
     data = meshdata.get(obj)
-    if mode == nodes.RESULT_REPLACE:
+    if kind == nodes.RESULT_REPLACE:
         mesh = result.data
-        if st.result_version != data.version or (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops)) != data.counts:
-            results.replace_mesh(result, obj.data)
-            st.result_version = data.version
+        if out.copied_version != data.version or (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops)) != data.counts:
+            results.copy_mesh(result, obj.data)
+            out.copied_version = data.version
     else:
-        results.points_mesh(result, len(st.out))
-        st.result_version = 0
-    results.write_positions(result, st.out)
-    results.set_mode(result, mode)
-    st.result = result
-    # The companion stays parked while DQ Skin deforms (re-parked if someone switched it on:
-    # both deforming would deform the mesh twice).
-    c = obj.modifiers.get(st.companion) if st.companion else None
-    if c is None or c.type != "ARMATURE":
-        c = companion.find(obj, mod)
-        st.companion = c.name if c is not None else ""
-    if c is not None and not companion.is_parked(c):
-        companion.park(c)
-    st.parked = True
-    st.signature = plan.signature
-    st.mode = "replace" if mode == nodes.RESULT_REPLACE else "positions"
-    st.error = ""
-    st.seconds = time.perf_counter() - plan.start
-    st.method = plan.s.method
-    st.status = ""
+        results.points_mesh(result, len(out.buffer))
+        out.copied_version = 0
+    results.write_positions(result, out.buffer)
+    results.set_mode(result, kind)
+    out.result, out.kind, out.written = result, kind, plan.key
+    settle_companion(obj, mod, st, plan.s, plan.deforms, render=plan.render)
+    binding = st.binding.binding
+    status = st.status
+    status.mode, status.message = Mode.LIVE, ""
+    status.method = plan.s.method.label
+    status.bones = len(binding.bone_names)
+    status.influences = len(binding.influences)
+    status.seconds = time.perf_counter() - plan.start
 
 
-def _mesh_input(obj, obj_eval, mod, st: State, data, depsgraph):
+# -- what reaches the modifier ------------------------------------------------------------------
+
+class _CaptureNeeded(SkinError):
+    """Shape keys DQ Skin cannot mix itself: it reads what reaches it from the evaluation."""
+
+
+def _mesh_input(obj, obj_eval, st: ModifierState, data, depsgraph):
     """The mesh's coordinates with its shape keys mixed, and a key that changes with them."""
     keys = data.keys
     if keys is None:
         return data.positions, ("mesh", data.version)
     if not keys.relative:
-        raise _needs_capture(mod, "absolute shape keys")
+        raise _CaptureNeeded("absolute shape keys")
     key_eval = obj.data.shape_keys.evaluated_get(depsgraph)
     blocks = key_eval.key_blocks
     if len(blocks) != len(keys.data):
-        raise _needs_capture(mod, "shape keys changing")
+        raise _CaptureNeeded("shape keys changing")
     values = np.empty(len(blocks), np.float32)
     blocks.foreach_get("value", values)
     mutes = np.empty(len(blocks), bool)
     blocks.foreach_get("mute", mutes)
     shown = obj_eval.active_shape_key_index if obj_eval.show_only_shape_key else None
-    signature = ("keys", data.version, values.tobytes(), mutes.tobytes(), shown)
-    if st.mixed is not None and st.signature is not None and st.signature[1] == signature:
-        return st.mixed, signature
-    if st.mixed is None or len(st.mixed) != data.vertex_count:
-        st.mixed = np.empty((data.vertex_count, 3), np.float32)
+    input_key = ("keys", data.version, values.tobytes(), mutes.tobytes(), shown)
+    out = st.output
+    if out.mixed is not None and out.mixed_key == input_key:
+        return out.mixed, input_key
+    if out.mixed is None or len(out.mixed) != data.vertex_count:
+        out.mixed = np.empty((data.vertex_count, 3), np.float32)
     blocks_in = [
         (
             keys.data[i],
@@ -550,18 +576,11 @@ def _mesh_input(obj, obj_eval, mod, st: State, data, depsgraph):
         for i in range(len(keys.data))
     ]
     try:
-        dqskin.shape_key_mix(blocks_in, keys.reference, st.mixed, shown)
+        dqskin.shape_key_mix(blocks_in, keys.reference, out.mixed, shown)
     except ValueError as e:
-        raise _needs_capture(mod, str(e)) from None
-    return st.mixed, signature
-
-
-class _CaptureNeeded(SkinError):
-    """Shape keys DQ Skin cannot mix itself: it reads what reaches it from the evaluation."""
-
-
-def _needs_capture(mod, why: str) -> SkinError:
-    return _CaptureNeeded(why)
+        raise _CaptureNeeded(str(e)) from None
+    out.mixed_key = input_key
+    return out.mixed, input_key
 
 
 def _set_capture(mod, on: bool) -> None:
@@ -572,13 +591,33 @@ def _set_capture(mod, on: bool) -> None:
         nodes.put(mod, "Capture Name", capture_name(mod))
 
 
+def prepare_capture(obj) -> None:
+    """Switches the node group's capture on for the DQ Skin modifiers that other enabled
+    modifiers precede, as soon as the stack changes: Blender then stores what reaches them in
+    the same evaluation, and the next one skins it (capture found on only while skinning would
+    cost an evaluation more)."""
+    if obj.library is not None:
+        return
+    others = False
+    for mod in obj.modifiers:
+        if nodes.is_dq_skin(mod):
+            if others and nodes.version_of(mod.node_group) == nodes.VERSION:
+                st = state_of(obj, mod)
+                if st.capture_on is not True:
+                    _set_capture(mod, True)
+                    _pass_through(mod)  # a replacing result would hide what the group stores
+                    st.capture_on = True
+        elif mod.show_viewport or mod.show_render:
+            others = True
+
+
 def capture_name(mod) -> str:
     return f"dq_skin_input_{compat.modifier_uid(mod)}"
 
 
-def _captured(obj, obj_eval, mod, data):
+def _captured(obj, obj_eval, mod, st: ModifierState, data, ctx: Context):
     _set_capture(mod, True)
-    state(obj, mod).capture_on = True
+    st.capture_on = True
     name = capture_name(mod)
     mesh = obj_eval.data
     attribute = mesh.attributes.get(name) if mesh is not None else None
@@ -606,94 +645,75 @@ def _captured(obj, obj_eval, mod, data):
     return positions, ("capture", positions.tobytes())
 
 
-def _armature_signature(arm) -> tuple:
-    """What of the armature's bones the binding depends on (names, deform flags, rest pose,
-    envelopes); read when Blender says the armature changed."""
-    bones = arm.data.bones
-    n = len(bones)
-    deform = np.empty(n, bool)
-    bones.foreach_get("use_deform", deform)
-    rest = np.empty(n * 16, np.float32)
-    bones.foreach_get("matrix_local", rest)
-    envelope = np.empty(n * 4, np.float32)
-    for i, attr in enumerate(("head_radius", "tail_radius", "envelope_distance", "envelope_weight")):
-        col = np.empty(n, np.float32)
-        bones.foreach_get(attr, col)
-        envelope[i::4] = col
-    multiply = np.empty(n, bool)
-    bones.foreach_get("use_envelope_multiply", multiply)
-    segments = np.empty(n, np.int32)
-    bones.foreach_get("bbone_segments", segments)
-    return (tuple(b.name for b in bones), deform.tobytes(), rest.tobytes(), envelope.tobytes(), multiply.tobytes(), segments.tobytes())
+# -- the result object --------------------------------------------------------------------------
 
-
-def _still(result, mod, claimed: dict) -> bool:
-    """Whether the result written last time is still this modifier's (the usual case)."""
+def _own_result(obj, mod, st: ModifierState):
+    """This modifier's result object: the one it wrote last, or the one its node group points at
+    if that is its own (a copied modifier points at another's), else a new one. The node group
+    is made to point at it."""
+    result = st.output.result
     try:
-        return nodes.get(mod, "Result") == result and claimed.get(result.session_uid) is not None
+        if result is not None and not results.owned_by(result, obj, mod):
+            result = None
     except ReferenceError:
-        return False
-
-
-def _own_result(obj, mod, claimed: dict):
-    """This modifier's result object: the one it points at if that is ours and not another
-    modifier's, else a new one."""
-    uid = compat.modifier_uid(mod)
-    owner = results.owner_key(obj, uid)
-    me = (obj.session_uid, uid)
-    result = nodes.get(mod, "Result")
-    if result is not None and results.is_result(result) and result.library is None and claimed.get(result.session_uid, me) == me:
-        claimed[result.session_uid] = me
-        if result.get(results.OWNER) != owner:
-            result[results.OWNER] = owner
-        return result
-    result = results.create(obj, mod, owner)
-    claimed[result.session_uid] = me
-    nodes.put(mod, "Result", result)
+        result = None
+    if result is None:
+        pointed = nodes.get(mod, "Result")
+        result = pointed if results.owned_by(pointed, obj, mod) else results.create(obj, mod)
+        st.output.result = result
+    if nodes.get(mod, "Result") != result:
+        nodes.put(mod, "Result", result)
     return result
 
 
-def _fallback(obj, mod, st: State, s: Settings | None, message: str) -> bool:
-    """DQ Skin cannot deform: pass the input through and let the companion deform as Blender
-    does; the panel shows why."""
-    st.mode, st.error, st.signature, st.parked = "fallback", message, None, False
-    result = nodes.get(mod, "Result")
-    if result is not None and results.is_result(result) and result.library is None:
-        results.set_mode(result, nodes.RESULT_OFF)
-    c = companion.find(obj, mod)
-    if c is None:
-        st.status = "No Armature modifier after it: the mesh is not deformed"
-    else:
-        if s is not None:
-            companion.activate(c, mod, s)
-        else:
-            c.show_viewport, c.show_render = mod.show_viewport, mod.show_render
-        st.status = f"Blender's Armature modifier '{c.name}' deforms the mesh instead"
-    return False
+def switch_off(obj, mod) -> None:
+    """DQ Skin and its companion both off, as the user would switch off an Armature modifier
+    (a cache plays in their place, see `bake`)."""
+    mod.show_viewport = mod.show_render = False
+    st = state_of(obj, mod)
+    c = _companion(obj, mod, st)
+    if c is not None:
+        companion.configure(c, mod, settings.cached(mod, st.settings), (False, False))
+    st.companion.deforms = st.companion.shown = (False, False)
 
+
+# -- files ----------------------------------------------------------------------------------------
 
 def deactivate(obj, mod, detach: bool) -> None:
-    """The state files are saved in: companion active, no result (detached with `detach`)."""
+    """The state files are saved in: the companion on wherever DQ Skin is on, set up like it, no
+    result (detached with `detach`)."""
     if obj.library is not None:
         return
     try:
-        s = settings(mod)
+        s = settings.read(mod)
     except Exception:
         s = None
     c = companion.find(obj, mod)
     if c is not None:
         if s is not None:
-            companion.activate(c, mod, s)
+            companion.configure(c, mod, s, (mod.show_viewport, mod.show_render))
         else:
-            c.show_viewport, c.show_render = mod.show_viewport, mod.show_render
-    result = nodes.get(mod, "Result")
-    if result is not None and results.is_result(result) and result.library is None:
-        results.set_mode(result, nodes.RESULT_OFF)
-    if detach and result is not None:
+            companion.configure_without_settings(c, mod)
+    _pass_through(mod)
+    if detach and nodes.get(mod, "Result") is not None:
         nodes.put(mod, "Result", None)
-    st = _states.get((obj.session_uid, compat.modifier_uid(mod)))
+    st = STATES.find(obj.session_uid, compat.modifier_uid(mod))
     if st is not None:
-        st.signature = None
-        st.parked = False
-        if st.live:
-            st.mode = ""
+        st.output.invalidate()
+
+
+def reactivate(obj, mod) -> None:
+    """After a save: back to how it was before `deactivate` (the next evaluation writes again)."""
+    st = STATES.find(obj.session_uid, compat.modifier_uid(mod))
+    if st is None or obj.library is not None:
+        return
+    if st.output.result is not None:
+        try:
+            nodes.put(mod, "Result", st.output.result)
+        except ReferenceError:
+            st.output.result = None
+    c = _companion(obj, mod, st)
+    known = st.companion
+    if c is not None and known.shown is not None and st.settings.value is not None:
+        companion.configure(c, mod, st.settings.value, known.shown)
+    st.output.invalidate()

@@ -44,8 +44,8 @@ RESULT_SCALE_POSITIONS = 2.0
 METHODS = ("Linear", "Dual Quaternion", "Blend", "Optimized Centers")
 METHOD_KEYS = {"Linear": "linear", "Dual Quaternion": "dual_quaternion", "Blend": "blend", "Optimized Centers": "centers_of_rotation"}
 WARNING = (
-    "DQ Skin is not deforming this mesh (extension not installed or enabled, linked data, or an "
-    "error): the Armature modifier after it does, as Blender would"
+    "DQ Skin is not deforming this mesh: the Armature modifier after it does, as Blender would "
+    "(the DQ Skin panel says why; without the DQ Skin extension it always does)"
 )
 
 # (name, socket type, default, min, max, description, hidden)
@@ -119,7 +119,7 @@ RAW = ("Armature", "Method", "Blend Amount", "Blend Factor", "Use Vertex Groups"
 
 
 def raw_settings(mod) -> tuple:
-    """The settings' stored values, cheap to read and compare (see `modifier.settings`)."""
+    """The settings' stored values, cheap to read and compare (see `settings.cached`)."""
     ids = socket_ids(mod.node_group)
     if compat.RNA_INPUTS:
         inputs = mod.properties.inputs
@@ -182,9 +182,20 @@ def ensure_group():
     """The DQ Skin node group, created on first use (shared by all DQ Skin modifiers)."""
     for group in bpy.data.node_groups:
         if group.bl_idname == "GeometryNodeTree" and group.get(GROUP_TAG) == VERSION and group.library is None:
-            add_missing_methods(group)
+            upgrade(group)
             return group
     return build_group()
+
+
+def upgrade(group) -> None:
+    """A group saved by an earlier DQ Skin 0.x, brought up to date in place (the modifiers'
+    stored values stay valid): the newer methods, the current warning."""
+    if group.library is not None:
+        return
+    add_missing_methods(group)
+    warning = next((n for n in group.nodes if n.bl_idname == "GeometryNodeWarning"), None)
+    if warning is not None and warning.inputs["Message"].default_value != WARNING:
+        warning.inputs["Message"].default_value = WARNING
 
 
 def add_missing_methods(group) -> None:

@@ -5,17 +5,15 @@ from __future__ import annotations
 
 import bpy
 
-from . import centers, companion, compat, modifier, nodes, results
+from . import centers, companion, compat, modifier, nodes, results, settings
 from .registry import REGISTRY
+from .state import STATES
 
 METHOD_ITEMS = (
-    ("AUTO", "From Armature Modifier", "Dual Quaternion if its Preserve Volume is on, else Linear"),
-    ("LINEAR", "Linear", "Linear blend skinning (Preserve Volume off)"),
-    ("DUAL_QUATERNION", "Dual Quaternion", "Dual quaternion skinning (Preserve Volume on)"),
-    ("BLEND", "Blend", "Per-vertex blend of Linear and Dual Quaternion"),
-    ("CENTERS", "Optimized Centers", "Optimized Centers of Rotation (Le and Hodgins 2016): no candy wrapper, no bulge at bent joints"),
+    ("AUTO", "From Armature Modifier", "Dual Quaternion if the Armature modifier's Preserve Volume is on, else Linear"),
+    *((m.id, m.label, m.description) for m in settings.METHODS),
 )
-MENU_NAME = {"LINEAR": "Linear", "DUAL_QUATERNION": "Dual Quaternion", "BLEND": "Blend", "CENTERS": "Optimized Centers"}
+MENU_NAME = {m.id: m.label for m in settings.METHODS}
 
 
 def set_input(mod, name: str, value) -> None:
@@ -67,7 +65,7 @@ def add(obj, source, method: str = "AUTO"):
     mod.show_on_cage = source.show_on_cage
     obj.modifiers.move(len(obj.modifiers) - 1, index)
     # Until DQ Skin has its first result, the companion deforms as Blender would.
-    companion.activate(source, mod, modifier.settings(mod))
+    companion.configure(source, mod, settings.read(mod), (mod.show_viewport, mod.show_render))
     return mod
 
 
@@ -108,12 +106,9 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
         # Skin right away, so the first frame is already DQ Skin's (and binding errors show).
         # The view layer's depsgraph as last evaluated (the armatures' poses are there): forcing
         # an evaluation here would rebuild the scene's relations once more for nothing.
-        REGISTRY.ensure()
         depsgraph = context.view_layer.depsgraph
         for obj in added:
-            rec = REGISTRY.records.get(obj.session_uid) or REGISTRY._add(obj)
-            REGISTRY._describe(rec)
-            REGISTRY.evaluate(rec, depsgraph)
+            REGISTRY.evaluate(REGISTRY.record_of(obj), depsgraph)
         if len(added) == 1:
             mod = modifier.dq_skin_modifiers(added[0])[-1]
             self.report({"INFO"}, f"DQ Skin ({nodes.get_method(mod)}) replaces {nodes.get_companion(mod)['name']!r} on {added[0].name}")
@@ -141,18 +136,18 @@ def remove_modifier(obj, mod) -> None:
     as it was before `dq_skin_add`."""
     info = nodes.get_companion(mod) if nodes.version_of(mod.node_group) == nodes.VERSION else {}
     c = companion.find(obj, mod, info) if info else None
-    result = nodes.get(mod, "Result") if info else None
     uid = compat.modifier_uid(mod)
+    st = STATES.pop(obj.session_uid, uid)
+    # Its own results only: a copied modifier may still point at another modifier's.
+    ours = [r for r in (nodes.get(mod, "Result") if info else None, st.output.result if st else None) if results.owned_by(r, obj, mod)]
     attr = obj.data.attributes.get(modifier.capture_name(mod))
     obj.modifiers.remove(mod)
     if attr is not None:
         obj.data.attributes.remove(attr)
     if c is not None:
         companion.restore(c, info.get("original", {}))
-    if result is not None and results.is_result(result):
-        REGISTRY.claimed.pop(result.session_uid, None)
-        results.remove(result)
-    modifier.drop_state((obj.session_uid, uid))
+    for r in {r.session_uid: r for r in ours}.values():
+        results.remove(r)
     rec = REGISTRY.records.get(obj.session_uid)
     if rec is not None:
         rec.mods.pop(uid, None)

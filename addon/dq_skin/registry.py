@@ -1,22 +1,29 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Which objects have DQ Skin modifiers, and which datablocks each depends on.
+"""Which objects have DQ Skin modifiers, which datablocks each depends on, and when to evaluate
+them.
 
 The handlers ask it what an update concerns, so that their cost follows what changed, not how
 many DQ Skin objects the file has: moving an unrelated object costs a dictionary lookup. It is
 rebuilt from `bpy.data` when a file is loaded and after undo (which replaces the datablocks),
 and it notices new objects (duplicates, appends, copied modifiers) and removed modifiers
 (removed or applied) from the updates Blender reports.
+
+While a Python operator runs (Rigify's Generate, scripts calling `bpy.ops`), Blender evaluates
+the scene after every step: the registry keeps its bookkeeping current then, but skins once the
+scene settles (the next update outside an operator, the next frame change, or an idle moment of
+the interface), not on every intermediate update.
 """
 
 from __future__ import annotations
 
-import contextlib
+import sys
 from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
 
 from . import companion, compat, meshdata, modifier, nodes, results
+from .state import STATES, Mode
 
 
 @dataclass
@@ -33,9 +40,9 @@ class Record:
     obj: object
     mods: dict[str, ModInfo] = field(default_factory=dict)  # modifier uid -> info
     watched: set = field(default_factory=set)
-    steady: object = None  # the State of its one DQ Skin while playback needs only the pose
+    steady: object = None  # the ModifierState of its one DQ Skin while playback needs only the pose
     volatile: bool = False  # evaluated by Blender before the frame handler (see `frame_pre`)
-    pending: bool = False
+    pending: bool = False  # evaluate fully at the next frame (its result was let go)
     modifier_count: int = 0
 
 
@@ -45,24 +52,33 @@ class Registry:
         self.built = False
         self.records: dict[int, Record] = {}
         self.watch: dict[int, set[int]] = {}  # datablock uid -> uids of objects depending on it
-        self.claimed: dict[int, tuple] = {}  # result object uid -> (object uid, modifier uid)
+        self.structure = 0  # bumped when objects, modifiers or constraints may have changed
+        self.deferred: set[int] = set()  # objects to evaluate once the scene settles
+        self.counts: dict[int, int] = {}  # modifier + constraint counts of other objects seen updated
 
-    @contextlib.contextmanager
     def suspend(self):
         """No evaluation while an operator is halfway through changing a modifier stack."""
-        self.suspended += 1
-        try:
-            yield
-        finally:
-            self.suspended -= 1
+        registry = self
+
+        class _Suspended:
+            def __enter__(self):
+                registry.suspended += 1
+
+            def __exit__(self, *exc):
+                registry.suspended -= 1
+
+        return _Suspended()
 
     # -- building ---------------------------------------------------------------------------
     def reset(self) -> None:
         self.built = False
         self.records.clear()
         self.watch.clear()
-        self.claimed.clear()
-        modifier.forget()
+        self.deferred.clear()
+        self.counts.clear()
+        self.structure += 1
+        STATES.clear()
+        meshdata.forget()
         nodes.forget_socket_ids()
 
     def build(self) -> None:
@@ -70,26 +86,27 @@ class Registry:
         self.built = True
         for obj in bpy.data.objects:
             if obj.type == "MESH" and any(nodes.is_dq_skin(m) for m in obj.modifiers):
-                self._add(obj)
-        # Results whose owner tag matches keep their owner; the others are claimed in stack
-        # order at the first evaluation (duplicates then get their own).
-        for rec in self.records.values():
-            for mod in modifier.dq_skin_modifiers(rec.obj):
-                r = nodes.get(mod, "Result") if nodes.version_of(mod.node_group) == nodes.VERSION else None
-                uid = compat.modifier_uid(mod)
-                if r is not None and results.is_result(r) and r.get(results.OWNER) == results.owner_key(rec.obj, uid):
-                    self.claimed.setdefault(r.session_uid, (rec.obj.session_uid, uid))
-        for r in results.orphans():
-            results.remove(r)
+                self.add(obj)
+        results.remove_unused()
 
     def ensure(self) -> None:
         if not self.built:
             self.build()
 
-    def _add(self, obj) -> Record:
+    def add(self, obj) -> Record:
         rec = Record(obj)
         self.records[obj.session_uid] = rec
         self._describe(rec)
+        self.structure += 1
+        return rec
+
+    def record_of(self, obj) -> Record:
+        self.ensure()
+        rec = self.records.get(obj.session_uid)
+        if rec is None:
+            rec = self.add(obj)
+        else:
+            self._describe(rec)
         return rec
 
     def _describe(self, rec: Record) -> None:
@@ -97,7 +114,6 @@ class Registry:
         obj = rec.obj
         for uid in rec.watched:
             self.watch.get(uid, set()).discard(obj.session_uid)
-        rec.watched = set()
         mods = {}
         watched = {obj.data.session_uid}
         if obj.data.shape_keys is not None:
@@ -125,6 +141,9 @@ class Registry:
         current = {compat.modifier_uid(m) for m in modifier.dq_skin_modifiers(obj)}
         for uid in [u for u in rec.mods if u not in current]:
             self._gone(obj, uid, rec.mods[uid])
+        if len(obj.modifiers) != rec.modifier_count:
+            self.structure += 1
+        modifier.prepare_capture(obj)
         self._describe(rec)
         if not rec.mods:
             self._drop(rec)
@@ -132,7 +151,7 @@ class Registry:
     def _gone(self, obj, uid: str, info: ModInfo) -> None:
         """A DQ Skin modifier disappeared: applied (its companion goes too, the mesh keeps the
         deformation) or removed (its companion is put back as it was)."""
-        st = modifier._states.pop((obj.session_uid, uid), None)
+        st = STATES.pop(obj.session_uid, uid)
         c = obj.modifiers.get(info.companion.get("name", "")) if info.companion.get("name") else None
         if c is not None and c.type != "ARMATURE":
             c = None
@@ -144,14 +163,12 @@ class Registry:
                 obj.data.attributes.remove(attr)
         elif c is not None:
             companion.restore(c, info.companion.get("original", {}))
-        if st is not None and st.result is not None:
+        if st is not None and st.output.result is not None:
             try:
-                self.claimed.pop(st.result.session_uid, None)
-                results.remove(st.result)
+                results.remove(st.output.result)
             except ReferenceError:
                 pass
-        for r in results.orphans():
-            results.remove(r)
+        results.remove_unused()
 
     def _drop(self, rec: Record) -> None:
         self.records.pop(rec.obj.session_uid, None)
@@ -162,24 +179,43 @@ class Registry:
         """Forgets deleted objects (and their results)."""
         for key, rec in list(self.records.items()):
             try:
-                rec.obj.name
-                alive = rec.obj.session_uid == key
+                alive = rec.obj.session_uid == key and rec.obj.name is not None
             except ReferenceError:
                 alive = False
             if not alive:
                 self.records.pop(key, None)
                 for uid in rec.watched:
                     self.watch.get(uid, set()).discard(key)
-                for k in [k for k in modifier._states if k[0] == key]:
-                    st = modifier._states.pop(k)
+                for st in STATES.drop_object(key):
                     try:
-                        results.remove(st.result)
+                        results.remove(st.output.result)
                     except ReferenceError:
                         pass
-        for r in results.orphans():
-            results.remove(r)
+                self.structure += 1
+        results.remove_unused()
+
+    def _armature_changed(self, arm_data_uid: int) -> None:
+        """Bones may have changed (deform flags, segments, rest pose): every object bound to
+        them takes the full path, which compares the bones, at its next evaluation."""
+        for obj_uid in self.watch.get(arm_data_uid, ()):
+            rec = self.records.get(obj_uid)
+            if rec is not None:
+                rec.steady = None
+                rec.pending = True
+
+    def _other_object_changed(self, obj) -> None:
+        """Another object's geometry was updated: if its modifiers or constraints changed, what
+        simulates on the DQ Skin objects may have too (see `consumers`)."""
+        count = len(obj.modifiers) + len(obj.constraints) if hasattr(obj, "modifiers") else 0
+        uid = obj.session_uid
+        if self.counts.get(uid) != count:
+            self.counts[uid] = count
+            self.structure += 1
 
     # -- evaluation -------------------------------------------------------------------------
+    def context(self, depsgraph, batch=None) -> modifier.Context:
+        return modifier.Context(depsgraph, structure=self.structure, batch=batch)
+
     def evaluate(self, rec: Record, depsgraph, force: bool = False, ctx=None) -> None:
         try:
             obj = rec.obj
@@ -187,15 +223,24 @@ class Registry:
         except ReferenceError:
             self.prune()
             return
-        modifier.evaluate_object(obj, depsgraph, self.claimed, force, ctx)
+        modifier.evaluate_object(obj, ctx or self.context(depsgraph), force)
         rec.steady = None
         if len(rec.mods) == 1:
-            st = modifier._states.get((obj.session_uid, next(iter(rec.mods))))
-            if st is not None and st.mode == "replace" and st.source == "mesh" and not st.needs_effective:
+            st = STATES.find(obj.session_uid, next(iter(rec.mods)))
+            if st is not None and st.status.mode is Mode.LIVE and st.status.source == "mesh" and not st.needs_effective:
                 rec.steady = st
 
+    def evaluate_all(self, depsgraph, force: bool = True) -> None:
+        """Every DQ Skin object of `depsgraph` (exports starting or ending, a save)."""
+        self.ensure()
+        ctx = self.context(depsgraph)
+        for rec in list(self.records.values()):
+            if _in(rec.obj, depsgraph):
+                self.evaluate(rec, depsgraph, force, ctx)
+
     def updates(self, depsgraph) -> None:
-        """After an interactive change: re-evaluate only what it concerns."""
+        """After an interactive change: re-evaluate only what it concerns (once the scene
+        settles, while a Python operator runs)."""
         if self.suspended:
             return
         self.ensure()
@@ -213,8 +258,10 @@ class Registry:
                     self.refresh(rec)
                     dirty.add(uid)
                 elif orig.type == "MESH" and any(nodes.is_dq_skin(m) for m in orig.modifiers):
-                    self._add(orig)
+                    self.add(orig)
                     dirty.add(uid)
+                elif update.is_updated_geometry:
+                    self._other_object_changed(orig)
                 if uid in self.watch:
                     dirty |= self.watch[uid]
             elif isinstance(orig, (bpy.types.Collection, bpy.types.Scene)):
@@ -230,24 +277,39 @@ class Registry:
                     self._armature_changed(uid)
                 dirty |= self.watch[uid]
         if structure:
+            self.structure += 1
             self.prune()
+        if inside_python_operator():
+            self.defer(dirty)
+            return
+        dirty |= self.deferred
+        self.deferred.clear()
+        ctx = self.context(depsgraph)
         for uid in dirty:
             rec = self.records.get(uid)
             if rec is not None and _in(rec.obj, depsgraph):
-                self.evaluate(rec, depsgraph)
+                self.evaluate(rec, depsgraph, ctx=ctx)
 
-    def _states_of(self, rec: Record):
-        for uid in rec.mods:
-            st = modifier._states.get((rec.obj.session_uid, uid))
-            if st is not None:
-                yield st
+    def defer(self, uids: set) -> None:
+        """Evaluates these objects once the scene settles."""
+        if not uids:
+            return
+        first = not self.deferred
+        self.deferred |= uids
+        if first and not bpy.app.background:
+            bpy.app.timers.register(_settle, first_interval=0.0)
 
-    def _armature_changed(self, arm_data_uid: int) -> None:
-        for obj_uid in self.watch.get(arm_data_uid, ()):
-            rec = self.records.get(obj_uid)
-            if rec is not None:
-                for st in self._states_of(rec):
-                    st.check_armature = True
+    def settle(self) -> None:
+        """The scene settled: evaluate what the operators changed."""
+        if not self.deferred or self.suspended:
+            return
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        uids, self.deferred = self.deferred, set()
+        ctx = self.context(depsgraph)
+        for uid in uids:
+            rec = self.records.get(uid)
+            if rec is not None and _in(rec.obj, depsgraph):
+                self.evaluate(rec, depsgraph, ctx=ctx)
 
     def frame_pre(self) -> None:
         """Before a frame change: objects Blender will evaluate anyway before the frame handler
@@ -256,10 +318,11 @@ class Registry:
         for rec in self.records.values():
             if not rec.volatile:
                 continue
-            for st in self._states_of(rec):
-                if st.mode == "replace" and st.result is not None:
+            for _uid, st in STATES.of_object(rec.obj.session_uid):
+                # (A modifier reading what reaches it needs that evaluated in the first pass.)
+                if st.status.mode is Mode.LIVE and st.output.result is not None and st.output.kind == nodes.RESULT_REPLACE and not st.capture_on:
                     try:
-                        results.set_mode(st.result, nodes.RESULT_PENDING)
+                        results.set_mode(st.output.result, nodes.RESULT_PENDING)
                         rec.pending = True
                     except ReferenceError:
                         pass
@@ -284,22 +347,29 @@ class Registry:
                 if rec is None:
                     # New since the last update (a script duplicated or linked it).
                     if orig.type == "MESH" and any(nodes.is_dq_skin(m) for m in orig.modifiers):
-                        self._add(orig)
+                        self.add(orig)
                         moved.add(uid)
+                    elif update.is_updated_geometry:
+                        self._other_object_changed(orig)
                 elif len(orig.modifiers) != rec.modifier_count:
                     self.refresh(rec)
                     moved.add(uid)
-            elif isinstance(orig, bpy.types.Mesh) and update.is_updated_geometry and orig.session_uid in self.watch:
-                # A script edited the mesh before changing frames (animated shape keys also
-                # flag it; then comparing costs a read, but nothing is recomputed).
-                key = orig.shape_keys
-                if key is None or not (key.animation_data is not None):
-                    meshdata.mark_stale(orig.session_uid)
-        ctx = modifier.Context(depsgraph, self.claimed, batch=[])
+            elif orig.session_uid in self.watch:
+                if isinstance(orig, bpy.types.Mesh) and update.is_updated_geometry:
+                    # A script edited the mesh before changing frames (animated shape keys also
+                    # flag it; then comparing costs a read, but nothing is recomputed).
+                    key = orig.shape_keys
+                    if key is None or key.animation_data is None:
+                        meshdata.mark_stale(orig.session_uid)
+                elif isinstance(orig, bpy.types.Armature):
+                    # A script edited bones (deform flags, B-Bone segments) before changing frames.
+                    self._armature_changed(orig.session_uid)
+        ctx = self.context(depsgraph, batch=[])
         # Objects Blender did not update in this evaluation keep their settings; those that did
-        # not move keep their spaces.
-        ctx.unchanged = {uid for uid in self.records if uid not in updated}
-        ctx.unmoved = _unmoved(self, moved)
+        # not move keep their spaces. Those changed while an operator ran are evaluated fully.
+        deferred, self.deferred = self.deferred, set()
+        ctx.unchanged = {uid for uid in self.records if uid not in updated and uid not in deferred}
+        ctx.unmoved = _unmoved(self, moved | deferred)
         for uid, rec in list(self.records.items()):
             if uid not in self.records or not _in(rec.obj, depsgraph):
                 continue
@@ -308,7 +378,7 @@ class Registry:
             force, rec.pending = rec.pending, False
             st = rec.steady
             if st is not None and not force and uid in ctx.unchanged:
-                plan = modifier._quick(rec.obj, None, st, ctx, "mesh")
+                plan = modifier._quick(rec.obj, None, st, ctx)
                 if plan is None:
                     continue
                 if plan is not False:
@@ -318,11 +388,21 @@ class Registry:
         modifier.run_batch(ctx.batch)
 
     # -- saving -----------------------------------------------------------------------------
-    def deactivate_all(self, detach: bool) -> list:
-        """Puts every DQ Skin in the state files are saved in; returns what to put back."""
+    def deactivate_all(self, detach: bool) -> None:
+        """Puts every DQ Skin in the state files are saved in."""
         self.ensure()
-        restore = []
+        for obj, mod in self._local_modifiers():
+            modifier.deactivate(obj, mod, detach)
+
+    def reactivate_all(self) -> None:
+        """Back from `deactivate_all` (after a save)."""
+        for obj, mod in self._local_modifiers():
+            modifier.reactivate(obj, mod)
         for rec in self.records.values():
+            rec.pending = True
+
+    def _local_modifiers(self):
+        for rec in list(self.records.values()):
             try:
                 obj = rec.obj
                 obj.name
@@ -331,17 +411,33 @@ class Registry:
             if obj.library is not None:
                 continue
             for mod in modifier.dq_skin_modifiers(obj):
-                if nodes.version_of(mod.node_group) != nodes.VERSION:
-                    continue
-                result = nodes.get(mod, "Result")
-                modifier.deactivate(obj, mod, detach)
-                restore.append((obj, mod.name, result))
-        return restore
+                if nodes.version_of(mod.node_group) == nodes.VERSION:
+                    yield obj, mod
+
+
+def inside_python_operator() -> bool:
+    """Whether Python code is running an operator now (an operator's `execute`, or `bpy.ops`
+    called from a script): Blender evaluates the scene after each of its steps."""
+    f = sys._getframe(1)
+    while f is not None:
+        code = f.f_code
+        if code.co_name == "__call__" and code.co_filename.endswith(("bpy/ops.py", "bpy\\ops.py")):
+            return True
+        if code.co_name in ("execute", "invoke", "modal") and code.co_varnames[:1] == ("self",):
+            if isinstance(f.f_locals.get("self"), bpy.types.Operator):
+                return True
+        f = f.f_back
+    return False
+
+
+def _settle():
+    REGISTRY.settle()
+    return None
 
 
 def _unmoved(reg: Registry, moved: set) -> set:
     """Objects (DQ Skin objects and the armatures they watch) whose transform did not change."""
-    ids = set(reg.records) | {uid for uid in reg.watch}
+    ids = set(reg.records) | set(reg.watch)
     return ids - moved
 
 
@@ -361,15 +457,15 @@ def _was_applied(obj, info: ModInfo, st) -> bool:
                 return True
         except (AttributeError, ReferenceError):
             pass
-    if st is None or st.out is None or len(st.out) != len(obj.data.vertices) or not st.live:
+    if st is None or st.output.buffer is None or len(st.output.buffer) != len(obj.data.vertices) or not st.status.live:
         return False
     # The mesh now holds what the modifier output (and that differs from what reached it).
     current = np.empty(len(obj.data.vertices) * 3, np.float32)
     obj.data.attributes["position"].data.foreach_get("vector", current)
     current = current.reshape(-1, 3)
-    data = meshdata._cache.get(obj.data.session_uid)
-    moved = data is None or not np.array_equal(data.positions, st.out)
-    return moved and np.allclose(current, st.out, atol=1e-6, rtol=0)
+    data = meshdata.peek_any(obj)
+    moved = data is None or not np.array_equal(data.positions, st.output.buffer)
+    return moved and np.allclose(current, st.output.buffer, atol=1e-6, rtol=0)
 
 
 REGISTRY = Registry()

@@ -1,79 +1,78 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Result objects: where the add-on puts what a DQ Skin modifier outputs.
 
-One per object and modifier (two DQ Skins on one object, or a duplicate of a character, never
-share one), local to the current file even when the character is a library override, linked to
-no scene (the modifier's reference keeps it evaluated), and never saved: files are written
-without them (see `handlers.on_save_pre`), so a file opened anywhere shows either a result the
-add-on just computed or Blender's own deformation through the companion.
+One per object and modifier (two DQ Skins on one object, or a copy of a character, never share
+one), local to the current file even when the character is a library override, linked to no
+scene (the modifier's reference keeps it evaluated), and runtime data: Blender never writes a
+result, its mesh or anything of theirs to a file.
 
-Each result records its owner; a duplicated object or copied modifier that still points at
-another modifier's result gets a new one of its own.
+Each result records its owner (the object's session uid and the modifier's persistent id): a
+copied object or modifier that still points at another modifier's result gets one of its own.
 """
 
 from __future__ import annotations
 
 import bpy
 
-from . import nodes
+from . import compat, nodes
 
 TAG = "dq_skin_result"
-OWNER = "dq_skin_owner"
-
-
-def owner_key(obj, mod_uid: str) -> str:
-    return f"{obj.name_full}\x1f{mod_uid}"
+OWNER_OBJECT = "dq_skin_owner_object"
+OWNER_MODIFIER = "dq_skin_owner_modifier"
 
 
 def is_result(obj) -> bool:
-    return obj is not None and obj.get(TAG) is not None
+    try:
+        return obj is not None and obj.get(TAG) is not None
+    except ReferenceError:
+        return False
 
 
-def usable(result, owner: str, claimed: set) -> bool:
-    """Whether `result` can be written for `owner`: ours, local, a mesh object, not claimed by
-    another modifier in this session."""
+def owned_by(result, obj, mod) -> bool:
+    """Whether `result` is a local result of `mod` on `obj` (this session)."""
     return (
-        result is not None
-        and result.type == "MESH"
+        is_result(result)
         and result.library is None
-        and result.override_library is None
-        and is_result(result)
-        and result.session_uid not in claimed
+        and result.get(OWNER_OBJECT) == str(obj.session_uid)
+        and result.get(OWNER_MODIFIER) == compat.modifier_uid(mod)
     )
 
 
-def create(obj, mod, owner: str):
-    """A new, empty result object for `mod` on `obj` (its location says "pass through")."""
+def create(obj, mod):
+    """A new, empty result object for `mod` on `obj` (its transform says "pass through")."""
     name = f".DQ Skin result {obj.name} {mod.name}"
-    mesh = runtime(bpy.data.meshes.new(name))
-    result = runtime(bpy.data.objects.new(name, mesh))
+    mesh = _runtime(bpy.data.meshes.new(name))
+    result = _runtime(bpy.data.objects.new(name, mesh))
     result[TAG] = 1
-    result[OWNER] = owner
+    result[OWNER_OBJECT] = str(obj.session_uid)  # a string: uids exceed ID properties' int range
+    result[OWNER_MODIFIER] = compat.modifier_uid(mod)
     return result
 
 
-def runtime(datablock):
-    """Marks a data-block of ours as runtime data: Blender never writes it to a file, so a saved
-    file holds no copy of a result mesh (whose object is not saved either)."""
+def _runtime(datablock):
+    """Marks a data-block of ours as runtime data: Blender never writes it to a file."""
     datablock.is_runtime_data = True
     return datablock
 
 
 def remove(result) -> None:
-    """Deletes a result object and its mesh (if nothing else uses them)."""
-    if result is None or not is_result(result) or result.library is not None:
+    """Deletes a result object and its mesh."""
+    if not is_result(result) or result.library is not None:
         return
     mesh = result.data
-    try:
-        bpy.data.objects.remove(result)
-    except ReferenceError:
-        return
+    bpy.data.objects.remove(result)
     if mesh is not None and mesh.users == 0:
         bpy.data.meshes.remove(mesh)
 
 
+def remove_unused() -> None:
+    """Deletes the results nothing uses any more (their modifier or object was deleted)."""
+    for r in [o for o in bpy.data.objects if is_result(o) and o.users == 0 and o.library is None]:
+        remove(r)
+
+
+# What a result object's transform asks the node group to do (see `nodes`).
 _TRANSFORMS = {
-    # mode: (location, scale); see `nodes`
     nodes.RESULT_OFF: ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
     nodes.RESULT_REPLACE: ((1.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
     nodes.RESULT_POSITIONS: ((0.0, 0.0, 0.0), (2.0, 2.0, 2.0)),
@@ -100,20 +99,21 @@ def mode_of(result) -> int:
         return nodes.RESULT_PENDING
     if result.location.x > 0:
         return nodes.RESULT_REPLACE
-    if result.scale.x == 2.0:
+    if result.scale.x == nodes.RESULT_SCALE_POSITIONS:
         return nodes.RESULT_POSITIONS
     return nodes.RESULT_OFF
 
 
-def replace_mesh(result, source_mesh) -> None:
-    """Makes the result's mesh a copy of `source_mesh` (its attributes, groups, topology, shared
-    with it until written) without shape keys."""
+def copy_mesh(result, source_mesh) -> None:
+    """Makes the result's mesh a copy of `source_mesh` (attributes, groups, topology, shared with
+    it until written) without its shape keys: a copied shape-key data-block would be saved in
+    the user's file, pointing at a mesh that is not."""
     old = result.data
-    mesh = runtime(source_mesh.copy())
+    mesh = _runtime(source_mesh.copy())
     mesh.name = result.name
-    result.data = mesh
     if mesh.shape_keys is not None:
-        result.shape_key_clear()
+        bpy.data.batch_remove([mesh.shape_keys])
+    result.data = mesh
     if old is not None and old.users == 0:
         bpy.data.meshes.remove(old)
 
@@ -124,7 +124,7 @@ def points_mesh(result, count: int) -> None:
     if len(mesh.vertices) == count and not len(mesh.polygons) and not len(mesh.edges):
         return
     old = mesh
-    mesh = runtime(bpy.data.meshes.new(result.name))
+    mesh = _runtime(bpy.data.meshes.new(result.name))
     mesh.vertices.add(count)
     result.data = mesh
     if old is not None and old.users == 0:
@@ -132,17 +132,13 @@ def points_mesh(result, count: int) -> None:
 
 
 def write_positions(result, positions) -> None:
-    """New positions; `Mesh.update()` tells Blender they changed (normals and bounds are
-    recomputed), which `foreach_set` alone does not."""
+    """New positions. The attribute write alone leaves Blender's caches of the mesh (bounds,
+    normals, the BVH trees Shrinkwrap, Surface Deform and ray casts use) as they were; writing
+    one vertex through `MeshVertex.co` makes Blender tag the positions as changed, which
+    invalidates them, and `Mesh.update()` tells the dependency graph."""
     mesh = result.data
     mesh.attributes["position"].data.foreach_set("vector", positions.ravel())
+    if len(mesh.vertices):
+        v = mesh.vertices[0]
+        v.co = v.co
     mesh.update()
-
-
-def orphans() -> list:
-    """Result objects nothing uses any more (e.g. after their modifier or object was deleted)."""
-    return [o for o in bpy.data.objects if is_result(o) and o.users == 0 and o.library is None]
-
-
-def referenced(mod):
-    return nodes.get(mod, "Result")

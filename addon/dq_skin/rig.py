@@ -34,11 +34,6 @@ class Binding:
     """`(B, 4, 4)` rest matrices of the bound bones (`Bone.matrix_local`)."""
 
 
-def deforming_bones(armature) -> list:
-    """Pose bones whose bone has Deform on, in `pose.bones` order."""
-    return [pb for pb in armature.pose.bones if pb.bone.use_deform]
-
-
 def bind(
     mesh_object, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True, data=None
 ) -> Binding:
@@ -112,6 +107,27 @@ def spaces(mesh_object, armature) -> tuple[np.ndarray, np.ndarray]:
     return dqskin.armature_spaces(world(mesh_object), world(armature))
 
 
+def armature_signature(arm) -> tuple:
+    """What of the armature's bones a binding depends on (names, deform flags, rest pose,
+    envelopes, B-Bone segments), whatever route changed them."""
+    bones = arm.data.bones
+    n = len(bones)
+    deform = np.empty(n, bool)
+    bones.foreach_get("use_deform", deform)
+    rest = np.empty(n * 16, np.float32)
+    bones.foreach_get("matrix_local", rest)
+    envelope = np.empty(n * 4, np.float32)
+    for i, attr in enumerate(("head_radius", "tail_radius", "envelope_distance", "envelope_weight")):
+        col = np.empty(n, np.float32)
+        bones.foreach_get(attr, col)
+        envelope[i::4] = col
+    multiply = np.empty(n, bool)
+    bones.foreach_get("use_envelope_multiply", multiply)
+    segments = np.empty(n, np.int32)
+    bones.foreach_get("bbone_segments", segments)
+    return (tuple(b.name for b in bones), deform.tobytes(), rest.tobytes(), envelope.tobytes(), multiply.tobytes(), segments.tobytes())
+
+
 def envelopes(armature, binding: Binding) -> np.ndarray:
     """`(B, 11)` float32 envelope rows of the bound bones (see `dqskin.Influences.with_envelopes`)."""
     rows = np.empty((len(binding.bone_names), 11), np.float32)
@@ -143,12 +159,6 @@ class Frame:
     rest: np.ndarray
     premat: np.ndarray
     postmat: np.ndarray
-
-    def same_as(self, other: "Frame | None") -> bool:
-        return other is not None and all(
-            np.array_equal(a, b)
-            for a, b in ((self.deform, other.deform), (self.premat, other.premat), (self.postmat, other.postmat))
-        )
 
 
 def frame(binding: Binding, mesh_object, armature) -> Frame:

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import bpy
 
-from . import centers, modifier, nodes
+from . import centers, handlers, modifier, nodes
+from .state import Mode
 
 
 class OBJECT_PT_dq_skin(bpy.types.Panel):
@@ -29,7 +30,6 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
             return
         for mod in mods:
             box = layout.box()
-            st = modifier.state(obj, mod)
             try:
                 method = nodes.get_method(mod)
                 box.label(text=f"{mod.name}: {method}", icon="MOD_ARMATURE")
@@ -40,22 +40,32 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
                 row = box.row()
                 row.progress(factor=job.fraction, type="BAR", text=f"Optimized Centers: {job.fraction:.0%} of {job.vertices} vertices")
                 row.operator("object.dq_skin_cancel_centers", text="", icon="CANCEL")
-            elif st.error:
-                box.label(text=st.error, icon="ERROR")
-            status = st.describe()
-            if status:
-                box.label(text=status, icon="INFO" if st.live or st.mode in ("off", "linked") else "ERROR")
-            elif not st.error:
-                box.label(text=_waiting(obj, mod), icon="TIME")
+            for line, icon in status_lines(obj, mod):
+                box.label(text=line, icon=icon)
             if obj.library is None:
                 op = box.operator("object.dq_skin_remove", icon="X")
                 op.modifier = mod.name
+        if handlers.last_error:
+            layout.label(text=f"Internal error (please report it): {handlers.last_error}", icon="ERROR")
 
 
-def _waiting(obj, mod) -> str:
-    if obj.library is not None:
-        return "Linked data: Blender's Armature modifier deforms it (make a Library Override to use DQ Skin)"
-    return "Not evaluated yet (the next frame change or update skins it)"
+ICONS = {Mode.LIVE: "INFO", Mode.HANDED_OVER: "INFO", Mode.OFF: "INFO", Mode.LINKED: "INFO", Mode.FALLBACK: "ERROR", Mode.NEW: "TIME"}
+
+
+def status_lines(obj, mod) -> list[tuple[str, str]]:
+    """What the panel says about a modifier (reading the state creates none)."""
+    status = modifier.find_status(obj, mod)
+    if status is None or status.mode is Mode.NEW:
+        if obj.library is not None:
+            return [("Linked data: Blender's Armature modifier deforms it (make a Library Override to use DQ Skin)", "INFO")]
+        return [("Not evaluated yet (the next frame change or update skins it)", "TIME")]
+    icon = ICONS[status.mode]
+    if status.mode is Mode.LIVE:
+        line = f"{status.method}: {status.bones} bones, {status.influences} influences, {status.seconds * 1e3:.1f} ms"
+        return [(line, icon)]
+    if status.mode is Mode.FALLBACK:
+        return [(status.message, icon), (status.instead, "INFO")]
+    return [(status.message, icon)]
 
 
 class VIEW3D_MT_dq_skin_animation(bpy.types.Menu):

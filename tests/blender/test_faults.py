@@ -175,8 +175,8 @@ def test_an_empty_mesh_under_dq_skin_says_so(dq_skin):
     obj.data.clear_geometry()
     bpy.context.view_layer.update()
     bpy.context.scene.frame_set(3)
-    st = dq_skin.modifier.state(obj, mod)
-    assert "no vertices" in st.error, st.error
+    st = dq_skin.modifier.status_of(obj, mod)
+    assert "no vertices" in st.message, st.message
     lines = draw_panel(dq_skin, obj)
     assert any("no vertices" in line for line in lines)
     assert len(obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data.vertices) == 0
@@ -188,7 +188,7 @@ def test_renaming_an_object_200_times_keeps_one_entry(dq_skin):
 
     obj, arm, _ = rig_tube()
     add_dq_skin(obj)
-    states = dq_skin.modifier._states
+    states = dq_skin.state.STATES
     before = len(states)
     for i in range(200):
         obj.name = f"Renamed {i}"

@@ -91,7 +91,7 @@ def test_follows_every_frame_of_every_animation_exactly(dq_skin, assets, asset, 
             frames += 1
     assert worst <= REL_TOL, f"{asset}: worst {worst:.2e} over {frames} frames"
     assert moved > 1e-3  # the character really moves
-    assert dq_skin.modifier.state(obj, mod).error == ""
+    assert dq_skin.modifier.status_of(obj, mod).message == ""
 
 
 def test_follows_posing_without_a_frame_change(dq_skin):
@@ -161,8 +161,8 @@ def test_settings_come_from_the_armature_modifier(dq_skin):
     arm_mod.invert_vertex_group = True
     arm_mod.use_deform_preserve_volume = False
     mod = add_dq_skin(obj)
-    s = dq_skin.modifier.settings(mod)
-    assert (s.armature, s.method, s.mask_group, s.invert_mask) == (arm, "linear", "Mask", True)
+    s = dq_skin.settings.read(mod)
+    assert (s.armature, s.method.kernel, s.mask_group, s.invert_mask) == (arm, "linear", "Mask", True)
     assert list(obj.modifiers).index(mod) == 0  # where the Armature modifier was
 
 
@@ -173,8 +173,8 @@ def test_armature_in_edit_mode_is_reported_and_passes_the_mesh_through(dq_skin):
     bpy.context.view_layer.objects.active = arm
     bpy.ops.object.mode_set(mode="EDIT")
     bpy.context.scene.frame_set(5)
-    st = dq_skin.modifier.state(obj, mod)
-    assert "Edit Mode" in st.error
+    st = dq_skin.modifier.status_of(obj, mod)
+    assert "Edit Mode" in st.message
     rest = np.empty(len(obj.data.vertices) * 3, np.float32)
     obj.data.vertices.foreach_get("co", rest)
     np.testing.assert_allclose(evaluated_positions(obj), rest.reshape(-1, 3), atol=1e-6)
@@ -216,7 +216,7 @@ def test_several_objects_keep_their_own_settings_through_save_and_load(dq_skin, 
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     a, b = (bpy.data.objects[n] for n in names)
-    methods = [dq_skin.modifier.settings(next(m for m in o.modifiers if m.type == "NODES")).method for o in (a, b)]
+    methods = [dq_skin.settings.read(next(m for m in o.modifiers if m.type == "NODES")).method.kernel for o in (a, b)]
     assert methods == ["linear", "dual_quaternion"]
     bpy.context.scene.frame_set(7)
     for obj, pv in ((a, False), (b, True)):
@@ -258,7 +258,7 @@ def test_envelopes_match_the_armature_modifier(dq_skin, case, method, preserve_v
     reference = reference_copy(obj, preserve_volume)
     mod = add_dq_skin(obj, method)
     bpy.context.scene.frame_set(8)
-    assert dq_skin.modifier.state(obj, mod).error == ""
+    assert dq_skin.modifier.status_of(obj, mod).message == ""
     ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
     dev = relative_deviation(ours, theirs)
     assert dev <= REL_TOL, dev
@@ -296,7 +296,7 @@ def test_b_bones_match_the_armature_modifier(dq_skin, method, preserve_volume, m
     reference = reference_copy(obj, preserve_volume)
     mod = add_dq_skin(obj, method)
     bpy.context.scene.frame_set(9)
-    assert dq_skin.modifier.state(obj, mod).error == ""
+    assert dq_skin.modifier.status_of(obj, mod).message == ""
     ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
     dev = relative_deviation(ours, theirs)
     assert dev <= REL_TOL, dev
@@ -364,7 +364,7 @@ def test_vertex_count_changed_by_an_earlier_modifier_is_reported(dq_skin):
     with bpy.context.temp_override(object=obj, active_object=obj):
         bpy.ops.object.modifier_move_to_index(modifier=subsurf.name, index=0)
     bpy.context.scene.frame_set(4)
-    assert "changed the vertex count" in dq_skin.modifier.state(obj, mod).error
+    assert "changed the vertex count" in dq_skin.modifier.status_of(obj, mod).message
     assert len(evaluated_positions(obj)) > len(obj.data.vertices)  # passed through, not broken
 
 
@@ -376,5 +376,5 @@ def test_missing_armature_is_reported_and_passes_the_mesh_through(dq_skin):
 
     set_input(mod, "Armature", None)
     bpy.context.scene.frame_set(5)
-    assert dq_skin.modifier.state(obj, mod).error == "No armature object set"
+    assert dq_skin.modifier.status_of(obj, mod).message == "No armature object set"
     np.testing.assert_allclose(evaluated_positions(obj), rig_positions(obj), atol=1e-6)

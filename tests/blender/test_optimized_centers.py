@@ -56,8 +56,8 @@ def test_modifier_equals_the_module_on_a_character(dq_skin, assets):
         bpy.context.scene.frame_set(frame)
         ours = evaluated_positions(obj)
         assert relative_deviation(ours, expected(dq_skin, obj, arm)) <= REL_TOL
-    st = dq_skin.modifier.state(obj, mod)
-    assert st.live and st.describe().startswith("Optimized Centers:")
+    st = dq_skin.modifier.status_of(obj, mod)
+    assert st.live and st.method == "Optimized Centers"
 
 
 def test_rest_pose_is_unchanged_and_translations_are_linear(dq_skin):
@@ -132,13 +132,28 @@ def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_ski
     bpy.context.scene.frame_set(7)
     evaluated_positions(obj)
     mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
-    assert dq_skin.modifier.state(obj, mod).live
+    assert dq_skin.modifier.status_of(obj, mod).live
     assert len(counted) == first
     # A weight change is a new binding: new centers.
     obj.vertex_groups[0].add([0], 0.5, "REPLACE")
     bpy.context.scene.frame_set(8)
     evaluated_positions(obj)
     assert len(counted) == first + 1 and len(list(folder.glob("*.npy"))) == 2
+
+
+def slow_down(monkeypatch, centers, seconds: float) -> None:
+    """The centers precompute waits `seconds` at each progress report (a computation slow
+    enough to see running, and to cancel)."""
+    compute = centers.dqskin.centers_of_rotation
+
+    def slow(*args, progress=None, **kw):
+        def report(done, total):
+            time.sleep(seconds)
+            return progress(done, total) if progress is not None else True
+
+        return compute(*args, progress=report, **kw)
+
+    monkeypatch.setattr(centers.dqskin, "centers_of_rotation", slow)
 
 
 def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancelled(dq_skin, monkeypatch):
@@ -148,14 +163,14 @@ def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancell
     centers._memory.clear()
     obj, arm, _ = rig_tube(rings=80, segments=48, bones=3, length=6.0)
     monkeypatch.setattr(centers, "_folder", lambda: None)  # not found on disk either
-    monkeypatch.setattr(centers, "_throttle", 0.01)  # about a second: still running when checked
+    slow_down(monkeypatch, centers, 0.01)  # about a second: still running when checked
     add_dq_skin(obj, "CENTERS")
     arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), math.radians(90))
     bpy.context.view_layer.update()
     mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
-    st = dq_skin.modifier.state(obj, mod)
+    st = dq_skin.modifier.status_of(obj, mod)
     # Until the centers are ready, Blender's own deformation stands in and the modifier says so.
-    assert st.mode == "fallback" and "Optimized Centers: computing" in st.error
+    assert st.mode.value == "fallback" and "Optimized Centers: computing" in st.message
     job = centers.running()[0] if centers.running() else next(iter(centers._jobs.values()))
     assert obj.name in job.owners or job.finished
     for _ in range(600):
@@ -166,13 +181,13 @@ def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancell
     centers._poll()  # the timer: re-evaluates the waiting objects
     bpy.context.view_layer.update()
     evaluated_positions(obj)
-    assert dq_skin.modifier.state(obj, mod).live
+    assert dq_skin.modifier.status_of(obj, mod).live
     assert relative_deviation(evaluated_positions(obj), expected(dq_skin, obj, arm)) <= REL_TOL
 
     # Cancelled: the modifier says so and Blender's deformation stays.
     centers._memory.clear()
     obj.vertex_groups[0].add([0], 0.25, "REPLACE")  # new weights, new centers
-    monkeypatch.setattr(centers, "_throttle", 0.1)  # slow enough to cancel mid-way
+    slow_down(monkeypatch, centers, 0.1)  # slow enough to cancel mid-way
     bpy.context.view_layer.update()
     evaluated_positions(obj)
     running = centers.running()
@@ -187,8 +202,8 @@ def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancell
     centers._poll()
     bpy.context.view_layer.update()
     evaluated_positions(obj)
-    st = dq_skin.modifier.state(obj, mod)
-    assert st.mode == "fallback" and "cancelled" in st.error
+    st = dq_skin.modifier.status_of(obj, mod)
+    assert st.mode.value == "fallback" and "cancelled" in st.message
 
 
 def test_on_a_character_the_centers_collapse_less_than_linear(dq_skin, assets):

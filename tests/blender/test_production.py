@@ -71,7 +71,7 @@ def check_frames(pairs, frames=FRAMES):
 
 
 def state(dq_skin, obj, mod=None):
-    return dq_skin.modifier.state(obj, mod or dq_skin_mods(obj)[0])
+    return dq_skin.modifier.status_of(obj, mod or dq_skin_mods(obj)[0])
 
 
 # -- duplicates and crowds ------------------------------------------------------------------------
@@ -257,7 +257,7 @@ def test_plain_linked_instance_plays_the_library_animation(dq_skin, tmp_path):
     assert worst <= REL_TOL
     assert moved(body) > 0.1
     st = state(dq_skin, body)
-    assert st.mode == "linked" and "Library Override" in st.status
+    assert st.mode.value == "linked" and "Library Override" in st.message
 
 
 WITHOUT_ADDON = """
@@ -512,7 +512,7 @@ def test_any_modifier_after_dq_skin(dq_skin, kind, method):
     tw = twin(obj)
     check_frames([(obj, tw)])
     st = state(dq_skin, obj)
-    assert st.live and st.error == "", st.error
+    assert st.live and st.message == "", st.message
 
 
 def test_later_modifiers_run_once_per_frame(dq_skin):
@@ -650,7 +650,7 @@ def test_viewport_off_render_on(dq_skin, tmp_path):
     mod.show_viewport = False
     bpy.context.scene.frame_set(3)
     st = state(dq_skin, obj)
-    assert st.mode == "off" and "Off in the viewport" in st.status and "Waiting" not in st.status
+    assert st.mode.value == "off" and "Off in the viewport" in st.message and "Waiting" not in st.message
     tw = twin(obj)
     tw.location.x = 0.0
     # Render ours alone, then the twin alone, at the same frame: the same picture.
@@ -678,7 +678,7 @@ def test_panel_status_says_what_is_wrong_and_where(dq_skin):
     bpy.context.scene.frame_set(5)
     lines = draw_panel(dq_skin, obj)
     st = state(dq_skin, obj, mod)
-    assert st.mode == "fallback" and sub.name in st.error, st.error
+    assert st.mode.value == "fallback" and sub.name in st.message, st.message
     assert any("Armature" in l and "instead" in l for l in lines), lines
     tw = twin(obj)
     # The twin has Blender's own Armature modifier; ours falls back to exactly that.
@@ -849,19 +849,28 @@ def test_add_to_all_selected_objects_at_once(dq_skin):
     check_frames([(o, twin(o)) for o in objs], frames=(4, 15))
 
 
-def test_switching_the_companion_on_does_not_deform_twice(dq_skin):
+def test_switching_the_companion_on_shows_blenders_deformation_once_and_back(dq_skin):
     obj, arm, _ = animated_tube()
     mod = add(obj, "LINEAR")
     tw = twin(obj)
     bpy.context.scene.frame_set(8)
     c = obj.modifiers["Armature"]
+    assert not c.show_viewport and not c.use_vertex_groups  # parked while DQ Skin deforms
+    # The user switches the Armature modifier on to compare: DQ Skin steps aside in the
+    # viewport, Blender's deformation shows (once, with DQ Skin's settings), renders unchanged.
     c.show_viewport = True
-    c.use_vertex_groups = True
     bpy.context.view_layer.update()
     bpy.context.scene.frame_set(9)
-    assert not c.show_viewport and not c.use_vertex_groups
+    assert c.show_viewport and c.use_vertex_groups and not mod.show_viewport and mod.show_render
+    assert state(dq_skin, obj, mod).mode.value == "off"
     assert_same(obj, tw)
+    # Switching DQ Skin back on parks the Armature modifier again.
+    mod.show_viewport = True
+    bpy.context.view_layer.update()
+    bpy.context.scene.frame_set(10)
+    assert not c.show_viewport and not c.use_vertex_groups
     assert state(dq_skin, obj, mod).live
+    assert_same(obj, tw)
 
 
 def test_disabling_the_add_on_leaves_blenders_deformation(dq_skin):

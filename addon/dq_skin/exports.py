@@ -1,0 +1,97 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Exporters that skin from the Armature modifier see a DQ Skin character as Blender's own.
+
+FBX and glTF export a skinned character as its rest mesh plus the armature and the vertex-group
+weights: they take the skin from the object's Armature modifier and switch that modifier off
+(FBX puts the armature in its rest position; glTF turns the modifier off) while they evaluate
+the mesh with the other modifiers applied. A DQ Skin modifier is not an Armature modifier, so
+while one of them exports, every DQ Skin hands over to its companion (see `consumers`): the
+exporter then finds an Armature modifier set up like DQ Skin and exports exactly what it
+exports for the same character under Blender's Armature modifier.
+
+- glTF: through its own extension point, a `glTF2ExportUserExtension` class in the add-on's
+  module (`pre_export_hook`, `post_export_hook`).
+- FBX has none: its export operator's `execute` runs inside `exporting()` (wrapped while the
+  add-on is enabled, unwrapped when it is disabled).
+
+Exporters that export the evaluated mesh (OBJ, PLY, STL, Alembic, USD, FBX and glTF without
+skins) need nothing: they see DQ Skin's result, as they see the Armature modifier's.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+
+_active: list[str] = []  # the exporters running now (nested exports are possible)
+_on_change = []  # called with no arguments when an export starts or ends (see `handlers`)
+
+
+def active() -> str:
+    """The panel's reason while an exporter runs, else ""."""
+    return f"Exporting ({_active[-1]}): the exporter skins from Blender's Armature modifier" if _active else ""
+
+
+@contextlib.contextmanager
+def exporting(name: str):
+    _active.append(name)
+    _changed()
+    try:
+        yield
+    finally:
+        _active.remove(name)
+        _changed()
+
+
+def _changed() -> None:
+    for fn in _on_change:
+        fn()
+
+
+class glTF2ExportUserExtension:
+    """Found by the glTF exporter in every enabled add-on's module (see `__init__`)."""
+
+    def __init__(self):
+        self._scope = None
+
+    def pre_export_hook(self, export_settings):
+        if not export_settings.get("gltf_skins", True):
+            return
+        self._scope = exporting("glTF")
+        self._scope.__enter__()
+
+    def post_export_hook(self, export_settings):
+        if self._scope is not None:
+            scope, self._scope = self._scope, None
+            scope.__exit__(None, None, None)
+
+
+# -- operators without extension points --------------------------------------------------------
+
+_WRAPPED = "_dq_skin_original_execute"
+# (module, operator class, label)
+OPERATORS = (("io_scene_fbx", "ExportFBX", "FBX"),)
+
+
+def wrap_operators() -> None:
+    """Runs the exporters above inside `exporting()` (those whose add-on is loaded now)."""
+    for module_name, class_name, label in OPERATORS:
+        cls = getattr(sys.modules.get(module_name), class_name, None)
+        if cls is None or hasattr(cls, _WRAPPED):
+            continue
+        original = cls.execute
+
+        def execute(self, context, _original=original, _label=label):
+            with exporting(_label):
+                return _original(self, context)
+
+        setattr(cls, _WRAPPED, original)
+        cls.execute = execute
+
+
+def unwrap_operators() -> None:
+    for module_name, class_name, _label in OPERATORS:
+        cls = getattr(sys.modules.get(module_name), class_name, None)
+        if cls is not None and hasattr(cls, _WRAPPED):
+            cls.execute = getattr(cls, _WRAPPED)
+            delattr(cls, _WRAPPED)

@@ -353,7 +353,6 @@ def write_report(result, out_dir, source: str, frames, pictures: dict[str, str] 
     """`report.json` and `report.md` in `out_dir` (each written to a temporary file first)."""
     import json
     import os
-    import tempfile
     from pathlib import Path
 
     out = Path(out_dir)

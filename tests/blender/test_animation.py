@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from mathutils import Euler, Matrix, Quaternion
 
-from test_exactness import import_character
+from dqtest import import_character
 
 ANGLE_TOL = 1e-4  # rad per frame: f32 keys, LINEAR interpolation between them
 F32 = np.float32

@@ -10,8 +10,7 @@ import bpy
 import numpy as np
 import pytest
 
-from test_exactness import evaluated_positions, import_character
-from test_modifier import add_dq_skin
+from dqtest import add_dq_skin, evaluated_positions, import_character
 
 PLAYBACK_TOL = 1e-6  # of the bounding-box diagonal: float32 positions stored and read back
 

@@ -6,7 +6,7 @@ import bpy
 import numpy as np
 import pytest
 
-from test_exactness import import_character
+from dqtest import import_character
 
 
 def test_builtin_rigs_comparison_report_and_render(dq_skin, tmp_path):

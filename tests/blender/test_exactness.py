@@ -13,25 +13,13 @@ import numpy as np
 import pytest
 from mathutils import Matrix, Quaternion
 
-from scenes import armature_modifier, rig_tube
+from dqtest import REL_TOL, action_frames, evaluated_positions, import_character
+from scenes import rig_tube
 
-REL_TOL = 1e-5  # of the bounding-box diagonal (the issue's bar)
 METHODS = {"linear": False, "dual_quaternion": True}  # ours -> use_deform_preserve_volume
 
 
-def evaluated_positions(obj) -> np.ndarray:
-    dg = bpy.context.evaluated_depsgraph_get()
-    ev = obj.evaluated_get(dg)
-    mesh = ev.to_mesh()
-    try:
-        flat = np.empty(len(mesh.vertices) * 3, np.float32)
-        mesh.vertices.foreach_get("co", flat)
-    finally:
-        ev.to_mesh_clear()
-    return flat.reshape(-1, 3)
-
-
-def deviation(rig, mesh_obj, mod, method: str, binding=None) -> tuple[float, np.ndarray]:
+def kernel_deviation(rig, mesh_obj, mod, method: str, binding=None) -> tuple[float, np.ndarray]:
     """Max distance between ours and Blender's, relative to the bounding-box diagonal."""
     mod.use_deform_preserve_volume = METHODS[method]
     reference = evaluated_positions(mesh_obj)
@@ -53,7 +41,7 @@ def rig(dq_skin):
 def check_both(rig, mesh_obj, mod):
     results = {}
     for method in METHODS:
-        dev, reference = deviation(rig, mesh_obj, mod, method)
+        dev, reference = kernel_deviation(rig, mesh_obj, mod, method)
         assert dev <= REL_TOL, f"{method}: max deviation {dev:.2e} of the diagonal"
         results[method] = reference
     return results
@@ -145,18 +133,6 @@ def test_groups_without_bones_and_bones_without_deform_are_ignored(rig):
     check_both(rig, mesh_obj, mod)
 
 
-def import_character(path):
-    bpy.ops.import_scene.gltf(filepath=str(path))
-    mesh_obj = next(o for o in bpy.data.objects if o.type == "MESH" and any(m.type == "ARMATURE" for m in o.modifiers))
-    mod = next(m for m in mesh_obj.modifiers if m.type == "ARMATURE")
-    return mesh_obj, mod
-
-
-def action_frames(action):
-    start, end = (int(round(f)) for f in action.frame_range)
-    return range(start, end + 1)
-
-
 @pytest.mark.parametrize("asset", ["RiggedSimple.glb", "RiggedFigure.glb", "CesiumMan.glb", "Fox.glb"])
 def test_every_frame_of_every_animation(rig, assets, asset):
     mesh_obj, mod = import_character(assets / asset)
@@ -174,7 +150,7 @@ def test_every_frame_of_every_animation(rig, assets, asset):
         for frame in action_frames(action):
             scene.frame_set(frame)
             for method in METHODS:
-                dev, reference = deviation(rig, mesh_obj, mod, method, binding)
+                dev, reference = kernel_deviation(rig, mesh_obj, mod, method, binding)
                 worst[method] = max(worst[method], dev)
             moved = max(moved, float(np.abs(reference - rest).max()))
             frames += 1

@@ -168,7 +168,7 @@ def test_sigkill_leaves_a_recognisable_temporary_that_the_next_run_removes(tmp_p
 
 def test_an_empty_mesh_under_dq_skin_says_so(dq_skin):
     from scenes import rig_tube
-    from test_modifier import add_dq_skin, draw_panel
+    from dqtest import add_dq_skin, draw_panel
 
     obj, arm, _ = rig_tube()
     mod = add_dq_skin(obj)
@@ -184,7 +184,7 @@ def test_an_empty_mesh_under_dq_skin_says_so(dq_skin):
 
 def test_renaming_an_object_200_times_keeps_one_entry(dq_skin):
     from scenes import rig_tube
-    from test_modifier import add_dq_skin
+    from dqtest import add_dq_skin
 
     obj, arm, _ = rig_tube()
     add_dq_skin(obj)

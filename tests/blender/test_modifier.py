@@ -10,46 +10,8 @@ import numpy as np
 import pytest
 from mathutils import Quaternion
 
+from dqtest import REL_TOL, add_dq_skin, deviation, draw_panel, evaluated_positions, import_character, reference_copy
 from scenes import rig_tube
-from test_exactness import REL_TOL, evaluated_positions, import_character
-
-
-def reference_copy(obj, preserve_volume: bool):
-    """A copy of `obj` sharing its mesh, deformed by a plain Armature modifier (set up as before
-    DQ Skin was added, if it was)."""
-    import json
-
-    from twins import dq_skin_mods, get_input
-
-    original = {}
-    for m in dq_skin_mods(obj):
-        original = json.loads(get_input(m, "Companion") or "{}").get("original", {})
-    copy = obj.copy()
-    bpy.context.scene.collection.objects.link(copy)
-    for m in list(copy.modifiers):
-        if m.type == "NODES":
-            copy.modifiers.remove(m)
-    arm_mod = next(m for m in copy.modifiers if m.type == "ARMATURE")
-    for name in ("use_vertex_groups", "use_bone_envelopes", "vertex_group", "invert_vertex_group"):
-        if name in original:
-            setattr(arm_mod, name, original[name])
-    arm_mod.show_viewport = True
-    arm_mod.show_render = True
-    arm_mod.use_deform_preserve_volume = preserve_volume
-    return copy
-
-
-def add_dq_skin(obj, method="AUTO"):
-    bpy.context.view_layer.objects.active = obj
-    with bpy.context.temp_override(object=obj, active_object=obj):
-        result = bpy.ops.object.dq_skin_add(method=method)
-    assert result == {"FINISHED"}
-    return next(m for m in obj.modifiers if m.type == "NODES")
-
-
-def relative_deviation(a, b):
-    diag = float(np.linalg.norm(b.max(0) - b.min(0)))
-    return float(np.abs(a - b).max()) / diag
 
 
 def snapshot(obj):
@@ -86,7 +48,7 @@ def test_follows_every_frame_of_every_animation_exactly(dq_skin, assets, asset, 
         for frame in [*range(start, end + 1), start + 1]:  # ends with a jump back
             scene.frame_set(frame)
             ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
-            worst = max(worst, relative_deviation(ours, theirs))
+            worst = max(worst, deviation(ours, theirs))
             moved = max(moved, float(np.abs(theirs - rest).max()))
             frames += 1
     assert worst <= REL_TOL, f"{asset}: worst {worst:.2e} over {frames} frames"
@@ -101,7 +63,7 @@ def test_follows_posing_without_a_frame_change(dq_skin):
     bpy.context.scene.frame_set(1)
     arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((0, 1, 0), math.radians(150))
     bpy.context.view_layer.update()
-    dev = relative_deviation(evaluated_positions(obj), evaluated_positions(reference))
+    dev = deviation(evaluated_positions(obj), evaluated_positions(reference))
     assert dev <= REL_TOL, dev
 
 
@@ -116,7 +78,7 @@ def test_shape_keys_are_applied_before_skinning(dq_skin):
     add_dq_skin(obj, "DUAL_QUATERNION")
     arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 1.3)
     bpy.context.scene.frame_set(2)
-    dev = relative_deviation(evaluated_positions(obj), evaluated_positions(reference))
+    dev = deviation(evaluated_positions(obj), evaluated_positions(reference))
     assert dev <= REL_TOL, dev
 
 
@@ -198,7 +160,7 @@ def test_blend_between_linear_and_dual_quaternion(dq_skin):
     lbs, dqs = evaluated_positions(lbs_ref), evaluated_positions(dqs_ref)
     alpha = 0.8 * (np.arange(len(lbs)) % 5 / 4.0)[:, None]
     want = (1 - alpha) * lbs + alpha * dqs
-    dev = relative_deviation(evaluated_positions(obj), want)
+    dev = deviation(evaluated_positions(obj), want)
     assert dev <= REL_TOL, dev
     assert np.abs(lbs - dqs).max() > 0.05  # the two methods really differ here
 
@@ -221,7 +183,7 @@ def test_several_objects_keep_their_own_settings_through_save_and_load(dq_skin, 
     bpy.context.scene.frame_set(7)
     for obj, pv in ((a, False), (b, True)):
         reference = reference_copy(obj, pv)
-        dev = relative_deviation(evaluated_positions(obj), evaluated_positions(reference))
+        dev = deviation(evaluated_positions(obj), evaluated_positions(reference))
         assert dev <= REL_TOL, (obj.name, dev)
 
 
@@ -260,7 +222,7 @@ def test_envelopes_match_the_armature_modifier(dq_skin, case, method, preserve_v
     bpy.context.scene.frame_set(8)
     assert dq_skin.modifier.status_of(obj, mod).message == ""
     ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
-    dev = relative_deviation(ours, theirs)
+    dev = deviation(ours, theirs)
     assert dev <= REL_TOL, dev
     rest = rig_positions(obj)
     assert np.abs(theirs - rest).max() > 0.05  # the envelopes really move the mesh
@@ -298,46 +260,18 @@ def test_b_bones_match_the_armature_modifier(dq_skin, method, preserve_volume, m
     bpy.context.scene.frame_set(9)
     assert dq_skin.modifier.status_of(obj, mod).message == ""
     ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
-    dev = relative_deviation(ours, theirs)
+    dev = deviation(ours, theirs)
     assert dev <= REL_TOL, dev
     if mapping == "CURVED":
         # The curved mapping really differs from the straight one here.
         for b in ("Bone1", "Bone2"):
             bones[b].bbone_mapping_mode = "STRAIGHT"
-        assert relative_deviation(evaluated_positions(reference), theirs) > 10 * REL_TOL
+        assert deviation(evaluated_positions(reference), theirs) > 10 * REL_TOL
     # The B-Bones really bend the mesh differently from plain bones.
     for b in ("Bone1", "Bone2"):
         bones[b].bbone_segments = 1
     plain = evaluated_positions(reference)
     assert np.abs(plain - theirs).max() > 0.01
-
-
-class _Recorder:
-    """Stands in for a panel layout and records the labels drawn."""
-
-    def __init__(self, lines):
-        self.lines = lines
-
-    def row(self, **_):
-        return self
-
-    def box(self, **_):
-        return self
-
-    def label(self, text="", **_):
-        self.lines.append(text)
-
-    def operator(self, idname, **_):
-        self.lines.append(f"[{idname}]")
-        return type("Props", (), {})()
-
-
-def draw_panel(dq_skin, obj):
-    lines = []
-    panel = type("P", (), {"layout": _Recorder(lines)})()
-    context = type("C", (), {"object": obj})()
-    dq_skin.ui.OBJECT_PT_dq_skin.draw(panel, context)
-    return lines
 
 
 def test_panel_shows_method_status_and_errors(dq_skin):

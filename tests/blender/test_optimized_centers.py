@@ -9,13 +9,11 @@ import math
 import time
 
 import bpy
-import numpy as np
 import pytest
 from mathutils import Quaternion
 
 from scenes import rig_tube
-from test_exactness import REL_TOL, evaluated_positions, import_character
-from test_modifier import add_dq_skin, relative_deviation
+from dqtest import REL_TOL, add_dq_skin, deviation, evaluated_positions, import_character
 
 
 def expected(dq_skin, obj, arm):
@@ -55,7 +53,7 @@ def test_modifier_equals_the_module_on_a_character(dq_skin, assets):
     for frame in (1, 12, 30):
         bpy.context.scene.frame_set(frame)
         ours = evaluated_positions(obj)
-        assert relative_deviation(ours, expected(dq_skin, obj, arm)) <= REL_TOL
+        assert deviation(ours, expected(dq_skin, obj, arm)) <= REL_TOL
     st = dq_skin.modifier.status_of(obj, mod)
     assert st.live and st.method == "Optimized Centers"
 
@@ -65,14 +63,14 @@ def test_rest_pose_is_unchanged_and_translations_are_linear(dq_skin):
     rest = evaluated_positions(obj)
     add_dq_skin(obj, "CENTERS")
     bpy.context.scene.frame_set(1)
-    assert relative_deviation(evaluated_positions(obj), rest) <= REL_TOL
+    assert deviation(evaluated_positions(obj), rest) <= REL_TOL
     # Moving bones without rotating them: exactly what linear blend skinning does.
     arm.pose.bones["Bone1"].location = (0.3, -0.2, 0.5)
     arm.pose.bones["Bone2"].location = (-0.4, 0.1, 0.2)
     bpy.context.view_layer.update()
     ours = evaluated_positions(obj)
     linear = dq_skin.rig.skin(dq_skin.rig.bind(obj, arm, "", False), obj, arm, dq_skin.rig.mesh_positions(obj.data), "linear")
-    assert relative_deviation(ours, linear) <= REL_TOL
+    assert deviation(ours, linear) <= REL_TOL
 
 
 def test_candy_wrapper_and_elbow_against_linear_and_dual_quaternion(dq_skin):
@@ -121,7 +119,7 @@ def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_ski
     twin = bpy.context.active_object
     assert twin is not obj
     bpy.context.scene.frame_set(6)
-    assert relative_deviation(evaluated_positions(twin), evaluated_positions(obj)) <= REL_TOL
+    assert deviation(evaluated_positions(twin), evaluated_positions(obj)) <= REL_TOL
     assert len(counted) == first
     # Save, forget everything this session knew, open again: found on disk, not recomputed.
     path, name = tmp_path / "centers.blend", obj.name
@@ -182,7 +180,7 @@ def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancell
     bpy.context.view_layer.update()
     evaluated_positions(obj)
     assert dq_skin.modifier.status_of(obj, mod).live
-    assert relative_deviation(evaluated_positions(obj), expected(dq_skin, obj, arm)) <= REL_TOL
+    assert deviation(evaluated_positions(obj), expected(dq_skin, obj, arm)) <= REL_TOL
 
     # Cancelled: the modifier says so and Blender's deformation stays.
     centers._memory.clear()

@@ -1,10 +1,10 @@
 """DQ Skin in the scenes artists and pipelines actually have, each compared with the same scene
-under Blender's own Armature modifier (its *twin*, see `twins`), frame by frame, Linear and
+under Blender's own Armature modifier (its *twin*, see `dqtest.twin`), frame by frame, Linear and
 Dual Quaternion: duplicates, crowds, append, library overrides, linked instances, files opened
 without the add-on, Apply, several DQ Skins, any modifier after DQ Skin, viewport off and render
 on, and the panel's status in each case.
 
-Bar: ≤ 1e-5 × the bounding-box diagonal (`twins.REL_TOL`).
+Bar: ≤ 1e-5 × the bounding-box diagonal (`dqtest.REL_TOL`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import bpy
@@ -20,58 +19,29 @@ import numpy as np
 import pytest
 from mathutils import Quaternion
 
+from dqtest import (
+    METHODS,
+    REL_TOL,
+    add_dq_skin,
+    animate,
+    animated_tube,
+    assert_same,
+    check_frames,
+    deviation,
+    dq_skin_mods,
+    draw_panel,
+    evaluated_positions,
+    get_input,
+    import_character,
+    moved,
+    plain_twin,
+    select_only,
+    status,
+    twin,
+)
 from scenes import armature_chain, chain_weights, rig_tube, tube
-from twins import REL_TOL, assert_same, deviation, dq_skin_mods, evaluated_positions, get_input, moved, plain_twin, twin
 
 ROOT = Path(__file__).resolve().parents[2]
-FRAMES = (1, 4, 9, 13, 20, 2)
-METHODS = ["LINEAR", "DUAL_QUATERNION"]
-
-
-def animate(arm, seed: float = 0.0):
-    """Keys on every bone over frames 1-20: bends and twists beyond 90° (where LBS and DQS
-    differ a lot)."""
-    for i, pb in enumerate(arm.pose.bones):
-        pb.rotation_mode = "QUATERNION"
-        for frame, angle in ((1, 0.0), (10, 1.4 + seed), (20, 2.6 - seed)):
-            axis = (1.0, 0.3 * i, 0.2) if i % 2 else (0.1, 1.0, 0.4 + seed)
-            pb.rotation_quaternion = Quaternion(axis, angle * (0.5 if i == 0 else 1.0))
-            pb.keyframe_insert("rotation_quaternion", frame=frame)
-    return arm
-
-
-def animated_tube(seed: float = 0.0, **kw):
-    obj, arm, mod = rig_tube(**kw)
-    obj.parent = arm
-    animate(arm, seed)
-    return obj, arm, mod
-
-
-def add(obj, method: str = "AUTO"):
-    bpy.context.view_layer.objects.active = obj
-    with bpy.context.temp_override(object=obj, active_object=obj):
-        assert bpy.ops.object.dq_skin_add(method=method) == {"FINISHED"}
-    return dq_skin_mods(obj)[-1]
-
-
-def select_only(*objs):
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o in objs)
-    bpy.context.view_layer.objects.active = objs[0]
-
-
-def check_frames(pairs, frames=FRAMES):
-    """Every (ours, twin) pair equal at every frame; returns the worst deviation."""
-    worst = 0.0
-    for f in frames:
-        bpy.context.scene.frame_set(f)
-        for ours, ref in pairs:
-            worst = max(worst, assert_same(ours, ref, f"{ours.name} at frame {f}"))
-    return worst
-
-
-def state(dq_skin, obj, mod=None):
-    return dq_skin.modifier.status_of(obj, mod or dq_skin_mods(obj)[0])
 
 
 # -- duplicates and crowds ------------------------------------------------------------------------
@@ -80,7 +50,7 @@ def state(dq_skin, obj, mod=None):
 @pytest.mark.parametrize("how", ["mesh and armature (Shift+D)", "mesh and armature (Alt+D)", "mesh only (Shift+D)"])
 def test_duplicates_follow_their_own_armature(dq_skin, method, how):
     obj, arm, _ = animated_tube()
-    add(obj, method)
+    add_dq_skin(obj, method)
     bpy.context.scene.frame_set(5)
     linked = "Alt+D" in how
     if "armature" in how:
@@ -106,7 +76,7 @@ def test_duplicates_follow_their_own_armature(dq_skin, method, how):
 
 def test_copy_modifiers_to_selected(dq_skin):
     obj, arm, _ = animated_tube()
-    add(obj, "DUAL_QUATERNION")
+    add_dq_skin(obj, "DUAL_QUATERNION")
     other = tube("Other", 24, 16, 4.0, 0.4)
     other.location.x = 2.0
     chain_weights(other, arm, 4.0)
@@ -124,7 +94,7 @@ def test_copy_modifiers_to_selected(dq_skin):
 def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method):
     """One mesh, many objects, each deformed by its own armature (a crowd)."""
     obj, arm, _ = animated_tube()
-    add(obj, method)
+    add_dq_skin(obj, method)
     pairs = [(obj, twin(obj))]
     for i in range(1, 5):
         a = arm.copy()
@@ -158,7 +128,7 @@ def character_file(path: Path, method: str = "DUAL_QUATERNION", frame: int = 7) 
         bpy.context.scene.collection.objects.unlink(o)
         coll.objects.link(o)
     obj.name, arm.name = "Body", "Skeleton"
-    add(obj, method)
+    add_dq_skin(obj, method)
     bpy.context.scene.frame_set(frame)
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
 
@@ -172,7 +142,7 @@ def test_appended_character(dq_skin, tmp_path):
     bpy.context.scene.collection.children.link(dst.collections[0])
     body = bpy.data.objects["Body"]
     check_frames([(body, twin(body))])
-    assert state(dq_skin, body).live
+    assert status(dq_skin, body).live
 
 
 def override(lib: Path, name: str = "Character"):
@@ -210,14 +180,14 @@ def test_library_overrides_one_and_two_with_different_actions_saved_and_reopened
     b_body.location.x = 3.0
     pairs = [(a_body, plain_twin(a_body, "A twin")), (b_body, plain_twin(b_body, "B twin"))]
     check_frames(pairs)
-    assert state(dq_skin, a_body).live and state(dq_skin, b_body).live
+    assert status(dq_skin, a_body).live and status(dq_skin, b_body).live
     path = tmp_path / "shot.blend"
     names = [o.name for o, _ in pairs] + [r.name for _, r in pairs]
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     objs = [bpy.data.objects[n] for n in names]
     check_frames([(objs[0], objs[2]), (objs[1], objs[3])])
-    assert state(dq_skin, objs[0]).live and state(dq_skin, objs[1]).live
+    assert status(dq_skin, objs[0]).live and status(dq_skin, objs[1]).live
     assert moved(objs[1]) > 0.1
 
 
@@ -256,7 +226,7 @@ def test_plain_linked_instance_plays_the_library_animation(dq_skin, tmp_path):
     worst = check_frames([(body, ref)])
     assert worst <= REL_TOL
     assert moved(body) > 0.1
-    st = state(dq_skin, body)
+    st = status(dq_skin, body)
     assert st.mode.value == "linked" and "Library Override" in st.message
 
 
@@ -302,15 +272,15 @@ def test_file_opened_without_the_add_on_shows_blenders_deformation_every_frame(d
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     obj, arm, _ = animated_tube()
     obj.name = "Body"
-    add(obj, method)
+    add_dq_skin(obj, method)
     tw = twin(obj, "Twin")
     bpy.context.scene.frame_set(7)
     check_frames([(obj, tw)], frames=(7,))
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     # The open session is untouched by saving.
-    assert state(dq_skin, obj).live or bpy.context.scene.frame_set(8) is None
+    assert status(dq_skin, obj).live or bpy.context.scene.frame_set(8) is None
     bpy.context.scene.frame_set(8)
-    assert state(dq_skin, obj).live
+    assert status(dq_skin, obj).live
     script = tmp_path / "without.py"
     script.write_text(WITHOUT_ADDON)
     r = subprocess.run([sys.executable, str(script), str(path)], capture_output=True, text=True, timeout=300, env=farm_env(tmp_path))
@@ -324,7 +294,7 @@ def test_file_opened_without_the_add_on_shows_blenders_deformation_every_frame(d
 
 def test_saved_file_has_no_results_and_active_companions(dq_skin, tmp_path):
     obj, arm, _ = animated_tube()
-    add(obj)
+    add_dq_skin(obj)
     bpy.context.scene.frame_set(6)
     path = tmp_path / "a.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path), copy=True)
@@ -340,13 +310,13 @@ def test_saved_file_has_no_results_and_active_companions(dq_skin, tmp_path):
     assert get_input(dq_skin_mods(saved)[0], "Result") is None
     # Still live here after saving.
     bpy.context.scene.frame_set(9)
-    assert state(dq_skin, obj).live and not obj.modifiers["Armature"].show_viewport
+    assert status(dq_skin, obj).live and not obj.modifiers["Armature"].show_viewport
 
 
 @pytest.mark.parametrize("method", METHODS)
 def test_undo_and_redo_stay_exact_and_leave_no_orphans(dq_skin, method):
     obj, arm, _ = animated_tube()
-    mod = add(obj, method)
+    add_dq_skin(obj, method)
     ref = twin(obj, "twin", share_mesh=False)
     names = (obj.name, ref.name, arm.name)
     bpy.context.scene.frame_set(4)
@@ -362,7 +332,7 @@ def test_undo_and_redo_stay_exact_and_leave_no_orphans(dq_skin, method):
         results = [o for o in bpy.data.objects if o.get("dq_skin_result")]
         assert len(results) == 1, [o.name for o in results]
         assert not [d.name for d in (*bpy.data.meshes, *bpy.data.objects) if d.users == 0]
-        assert state(dq_skin, obj).live
+        assert status(dq_skin, obj).live
 
 
 # -- Apply, remove, several DQ Skins ------------------------------------------------------------
@@ -375,7 +345,7 @@ def test_apply_gives_the_builtin_applied_mesh_and_leaves_nothing_behind(dq_skin,
     ref.data = obj.data.copy()
     bpy.context.scene.collection.objects.link(ref)
     ref.modifiers["Armature"].use_deform_preserve_volume = method == "DUAL_QUATERNION"
-    mod = add(obj, method)
+    mod = add_dq_skin(obj, method)
     bpy.context.scene.frame_set(13)
     with bpy.context.temp_override(object=obj, active_object=obj):
         assert bpy.ops.object.modifier_apply(modifier=mod.name) == {"FINISHED"}
@@ -412,21 +382,21 @@ def two_armature_rig():
 @pytest.mark.parametrize("method", METHODS)
 def test_two_dq_skins_equal_two_armature_modifiers(dq_skin, method):
     obj, arm, arm2 = two_armature_rig()
-    first = add(obj, method)
-    second = add(obj, method)
+    first = add_dq_skin(obj, method)
+    second = add_dq_skin(obj, method)
     assert [m.type for m in obj.modifiers] == ["NODES", "ARMATURE", "NODES", "ARMATURE"]
     assert get_input(second, "Armature") == arm2
     tw = twin(obj)
     check_frames([(obj, tw)])
-    assert state(dq_skin, obj, first).live and state(dq_skin, obj, second).live
-    assert state(dq_skin, obj, second).source == "chain"
+    assert status(dq_skin, obj, first).live and status(dq_skin, obj, second).live
+    assert status(dq_skin, obj, second).source == "chain"
 
 
 def test_removing_one_of_two_restores_only_its_own_armature_modifier(dq_skin):
     obj, arm, arm2 = two_armature_rig()
     before = [(m.name, m.show_viewport, m.show_render, m.use_vertex_groups) for m in obj.modifiers]
-    add(obj)
-    second = add(obj)
+    add_dq_skin(obj)
+    second = add_dq_skin(obj)
     bpy.context.scene.frame_set(9)
     obj.modifiers.remove(second)  # the X button
     bpy.context.view_layer.update()
@@ -506,12 +476,12 @@ LATER = ["SUBSURF", "SOLIDIFY", "MIRROR", "DECIMATE", "WELD", "EDGE_SPLIT", "TRI
 def test_any_modifier_after_dq_skin(dq_skin, kind, method):
     obj, arm, _ = animated_tube(rings=16, segments=12)
     later_modifier(obj, kind)
-    add(obj, method)
+    add_dq_skin(obj, method)
     names = [m.type for m in obj.modifiers]
     assert names[0] == "NODES" and names[1] == "ARMATURE"
     tw = twin(obj)
     check_frames([(obj, tw)])
-    st = state(dq_skin, obj)
+    st = status(dq_skin, obj)
     assert st.live and st.message == "", st.message
 
 
@@ -521,7 +491,7 @@ def test_later_modifiers_run_once_per_frame(dq_skin):
     not evaluated at all, or DQ Skin outputs nothing there."""
     obj, arm, _ = animated_tube()
     later_modifier(obj, "SUBSURF")
-    add(obj)
+    add_dq_skin(obj)
     # Shape keys driven by a bone make the object change in the first evaluation too.
     other, arm2, _ = animated_tube(seed=0.5)
     other.location.x = 3
@@ -538,7 +508,7 @@ def test_later_modifiers_run_once_per_frame(dq_skin):
     var.targets[0].rotation_mode = "SWING_TWIST_X"
     fc.driver.expression = "abs(var)"
     later_modifier(other, "SUBSURF")
-    add(other)
+    add_dq_skin(other)
     seen = []
 
     def after_dq_skin(scene, depsgraph):
@@ -597,9 +567,9 @@ def test_driven_corrective_shape_keys(dq_skin, method):
     var.targets[0].bone_target = "Bone1"
     var.targets[0].transform_type = "ROT_W"
     fc.driver.expression = "1 - var"
-    add(obj, method)
+    add_dq_skin(obj, method)
     check_frames([(obj, twin(obj))])
-    assert state(dq_skin, obj).source == "mesh"
+    assert status(dq_skin, obj).source == "mesh"
 
 
 def render_image(path: Path, frame: int, hide) -> np.ndarray:
@@ -646,10 +616,10 @@ def render_image(path: Path, frame: int, hide) -> np.ndarray:
 def test_viewport_off_render_on(dq_skin, tmp_path):
     """Off in the viewport, on in renders: the panel says so and the render is DQ Skin's."""
     obj, arm, _ = animated_tube()
-    mod = add(obj, "DUAL_QUATERNION")
+    mod = add_dq_skin(obj, "DUAL_QUATERNION")
     mod.show_viewport = False
     bpy.context.scene.frame_set(3)
-    st = state(dq_skin, obj)
+    st = status(dq_skin, obj)
     assert st.mode.value == "off" and "Off in the viewport" in st.message and "Waiting" not in st.message
     tw = twin(obj)
     tw.location.x = 0.0
@@ -661,10 +631,8 @@ def test_viewport_off_render_on(dq_skin, tmp_path):
 
 
 def test_panel_status_says_what_is_wrong_and_where(dq_skin):
-    from test_modifier import draw_panel
-
     obj, arm, _ = animated_tube()
-    mod = add(obj)
+    mod = add_dq_skin(obj)
     bpy.context.scene.frame_set(3)
     lines = draw_panel(dq_skin, obj)
     assert any("bones" in l and "influences" in l for l in lines), lines
@@ -677,7 +645,7 @@ def test_panel_status_says_what_is_wrong_and_where(dq_skin):
     bpy.context.scene.frame_set(4)
     bpy.context.scene.frame_set(5)
     lines = draw_panel(dq_skin, obj)
-    st = state(dq_skin, obj, mod)
+    st = status(dq_skin, obj, mod)
     assert st.mode.value == "fallback" and sub.name in st.message, st.message
     assert any("Armature" in l and "instead" in l for l in lines), lines
     tw = twin(obj)
@@ -689,7 +657,7 @@ def test_panel_status_says_what_is_wrong_and_where(dq_skin):
     tw.modifiers.remove(tw.modifiers[sub_name])
     bpy.context.scene.frame_set(6)
     bpy.context.scene.frame_set(7)
-    assert state(dq_skin, obj, mod).live and state(dq_skin, obj, mod).source == "capture"
+    assert status(dq_skin, obj, mod).live and status(dq_skin, obj, mod).source == "capture"
     assert_same(obj, tw)
 
 
@@ -697,7 +665,7 @@ def test_panel_status_says_what_is_wrong_and_where(dq_skin):
 
 def test_two_scenes_renames_nla_and_method_changes(dq_skin):
     obj, arm, _ = animated_tube()
-    mod = add(obj, "LINEAR")
+    mod = add_dq_skin(obj, "LINEAR")
     tw = twin(obj)
     check_frames([(obj, tw)], frames=(3, 8))
     # Renames of the object, the modifier and the armature.
@@ -732,7 +700,7 @@ def test_export_writes_the_skinned_animation(dq_skin, tmp_path, fmt):
     what Blender's Armature modifier gives (recorded from the twin before exporting)."""
     obj, arm, _ = animated_tube()
     obj.name = "Body"
-    add(obj, "DUAL_QUATERNION")
+    add_dq_skin(obj, "DUAL_QUATERNION")
     tw = twin(obj, "Twin")
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, 12
@@ -771,7 +739,7 @@ def _world(obj) -> np.ndarray:
 
 def test_motion_blur_render_matches_the_armature_modifier(dq_skin, tmp_path):
     obj, arm, _ = animated_tube()
-    add(obj, "DUAL_QUATERNION")
+    add_dq_skin(obj, "DUAL_QUATERNION")
     tw = twin(obj)
     scene = bpy.context.scene
     scene.render.use_motion_blur = True
@@ -794,8 +762,6 @@ def same_picture(a: np.ndarray, b: np.ndarray) -> bool:
 def test_weights_read_from_memory_equal_the_python_api(dq_skin, assets, asset):
     """The vertex-group reader (Blender's memory, through its SDNA) gives exactly what
     `MeshVertex.groups` gives, in stored order."""
-    from test_exactness import import_character
-
     obj, _ = import_character(assets / asset)
     meshdata = dq_skin.meshdata
     assert meshdata.reader() is not None, meshdata._reader_error
@@ -812,7 +778,7 @@ def test_weight_changes_show_on_the_next_evaluation(dq_skin):
     """Painting weights (here `VertexGroup.add`/`remove`, what a brush stroke does to the data)
     shows up skinned at once, as with the Armature modifier."""
     obj, arm, _ = animated_tube()
-    add(obj, "DUAL_QUATERNION")
+    add_dq_skin(obj, "DUAL_QUATERNION")
     tw = twin(obj)
     bpy.context.scene.frame_set(12)
     assert_same(obj, tw)
@@ -845,13 +811,13 @@ def test_add_to_all_selected_objects_at_once(dq_skin):
     with bpy.context.temp_override(active_object=objs[0], selected_objects=[*objs, plain]):
         assert bpy.ops.object.dq_skin_add(all_selected=True, method="DUAL_QUATERNION") == {"FINISHED"}
     assert all(len(dq_skin_mods(o)) == 1 for o in objs) and not dq_skin_mods(plain)
-    assert all(state(dq_skin, o).live for o in objs)  # skinned right away
+    assert all(status(dq_skin, o).live for o in objs)  # skinned right away
     check_frames([(o, twin(o)) for o in objs], frames=(4, 15))
 
 
 def test_switching_the_companion_on_shows_blenders_deformation_once_and_back(dq_skin):
     obj, arm, _ = animated_tube()
-    mod = add(obj, "LINEAR")
+    mod = add_dq_skin(obj, "LINEAR")
     tw = twin(obj)
     bpy.context.scene.frame_set(8)
     c = obj.modifiers["Armature"]
@@ -862,14 +828,14 @@ def test_switching_the_companion_on_shows_blenders_deformation_once_and_back(dq_
     bpy.context.view_layer.update()
     bpy.context.scene.frame_set(9)
     assert c.show_viewport and c.use_vertex_groups and not mod.show_viewport and mod.show_render
-    assert state(dq_skin, obj, mod).mode.value == "off"
+    assert status(dq_skin, obj, mod).mode.value == "off"
     assert_same(obj, tw)
     # Switching DQ Skin back on parks the Armature modifier again.
     mod.show_viewport = True
     bpy.context.view_layer.update()
     bpy.context.scene.frame_set(10)
     assert not c.show_viewport and not c.use_vertex_groups
-    assert state(dq_skin, obj, mod).live
+    assert status(dq_skin, obj, mod).live
     assert_same(obj, tw)
 
 
@@ -877,7 +843,7 @@ def test_disabling_the_add_on_leaves_blenders_deformation(dq_skin):
     import addon_utils
 
     obj, arm, _ = animated_tube()
-    add(obj, "DUAL_QUATERNION")
+    add_dq_skin(obj, "DUAL_QUATERNION")
     tw = twin(obj)
     bpy.context.scene.frame_set(6)
     addon_utils.disable("bl_ext.user_default.dq_skin", default_set=False)
@@ -888,5 +854,5 @@ def test_disabling_the_add_on_leaves_blenders_deformation(dq_skin):
     finally:
         addon_utils.enable("bl_ext.user_default.dq_skin", default_set=False)
     bpy.context.scene.frame_set(3)
-    assert state(dq_skin, obj).live and not obj.modifiers["Armature"].show_viewport
+    assert status(dq_skin, obj).live and not obj.modifiers["Armature"].show_viewport
     assert_same(obj, tw)

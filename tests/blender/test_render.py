@@ -5,10 +5,8 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
-import pytest
 
-from test_exactness import import_character
-from test_modifier import add_dq_skin, reference_copy
+from dqtest import add_dq_skin, import_character, reference_copy
 
 # Two renders of the same geometry differ at most by rounding (1/255); a pixel that differs by
 # more counts as changed. Allowed share of changed pixels for "the same image"; a pose from

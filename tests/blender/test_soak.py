@@ -12,9 +12,7 @@ import bpy
 import pytest
 
 from conftest import ASSETS
-from test_exactness import action_frames, import_character
-from test_modifier import add_dq_skin
-from twins import REL_TOL, deviation, evaluated_positions, plain_twin
+from dqtest import REL_TOL, action_frames, add_dq_skin, deviation, evaluated_positions, import_character, plain_twin
 
 FRAMES = 10_000
 RELOAD_EVERY = 1_000

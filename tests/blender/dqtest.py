@@ -1,7 +1,14 @@
-"""The same scene with Blender's own Armature modifier: a twin of a DQ Skin object whose stack
-has each DQ Skin replaced by its companion Armature modifier, set up as DQ Skin (Linear:
-Preserve Volume off; Dual Quaternion: on), enabled. The twin shares the object's mesh, shape
-keys, parent, transform and every other modifier, so the two must evaluate to the same mesh."""
+"""Shared helpers of the Blender tests (the only module test files import besides `scenes`, the
+rig builders, and `conftest`).
+
+- The same scene with Blender's own Armature modifier: `twin` (the object with each DQ Skin
+  replaced by its companion set up as DQ Skin: Linear = Preserve Volume off, every other method
+  on) and `plain_twin` (a new object with a plain Armature modifier, for linked data).
+- Comparing evaluated meshes: `evaluated_positions`, `deviation` (relative to the bounding-box
+  diagonal), `assert_same`, `check_frames`, `moved` (a test that moves nothing proves nothing).
+- Building scenes: `add_dq_skin`, `import_character`, `animate`, `animated_tube`, `select_only`.
+- Reading DQ Skin: `dq_skin_mods`, `get_input`, `get_attribute`, `method`, `status`, `draw_panel`.
+"""
 
 from __future__ import annotations
 
@@ -9,8 +16,13 @@ import json
 
 import bpy
 import numpy as np
+from mathutils import Quaternion
 
-REL_TOL = 1e-5  # of the bounding-box diagonal (the issue's bar)
+from scenes import rig_tube
+
+REL_TOL = 1e-5  # of the bounding-box diagonal (the bar of every exactness test)
+FRAMES = (1, 4, 9, 13, 20, 2)
+METHODS = ["LINEAR", "DUAL_QUATERNION"]
 
 
 def dq_skin_mods(obj):
@@ -139,3 +151,126 @@ def moved(obj, frames=(1, 10)) -> float:
     scene.frame_set(frames[1])
     b = evaluated_positions(obj)
     return float(np.abs(a - b).max()) if a.shape == b.shape else float("inf")
+
+
+def check_frames(pairs, frames=FRAMES):
+    """Every (ours, twin) pair equal at every frame; returns the worst deviation."""
+    worst = 0.0
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        for ours, ref in pairs:
+            worst = max(worst, assert_same(ours, ref, f"{ours.name} at frame {f}"))
+    return worst
+
+
+def add_dq_skin(obj, method: str = "AUTO"):
+    """`object.dq_skin_add` on `obj`; returns its (last) DQ Skin modifier."""
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_add(method=method) == {"FINISHED"}
+    return dq_skin_mods(obj)[-1]
+
+
+def import_character(path):
+    """A glTF character: its skinned mesh and that mesh's Armature modifier."""
+    bpy.ops.import_scene.gltf(filepath=str(path))
+    mesh_obj = next(o for o in bpy.data.objects if o.type == "MESH" and any(m.type == "ARMATURE" for m in o.modifiers))
+    mod = next(m for m in mesh_obj.modifiers if m.type == "ARMATURE")
+    return mesh_obj, mod
+
+
+def action_frames(action):
+    start, end = (int(round(f)) for f in action.frame_range)
+    return range(start, end + 1)
+
+
+def animate(arm, seed: float = 0.0):
+    """Keys on every bone over frames 1-20: bends and twists beyond 90° (where LBS and DQS
+    differ a lot)."""
+    for i, pb in enumerate(arm.pose.bones):
+        pb.rotation_mode = "QUATERNION"
+        for frame, angle in ((1, 0.0), (10, 1.4 + seed), (20, 2.6 - seed)):
+            axis = (1.0, 0.3 * i, 0.2) if i % 2 else (0.1, 1.0, 0.4 + seed)
+            pb.rotation_quaternion = Quaternion(axis, angle * (0.5 if i == 0 else 1.0))
+            pb.keyframe_insert("rotation_quaternion", frame=frame)
+    return arm
+
+
+def animated_tube(seed: float = 0.0, **kw):
+    obj, arm, mod = rig_tube(**kw)
+    obj.parent = arm
+    animate(arm, seed)
+    return obj, arm, mod
+
+
+def select_only(*objs):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in objs)
+    bpy.context.view_layer.objects.active = objs[0]
+
+
+def status(dq_skin, obj, mod=None):
+    """What DQ Skin's panel knows about a modifier (`state.Status`)."""
+    return dq_skin.modifier.status_of(obj, mod or dq_skin_mods(obj)[0])
+
+
+class _Recorder:
+    """Stands in for a panel layout and records the labels drawn."""
+
+    def __init__(self, lines):
+        self.lines = lines
+
+    def row(self, **_):
+        return self
+
+    def box(self, **_):
+        return self
+
+    def column(self, **_):
+        return self
+
+    def separator(self, **_):
+        pass
+
+    def prop(self, data, name, text="", **_):
+        self.lines.append(f"<{name}>")
+
+    def label(self, text="", **_):
+        self.lines.append(text)
+
+    def progress(self, text="", **_):
+        self.lines.append(text)
+
+    def operator(self, idname, text="", **_):
+        self.lines.append(f"[{idname}]")
+        return type("Props", (), {})()
+
+
+def draw_panel(dq_skin, obj):
+    """The lines DQ Skin's panel draws for `obj`."""
+    lines = []
+    panel = type("P", (), {"layout": _Recorder(lines)})()
+    context = type("C", (), {"object": obj})()
+    dq_skin.ui.OBJECT_PT_dq_skin.draw(panel, context)
+    return lines
+
+
+def reference_copy(obj, preserve_volume: bool):
+    """A copy of `obj` sharing its mesh, deformed by a plain Armature modifier (set up as before
+    DQ Skin was added, if it was)."""
+    original = {}
+    for m in dq_skin_mods(obj):
+        original = json.loads(get_input(m, "Companion") or "{}").get("original", {})
+    copy = obj.copy()
+    bpy.context.scene.collection.objects.link(copy)
+    for m in list(copy.modifiers):
+        if m.type == "NODES":
+            copy.modifiers.remove(m)
+    arm_mod = next(m for m in copy.modifiers if m.type == "ARMATURE")
+    for name in ("use_vertex_groups", "use_bone_envelopes", "vertex_group", "invert_vertex_group"):
+        if name in original:
+            setattr(arm_mod, name, original[name])
+    arm_mod.show_viewport = True
+    arm_mod.show_render = True
+    arm_mod.use_deform_preserve_volume = preserve_volume
+    return copy

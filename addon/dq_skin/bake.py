@@ -26,18 +26,20 @@ def _positions(obj, depsgraph) -> np.ndarray:
 
 def bake(context, obj, mod, path, frame_start: int, frame_end: int, check=None) -> pc2.Header:
     """Writes the modifier's output for every frame of `[frame_start, frame_end]` to `path` (PC2,
-    object space). Modifiers after it are muted while baking, so the cache holds exactly what DQ
-    Skin passes on. Nothing is written under `path` if anything fails. `check` is called before
-    every frame and may raise to stop (the command line's Ctrl-C and SIGTERM)."""
+    object space). Modifiers after it, and simulations before it, are muted while baking, so the
+    cache holds exactly what DQ Skin makes of the mesh. Nothing is written under `path` if
+    anything fails. `check` is called before every frame and may raise to stop (the command
+    line's Ctrl-C and SIGTERM)."""
     if frame_end < frame_start:
         raise ValueError(f"the frame range {frame_start}–{frame_end} is empty")
     scene = context.scene
     mods = list(obj.modifiers)
-    later = [m for m in mods[mods.index(mod) + 1:] if m.show_viewport]
+    at = mods.index(mod)
+    muted = [m for m in mods[at + 1:] + _simulations_before(obj, mod) if m.show_viewport]
     current = scene.frame_current
     progress = Progress(context, frame_end - frame_start + 1, f"Baking {obj.name}")
     try:
-        for m in later:
+        for m in muted:
             m.show_viewport = False
         with pc2.Writer(path, len(obj.data.vertices), frame_start, 1.0) as writer:
             for frame in range(frame_start, frame_end + 1):
@@ -53,15 +55,23 @@ def bake(context, obj, mod, path, frame_start: int, frame_end: int, check=None) 
                 writer.add(_positions(obj, depsgraph))
                 progress.step()
     finally:
-        for m in later:
+        for m in muted:
             m.show_viewport = True
         scene.frame_set(current)
         progress.end()
     return pc2.read_header(path)
 
 
+def _simulations_before(obj, mod) -> list:
+    """Soft Bodies before DQ Skin (Blender keeps them before non-deform modifiers)."""
+    mods = list(obj.modifiers)
+    return [m for m in mods[: mods.index(mod)] if m.type == "SOFT_BODY"]
+
+
 def add_cache_modifier(obj, mod, path, frame_start: int):
-    """A Mesh Cache modifier playing `path` in DQ Skin's place (right after it)."""
+    """A Mesh Cache modifier playing `path` in DQ Skin's place (right after it), or before a
+    Soft Body that precedes DQ Skin, which then simulates on the skinned mesh (the Mesh Cache
+    modifier is deform-only, so it may come first)."""
     cache = obj.modifiers.get(CACHE_NAME) or obj.modifiers.new(CACHE_NAME, "MESH_CACHE")
     cache.cache_format = "PC2"
     cache.filepath = str(path)
@@ -71,7 +81,8 @@ def add_cache_modifier(obj, mod, path, frame_start: int):
     cache.time_mode = "FRAME"
     cache.deform_mode = "OVERWRITE"
     cache.forward_axis, cache.up_axis = "POS_Y", "POS_Z"
-    index = list(obj.modifiers).index(mod) + 1
+    first_simulation = next(iter(_simulations_before(obj, mod)), None)
+    index = list(obj.modifiers).index(first_simulation if first_simulation else mod) + (0 if first_simulation else 1)
     with bpy.context.temp_override(object=obj, active_object=obj):
         bpy.ops.object.modifier_move_to_index(modifier=cache.name, index=min(index, len(obj.modifiers) - 1))
     return cache

@@ -142,12 +142,20 @@ class Scan:
     def __init__(self):
         self.version = -1
         self.readers: dict[int, list[str]] = {}  # object uid -> "Object's Cloth" of the simulations reading it
+        self.by_index: dict[int, list[str]] = {}  # object uid -> what reads its vertices by index
 
     def build(self, version: int) -> None:
         self.version = version
         readers: dict[int, list[str]] = {}
+        by_index: dict[int, list[str]] = {}
         known: dict = {}
         for owner in bpy.data.objects:
+            parent = owner.parent
+            if parent is not None and owner.parent_type in ("VERTEX", "VERTEX_3") and not owner.use_parent_final_indices:
+                by_index.setdefault(parent.session_uid, []).append(f"{owner.name} (vertex parent)")
+            surface = getattr(owner.data, "surface", None) if owner.type == "CURVES" else None
+            if surface is not None:
+                by_index.setdefault(surface.session_uid, []).append(f"{owner.name} (hair on the surface)")
             sims = [label for label in (simulation_label(m, known) for m in getattr(owner, "modifiers", ())) if label]
             if owner.rigid_body is not None:
                 sims.append("Rigid Body")
@@ -157,9 +165,20 @@ class Scan:
             for uid in _object_targets(owner):
                 readers.setdefault(uid, []).append(what)
         self.readers = readers
+        self.by_index = by_index
 
 
 SCAN = Scan()
+
+
+def index_readers(obj, structure_version: int) -> list[str]:
+    """What finds the object's vertices by their original index (vertex parents, hair curves on
+    the surface): Blender maps those through the mesh a modifier outputs only when it keeps the
+    incoming mesh's index layers, so DQ Skin then sets the incoming mesh's positions instead of
+    replacing the mesh (a little more work per vertex)."""
+    if SCAN.version != structure_version:
+        SCAN.build(structure_version)
+    return SCAN.by_index.get(obj.session_uid, [])
 
 
 def _own_simulation(obj, mod) -> str:
@@ -188,6 +207,20 @@ def simulation_reason(obj, mod, structure_version: int) -> str:
     if readers:
         return f"{readers[0]} simulates on it"
     return ""
+
+
+def notes(obj, mod) -> list[str]:
+    """What the panel points out about the stack while DQ Skin deforms."""
+    out = []
+    mods = obj.modifiers
+    for earlier in list(mods)[: mods.find(mod.name)]:
+        if earlier.type == "SOFT_BODY" and (earlier.show_viewport or earlier.show_render):
+            out.append(
+                f"'{earlier.name}' simulates the undeformed mesh before DQ Skin (Blender keeps Soft Body "
+                "before modifiers that are not deform-only); for a soft body on the skinned mesh, bake DQ "
+                "Skin to a cache: the cache comes first and the Soft Body follows it"
+            )
+    return out
 
 
 def mode_reason(obj) -> str:

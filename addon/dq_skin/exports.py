@@ -79,14 +79,17 @@ def wrap_operators() -> None:
         cls = getattr(sys.modules.get(module_name), class_name, None)
         if cls is None or hasattr(cls, _WRAPPED):
             continue
-        original = cls.execute
+        setattr(cls, _WRAPPED, cls.execute)
+        cls.execute = _wrapped(cls.execute, label)
 
-        def execute(self, context, _original=original, _label=label):
-            with exporting(_label):
-                return _original(self, context)
 
-        setattr(cls, _WRAPPED, original)
-        cls.execute = execute
+def _wrapped(original, label: str):
+    # Exactly (self, context): Blender checks the arguments of an operator's methods.
+    def execute(self, context):
+        with exporting(label):
+            return original(self, context)
+
+    return execute
 
 
 def unwrap_operators() -> None:

@@ -73,6 +73,7 @@ class MeshData:
 
 _cache: dict[int, MeshData] = {}
 _stale: set[int] = set()
+_revisions: dict[int, int] = {}  # mesh uid -> how many times Blender said it changed
 _versions = iter(range(1, 1 << 62))
 _reader = None
 _reader_error = ""
@@ -81,11 +82,19 @@ _reader_error = ""
 def forget() -> None:
     _cache.clear()
     _stale.clear()
+    _revisions.clear()
 
 
 def mark_stale(mesh_uid: int) -> None:
     """Blender says the mesh may have changed: compare it on its next use."""
     _stale.add(mesh_uid)
+    _revisions[mesh_uid] = _revisions.get(mesh_uid, 0) + 1
+
+
+def revision(mesh) -> int:
+    """Changes whenever Blender said the mesh changed, in anything (materials, UV maps, colors,
+    normals...), not only in what DQ Skin reads (`MeshData.version`)."""
+    return _revisions.get(mesh.session_uid, 0)
 
 
 def reader():

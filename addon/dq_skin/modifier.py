@@ -300,7 +300,9 @@ def _quick(obj, mod, st: ModifierState, ctx: Context):
         if uid not in ctx.unmoved or arm.mode == "EDIT":
             return False
         data = meshdata.peek(obj)
-        if data is None or data.keys is not None or data.version != out.copied_version:
+        if data is None or data.keys is not None:
+            return False
+        if out.kind == nodes.RESULT_REPLACE and (data.version != out.copied_version or meshdata.revision(obj.data) != out.copied_revision):
             return False
         deform = ctx.poses.get(uid)
         if deform is None:
@@ -320,7 +322,7 @@ def _quick(obj, mod, st: ModifierState, ctx: Context):
     key = FrameKey(old.settings, old.source, raw, old.spaces, old.result, old.mesh_version)
     job = _job(st, s, data.positions, binding.influences, deform, binding.rest, premat, postmat)
     deforms = st.companion.deforms or (True, True)
-    return Plan(obj, mod, st, s, out.result, nodes.RESULT_REPLACE, key, job, deforms, time.perf_counter(), quick=True, render=ctx.render)
+    return Plan(obj, mod, st, s, out.result, out.kind, key, job, deforms, time.perf_counter(), quick=True, render=ctx.render)
 
 
 def run_batch(plans: list) -> None:
@@ -402,9 +404,10 @@ def _prepare(obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: C
     if out.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
         out.spaces = rig.spaces(obj_eval, arm_eval)
     premat, postmat = out.spaces
-    kind = nodes.RESULT_POSITIONS if source == "capture" else nodes.RESULT_REPLACE
+    by_index = consumers.index_readers(obj, ctx.structure)
+    kind = nodes.RESULT_POSITIONS if source == "capture" or by_index else nodes.RESULT_REPLACE
     result = _own_result(obj, mod, st)
-    key = FrameKey(s.key(), input_key, deform.tobytes(), premat.tobytes(), result.session_uid, data.version)
+    key = FrameKey(s.key(), input_key, deform.tobytes(), premat.tobytes(), result.session_uid, (data.version, meshdata.revision(obj.data)))
     if not force and key == out.written and st.status.live and results.mode_of(result) == kind:
         return None  # the result is already this
     if out.buffer is None or len(out.buffer) != binding.vertex_count:
@@ -518,9 +521,15 @@ def finish(plan: Plan) -> None:
     data = meshdata.get(obj)
     if kind == nodes.RESULT_REPLACE:
         mesh = result.data
-        if out.copied_version != data.version or (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops)) != data.counts:
+        revision = meshdata.revision(obj.data)
+        if (
+            out.copied_version != data.version
+            or out.copied_revision != revision
+            or (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops)) != data.counts
+        ):
+            # Everything but the positions comes from the mesh (materials, UV maps, colors...).
             results.copy_mesh(result, obj.data)
-            out.copied_version = data.version
+            out.copied_version, out.copied_revision = data.version, revision
     else:
         results.points_mesh(result, len(out.buffer))
         out.copied_version = 0
@@ -531,6 +540,7 @@ def finish(plan: Plan) -> None:
     binding = st.binding.binding
     status = st.status
     status.mode, status.message = Mode.LIVE, ""
+    status.notes = tuple(consumers.notes(obj, mod))
     status.method = plan.s.method.label
     status.bones = len(binding.bone_names)
     status.influences = len(binding.influences)

@@ -131,9 +131,10 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
         return ""
 
 
-def remove_modifier(obj, mod) -> None:
+def remove_modifier(obj, mod, applied: bool = False) -> None:
     """Removes a DQ Skin modifier and its result, and puts its companion Armature modifier back
-    as it was before `dq_skin_add`."""
+    as it was before `dq_skin_add` (or, with `applied`, removes it too: its deformation is in
+    the mesh now)."""
     info = nodes.get_companion(mod) if nodes.version_of(mod.node_group) == nodes.VERSION else {}
     c = companion.find(obj, mod, info) if info else None
     uid = compat.modifier_uid(mod)
@@ -145,7 +146,10 @@ def remove_modifier(obj, mod) -> None:
     if attr is not None:
         obj.data.attributes.remove(attr)
     if c is not None:
-        companion.restore(c, info.get("original", {}))
+        if applied:
+            obj.modifiers.remove(c)
+        else:
+            companion.restore(c, info.get("original", {}))
     for r in {r.session_uid: r for r in ours}.values():
         results.remove(r)
     rec = REGISTRY.records.get(obj.session_uid)
@@ -165,16 +169,64 @@ class OBJECT_OT_dq_skin_remove(ActiveMeshOperator):
 
     def execute(self, context):
         obj = context.active_object
-        mods = modifier.dq_skin_modifiers(obj)
-        if self.modifier:
-            mods = [m for m in mods if m.name == self.modifier]
-        if not mods:
-            self.report({"ERROR"}, f"{obj.name} has no DQ Skin modifier" + (f" named {self.modifier!r}" if self.modifier else ""))
+        mod = _named_modifier(self, obj)
+        if mod is None:
             return {"CANCELLED"}
-        if obj.library is not None:
-            self.report({"ERROR"}, f"{obj.name} is linked from a library and cannot be changed")
+        remove_modifier(obj, mod)
+        return {"FINISHED"}
+
+
+def _named_modifier(op, obj):
+    mods = modifier.dq_skin_modifiers(obj)
+    if op.modifier:
+        mods = [m for m in mods if m.name == op.modifier]
+    if not mods:
+        op.report({"ERROR"}, f"{obj.name} has no DQ Skin modifier" + (f" named {op.modifier!r}" if op.modifier else ""))
+        return None
+    if obj.library is not None:
+        op.report({"ERROR"}, f"{obj.name} is linked from a library and cannot be changed")
+        return None
+    return mods[0]
+
+
+class OBJECT_OT_dq_skin_apply_as_shape_key(ActiveMeshOperator):
+    """Store DQ Skin's deformation of the current frame in a new shape key (Blender's own Apply
+    as Shape Key only takes deform-only modifiers, which a Geometry Nodes modifier is not)"""
+
+    bl_idname = "object.dq_skin_apply_as_shape_key"
+    bl_label = "Apply DQ Skin as Shape Key"
+    bl_options = {"REGISTER", "UNDO"}
+
+    modifier: bpy.props.StringProperty(name="Modifier", description="Name of the DQ Skin modifier (default: the first)")
+    keep_modifier: bpy.props.BoolProperty(
+        name="Keep Modifier",
+        description="Keep DQ Skin in the stack (Save as Shape Key); off: remove it and its Armature modifier, as Apply does",
+        default=False,
+    )
+
+    def execute(self, context):
+        obj = context.active_object
+        mod = _named_modifier(self, obj)
+        if mod is None:
             return {"CANCELLED"}
-        remove_modifier(obj, mods[0])
+        REGISTRY.evaluate(REGISTRY.record_of(obj), context.evaluated_depsgraph_get(), force=True)
+        st = modifier.state_of(obj, mod)
+        out = st.output.buffer
+        if not st.status.live or out is None or len(out) != len(obj.data.vertices):
+            self.report({"ERROR"}, f"DQ Skin is not deforming {obj.name} now: {st.status.message or 'nothing to store'}")
+            return {"CANCELLED"}
+        out = out.copy()
+        name = mod.name
+        if obj.data.shape_keys is None:
+            obj.shape_key_add(name="Basis", from_mix=False)
+        key = obj.shape_key_add(name=name, from_mix=False)
+        key.value = 0.0  # as Blender's Apply as Shape Key leaves it
+        points = getattr(key, "points", None)  # the fast path (Blender 4.1+)
+        (points if points is not None else key.data).foreach_set("co", out.ravel())
+        obj.data.update()
+        if not self.keep_modifier:
+            remove_modifier(obj, mod, applied=True)
+        self.report({"INFO"}, f"DQ Skin's deformation stored in shape key {key.name!r}")
         return {"FINISHED"}
 
 
@@ -195,4 +247,4 @@ class OBJECT_OT_dq_skin_cancel_centers(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (OBJECT_OT_dq_skin_add, OBJECT_OT_dq_skin_remove, OBJECT_OT_dq_skin_cancel_centers)
+CLASSES = (OBJECT_OT_dq_skin_add, OBJECT_OT_dq_skin_remove, OBJECT_OT_dq_skin_apply_as_shape_key, OBJECT_OT_dq_skin_cancel_centers)

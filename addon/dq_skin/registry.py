@@ -8,10 +8,10 @@ rebuilt from `bpy.data` when a file is loaded and after undo (which replaces the
 and it notices new objects (duplicates, appends, copied modifiers) and removed modifiers
 (removed or applied) from the updates Blender reports.
 
-While a Python operator runs (Rigify's Generate, scripts calling `bpy.ops`), Blender evaluates
-the scene after every step: the registry keeps its bookkeeping current then, but skins once the
-scene settles (the next update outside an operator, the next frame change, or an idle moment of
-the interface), not on every intermediate update.
+While a Python operator runs (Rigify's Generate, an add-on's rig tools), Blender evaluates the
+scene after every `bpy.ops` step it takes: the registry keeps its bookkeeping current then, but
+skins once the scene settles (an idle moment of the interface, the next update outside an
+operator or the next frame change), not on every intermediate update.
 """
 
 from __future__ import annotations
@@ -416,13 +416,12 @@ class Registry:
 
 
 def inside_python_operator() -> bool:
-    """Whether Python code is running an operator now (an operator's `execute`, or `bpy.ops`
-    called from a script): Blender evaluates the scene after each of its steps."""
+    """Whether a Python operator is running (its `execute`, `invoke` or `modal` is on the
+    stack): Blender evaluates the scene after each `bpy.ops` step it takes. (A script calling
+    operators itself is not deferred: it may read the result right after.)"""
     f = sys._getframe(1)
     while f is not None:
         code = f.f_code
-        if code.co_name == "__call__" and code.co_filename.endswith(("bpy/ops.py", "bpy\\ops.py")):
-            return True
         if code.co_name in ("execute", "invoke", "modal") and code.co_varnames[:1] == ("self",):
             if isinstance(f.f_locals.get("self"), bpy.types.Operator):
                 return True

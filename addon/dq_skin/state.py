@@ -40,6 +40,7 @@ class Status:
     mode: Mode = Mode.NEW
     message: str = ""  # the reason (handed over, off, linked) or the error (fallback)
     instead: str = ""  # what deforms the mesh instead (fallback)
+    notes: tuple = ()  # what the panel points out about the stack while DQ Skin deforms
     source: str = ""  # what reaches the modifier: mesh, chain or capture
     method: str = ""  # the method label of the last result
     bones: int = 0
@@ -90,7 +91,7 @@ class FrameKey:
     pose: bytes
     spaces: bytes
     result: int  # session uid of the result object
-    mesh_version: int
+    mesh_version: tuple  # (MeshData.version, meshdata.revision)
 
 
 @dataclass
@@ -102,6 +103,7 @@ class Output:
     mixed_key: tuple = ()
     written: FrameKey | None = None
     copied_version: int = 0  # mesh version the replace-mode result mesh was copied from
+    copied_revision: int = -1  # and its revision (see `meshdata.revision`)
     generation: int = 0  # counts the outputs (a following DQ Skin's input key)
     spaces: tuple | None = field(default=None, repr=False)  # (premat, postmat) last computed
 

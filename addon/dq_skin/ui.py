@@ -62,7 +62,7 @@ def status_lines(obj, mod) -> list[tuple[str, str]]:
     icon = ICONS[status.mode]
     if status.mode is Mode.LIVE:
         line = f"{status.method}: {status.bones} bones, {status.influences} influences, {status.seconds * 1e3:.1f} ms"
-        return [(line, icon)]
+        return [(line, icon), *((note, "ERROR") for note in status.notes)]
     if status.mode is Mode.FALLBACK:
         return [(status.message, icon), (status.instead, "INFO")]
     return [(status.message, icon)]

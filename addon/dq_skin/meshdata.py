@@ -225,11 +225,13 @@ def get(obj, verify: bool = False) -> MeshData:
     if uid in _stale:
         _stale.discard(uid)
         verify = True
-    if old is not None and not verify:
-        return old
     # Vertex group names live on the mesh since Blender 3.0 but Python reaches them through
-    # any of its objects.
-    new = _read(mesh, uid, tuple(g.name for g in obj.vertex_groups))
+    # any of its objects. Removing or renaming a group does not always reach the handlers as a
+    # change of the mesh: compared on every use (a few microseconds).
+    names = tuple(g.name for g in obj.vertex_groups)
+    if old is not None and not verify and names == old.group_names:
+        return old
+    new = _read(mesh, uid, names)
     if old is not None and _same(old, new):
         return old
     _cache[uid] = new

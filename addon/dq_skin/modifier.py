@@ -154,6 +154,8 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: str, 
             return _step_aside(obj, mod, st, s, deforms, Mode.HANDED_OVER, reason + _instead(s), ctx.render)
         plan = _prepare(obj, obj_eval, mod, st, s, ctx, source, previous, force, deforms, start)
         if plan is None:
+            if st.companion.deforms != deforms:  # e.g. only the render toggle changed
+                settle_companion(obj, mod, st, s, deforms, render=ctx.render)
             return False
         if batchable and not st.needs_effective:
             ctx.batch.append(plan)
@@ -204,8 +206,20 @@ def _companion(obj, mod, st: ModifierState):
     c = obj.modifiers.get(st.companion.name) if st.companion.name else None
     if c is None or c.type != "ARMATURE":
         c = companion.find(obj, mod)
+        if c is not None and _claimed_before(obj, mod, c):
+            c = None  # a copy of a DQ Skin: the Armature modifier is its original's
         st.companion.name = c.name if c is not None else ""
     return c
+
+
+def _claimed_before(obj, mod, c) -> bool:
+    """Whether a DQ Skin earlier in the stack has `c` as its companion."""
+    for other in obj.modifiers:
+        if other == mod:
+            return False
+        if nodes.is_dq_skin(other) and nodes.version_of(other.node_group) == nodes.VERSION and companion.find(obj, other) == c:
+            return True
+    return False
 
 
 def settle_companion(obj, mod, st: ModifierState, s, deforms: tuple[bool, bool], render: bool = False) -> None:

@@ -88,9 +88,17 @@ def twin(obj, name: str | None = None, collection=None, share_mesh: bool = True)
     if name:
         copy.name = name
     (collection or bpy.context.scene.collection).objects.link(copy)
+    used = set()
     for dq_name, arm_name, settings in plan:
-        arm_mod = copy.modifiers.get(arm_name)
-        assert arm_mod is not None and arm_mod.type == "ARMATURE", f"{obj.name}: no companion {arm_name!r} after {dq_name!r}"
+        arm_mod = copy.modifiers.get(arm_name) if arm_name not in used else None
+        if arm_mod is None:
+            # A copy of a DQ Skin whose companion is its original's: an Armature modifier of
+            # its own, in its place.
+            arm_mod = copy.modifiers.new(f"{dq_name} twin", "ARMATURE")
+            with bpy.context.temp_override(object=copy, active_object=copy):
+                bpy.ops.object.modifier_move_to_index(modifier=arm_mod.name, index=copy.modifiers.find(dq_name))
+        assert arm_mod.type == "ARMATURE", f"{obj.name}: no companion {arm_name!r} after {dq_name!r}"
+        used.add(arm_mod.name)
         for k, v in settings.items():
             setattr(arm_mod, k, v)
         copy.modifiers.remove(copy.modifiers[dq_name])

@@ -1,0 +1,442 @@
+"""Everyday actions on DQ Skin characters, each compared with the same scene under Blender's own
+Armature modifier: files with shape keys and other mesh data saved and reopened, modifiers
+copied to other objects in every way Blender and scripts do it, switching DQ Skin and its
+Armature modifier on and off, scripts editing bones then changing frames, removing the mask
+group, Corrective Smooth after DQ Skin, failures that must not print tracebacks, and a
+generated Rigify character (every method, exact, and rebuilt by Re-Generate).
+
+Bar: <= 1e-5 of the bounding-box diagonal (`dqtest.REL_TOL`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Quaternion
+
+from characters import bbone_counts, open_rigify_character
+from dqtest import (
+    METHODS,
+    REL_TOL,
+    add_dq_skin,
+    animated_tube,
+    assert_same,
+    check_frames,
+    deviation,
+    dq_skin_mods,
+    draw_panel,
+    evaluated_positions,
+    get_input,
+    import_character,
+    select_only,
+    status,
+    twin,
+)
+from scenes import chain_weights, tube
+
+
+# -- files ----------------------------------------------------------------------------------------
+
+def mesh_data_of_every_kind(obj):
+    """Shape keys (two, one driven by a vertex group), custom normals, a color attribute, a UV
+    map, a custom float attribute: what characters have."""
+    obj.shape_key_add(name="Basis")
+    smile = obj.shape_key_add(name="Smile")
+    co = np.empty(len(obj.data.vertices) * 3, np.float32)
+    smile.data.foreach_get("co", co)
+    co[2::3] += 0.05
+    smile.data.foreach_set("co", co)
+    smile.value = 0.6
+    g = obj.vertex_groups.new(name="Face")
+    g.add(list(range(0, len(obj.data.vertices), 3)), 1.0, "REPLACE")
+    frown = obj.shape_key_add(name="Frown")
+    frown.vertex_group = "Face"
+    frown.value = 0.3
+    mesh = obj.data
+    mesh.uv_layers.new(name="UVMap")
+    mesh.color_attributes.new("Col", "FLOAT_COLOR", "POINT")
+    mesh.attributes.new("stiffness", "FLOAT", "POINT")
+    normals = [(0.0, 0.0, 1.0)] * len(mesh.loops)
+    mesh.normals_split_custom_set(normals)
+
+
+def dangling() -> list[str]:
+    """Data-blocks of the open file that refer to a missing owner, or that DQ Skin left."""
+    out = []
+    for key in bpy.data.shape_keys:
+        if key.user is None or key.user.shape_keys != key:
+            out.append(f"shape keys {key.name} without their mesh")
+    for coll in (bpy.data.objects, bpy.data.meshes):
+        for idb in coll:
+            if idb.name.startswith(".DQ Skin result") or idb.get("dq_skin_result") is not None:
+                out.append(f"{idb.name}: a DQ Skin result in the file")
+    for mesh in bpy.data.meshes:
+        if mesh.users == 0 and not mesh.use_fake_user:
+            out.append(f"mesh {mesh.name} with no users")
+    return out
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_files_with_shape_keys_and_mesh_data_save_and_reopen_cleanly(dq_skin, tmp_path, method):
+    obj, arm, _ = animated_tube()
+    mesh_data_of_every_kind(obj)
+    add_dq_skin(obj, method)
+    tw = twin(obj, "Twin", share_mesh=False)
+    bpy.context.scene.frame_set(7)
+    assert_same(obj, tw)
+    path = tmp_path / "keys.blend"
+    name = obj.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))  # raises on the errors it reports
+    assert dangling() == []
+    obj, tw = bpy.data.objects[name], bpy.data.objects["Twin"]
+    check_frames([(obj, tw)], frames=(3, 11, 17))
+    # Saved again after playing (results made, companions parked): still clean.
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    assert dangling() == []
+
+
+def test_the_apply_command_writes_clean_files(dq_skin, tmp_path):
+    import subprocess
+    import sys
+
+    from conftest import ROOT, USER
+
+    obj, arm, _ = animated_tube()
+    mesh_data_of_every_kind(obj)
+    name = obj.name
+    src, out = tmp_path / "src.blend", tmp_path / "out.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(src), copy=True)
+    env = dict(__import__("os").environ, BLENDER_USER_RESOURCES=str(USER), PYTHONPATH=str(ROOT / "python"))
+    r = subprocess.run([sys.executable, "-m", "dqskin.blender", "apply", str(src), "--out", str(out)], capture_output=True, text=True, env=env, timeout=300)
+    assert r.returncode == 0, r.stderr
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    assert dangling() == []
+    assert dq_skin_mods(bpy.data.objects[name])
+
+
+# -- copied modifiers -------------------------------------------------------------------------
+
+def two_characters(assets):
+    """Two CesiumMen, each with its own armature playing the walk at its own pace."""
+    a, a_mod = import_character(assets / "CesiumMan.glb")
+    a_arm = a_mod.object
+    b = a.copy()
+    b.data = a.data.copy()
+    bpy.context.scene.collection.objects.link(b)
+    b_arm = a_arm.copy()
+    b_arm.data = a_arm.data.copy()
+    bpy.context.scene.collection.objects.link(b_arm)
+    b_arm.location.x += 1.5
+    b.parent = b_arm
+    b_arm.animation_data.action = a_arm.animation_data.action.copy()
+    for fc in getattr(b_arm.animation_data.action, "fcurves", []):
+        for k in fc.keyframe_points:
+            k.co.x *= 0.7
+    b.modifiers.clear()
+    return a, b, a_arm, b_arm
+
+
+def copy_by_script(src, dst, dq_skin):
+    """What a 'copy attributes' script does: a new modifier per modifier, every setting copied
+    (the Result reference too)."""
+    for m in src.modifiers:
+        new = dst.modifiers.new(m.name, m.type)
+        if m.type == "NODES":
+            new.node_group = m.node_group
+            for name in [i.name for i in m.node_group.interface.items_tree if getattr(i, "in_out", "") == "INPUT" and i.name != "Geometry"]:
+                dq_skin.nodes.put(new, name, dq_skin.nodes.get(m, name))
+            for name in ("Mask", "Blend Amount"):
+                dq_skin.nodes.put_attribute(new, name, dq_skin.nodes.get_attribute(m, name))
+        else:
+            for p in ("object", "use_vertex_groups", "use_bone_envelopes", "use_deform_preserve_volume", "show_viewport", "show_render", "vertex_group"):
+                setattr(new, p, getattr(m, p))
+        new.show_viewport, new.show_render = m.show_viewport, m.show_render
+
+
+@pytest.mark.parametrize("how", ["Copy Modifiers (Ctrl+L)", "Copy to Selected", "script"])
+def test_modifiers_copied_to_another_character(dq_skin, assets, how):
+    a, b, a_arm, b_arm = two_characters(assets)
+    add_dq_skin(a, "DUAL_QUATERNION")
+    bpy.context.scene.frame_set(5)
+    select_only(a, b)
+    if how.startswith("Copy Modifiers"):
+        with bpy.context.temp_override(object=a, active_object=a, selected_objects=[a, b], selected_editable_objects=[a, b]):
+            assert bpy.ops.object.make_links_data(type="MODIFIERS") == {"FINISHED"}
+    elif how == "Copy to Selected":
+        with bpy.context.temp_override(object=a, active_object=a, selected_objects=[a, b], selected_editable_objects=[a, b]):
+            for m in list(a.modifiers):
+                assert bpy.ops.object.modifier_copy_to_selected(modifier=m.name) == {"FINISHED"}
+    else:
+        copy_by_script(a, b, dq_skin)
+    assert [m.type for m in b.modifiers] == ["NODES", "ARMATURE"]
+    # The copy plays the other armature, as the Armature modifier would after retargeting.
+    dq_skin.nodes.put(dq_skin_mods(b)[0], "Armature", b_arm)
+    bpy.context.view_layer.update()
+    pairs = [(a, twin(a, share_mesh=False)), (b, twin(b, share_mesh=False))]
+    check_frames(pairs, frames=(2, 9, 15, 3))
+    for o in (a, b):
+        assert status(dq_skin, o).live
+    assert get_input(dq_skin_mods(a)[0], "Result") != get_input(dq_skin_mods(b)[0], "Result")
+
+
+def test_a_modifier_duplicated_within_its_stack_gets_its_own_result(dq_skin):
+    obj, arm, _ = animated_tube()
+    mod = add_dq_skin(obj, "LINEAR")
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.modifier_copy(modifier=mod.name) == {"FINISHED"}
+    mods = dq_skin_mods(obj)
+    assert len(mods) == 2
+    mods[1].show_viewport = mods[1].show_render = False  # the copy stays off: one deformation
+    bpy.context.view_layer.update()
+    tw = twin(obj, share_mesh=False)
+    check_frames([(obj, tw)], frames=(4, 12))
+    mods[1].show_viewport = True
+    mods[0].show_viewport = False
+    bpy.context.view_layer.update()
+    bpy.context.scene.frame_set(13)
+    assert status(dq_skin, obj, mods[1]).live
+    assert get_input(mods[0], "Result") != get_input(mods[1], "Result")
+
+
+# -- DQ Skin and its Armature modifier ---------------------------------------------------------
+
+@pytest.mark.parametrize("method", METHODS)
+def test_switching_dq_skin_off_shows_blenders_deformation(dq_skin, tmp_path, method):
+    obj, arm, _ = animated_tube()
+    mod = add_dq_skin(obj, method)
+    tw = twin(obj, share_mesh=False)
+    c = obj.modifiers["Armature"]
+    bpy.context.scene.frame_set(6)
+    # Off in the viewport: the Armature modifier deforms there with DQ Skin's settings.
+    mod.show_viewport = False
+    bpy.context.view_layer.update()
+    bpy.context.scene.frame_set(7)
+    assert c.show_viewport and c.use_vertex_groups and not c.show_render
+    assert c.use_deform_preserve_volume == (method != "LINEAR")
+    assert_same(obj, tw)
+    assert "Off in the viewport" in status(dq_skin, obj).message
+    # And the panel shows it.
+    assert any("Off in the viewport" in line for line in draw_panel(dq_skin, obj))
+    # Back on: DQ Skin deforms, its Armature modifier is parked again.
+    mod.show_viewport = True
+    bpy.context.view_layer.update()
+    bpy.context.scene.frame_set(8)
+    assert not c.show_viewport and status(dq_skin, obj).live
+    assert_same(obj, tw)
+
+
+def test_renders_follow_the_render_toggles(dq_skin, tmp_path):
+    obj, arm, _ = animated_tube()
+    mod = add_dq_skin(obj, "DUAL_QUATERNION")
+    c = obj.modifiers["Armature"]
+    mod.show_render = False
+    bpy.context.view_layer.update()
+    bpy.context.scene.frame_set(3)
+    assert c.show_render and not c.show_viewport  # Blender's deformation renders, DQ Skin shows
+    mod.show_render = True
+    bpy.context.view_layer.update()
+    bpy.context.scene.frame_set(4)
+    assert not c.show_render and not c.show_viewport
+
+
+# -- scripts that edit bones --------------------------------------------------------------------
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("edit", ["deform off", "B-Bone segments", "rest pose", "envelope"])
+def test_scripts_editing_bones_then_changing_frames(dq_skin, method, edit):
+    obj, arm, _ = animated_tube(bones=3)
+    add_dq_skin(obj, method)
+    tw = twin(obj, share_mesh=False)
+    scene = bpy.context.scene
+    check_frames([(obj, tw)], frames=(3, 5))
+    bone = arm.data.bones["Bone1"]
+    if edit == "deform off":
+        bone.use_deform = False
+    elif edit == "B-Bone segments":
+        bone.bbone_segments = 6
+    elif edit == "rest pose":
+        bpy.context.view_layer.objects.active = arm
+        select_only(arm)
+        bpy.ops.object.mode_set(mode="EDIT")
+        arm.data.edit_bones["Bone1"].roll = 0.6
+        bpy.ops.object.mode_set(mode="OBJECT")
+    else:
+        bone.envelope_distance = 0.3
+        bone.head_radius = 0.5
+        for o in (obj, tw):
+            m = o.modifiers["Armature"] if o is tw else None
+            if m is not None:
+                m.use_bone_envelopes = True
+        dq_skin.nodes.put(dq_skin_mods(obj)[0], "Use Envelopes", True)
+    scene.frame_set(9)  # no update in between
+    assert_same(obj, tw, f"after '{edit}'")
+    scene.frame_set(14)
+    assert_same(obj, tw, f"after '{edit}', next frame")
+
+
+# -- the mask group -----------------------------------------------------------------------------
+
+def test_removing_the_mask_group_gives_a_steady_result(dq_skin):
+    """The mask group removed as artists remove it (the Vertex Groups panel's minus button):
+    no mask any more, for DQ Skin as for the Armature modifier, on every evaluation. (Removing
+    it through `VertexGroups.remove` leaves Blender's own evaluated mesh with the old group until
+    something else updates the mesh.)"""
+    obj, arm, _ = animated_tube()
+    g = obj.vertex_groups.new(name="Mask")
+    g.add(list(range(0, 200)), 0.6, "REPLACE")
+    obj.modifiers["Armature"].vertex_group = "Mask"
+    add_dq_skin(obj, "DUAL_QUATERNION")
+    tw = twin(obj, share_mesh=False)
+    bpy.context.scene.frame_set(5)
+    assert_same(obj, tw)
+    for o in (obj, tw):
+        select_only(o)
+        o.vertex_groups.active_index = o.vertex_groups["Mask"].index
+        with bpy.context.temp_override(object=o, active_object=o):
+            assert bpy.ops.object.vertex_group_remove() == {"FINISHED"}
+    bpy.context.view_layer.update()
+    for f in (6, 6, 7, 7, 8):
+        bpy.context.scene.frame_set(f)
+        obj.update_tag()
+        bpy.context.view_layer.update()
+        assert_same(obj, tw, f"without the mask group, frame {f}")
+    a = evaluated_positions(obj)
+    obj.update_tag()
+    bpy.context.view_layer.update()
+    assert np.array_equal(a, evaluated_positions(obj))
+
+
+# -- Corrective Smooth ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("method", METHODS)
+def test_corrective_smooth_after_dq_skin(dq_skin, assets, method):
+    """Corrective Smooth turns the last float bits of its input into far larger differences on
+    this mesh (sliver triangles): a perturbation of 2e-7 of the diagonal, what two exact
+    skinnings differ by, moves its output by about 5e-5. DQ Skin's stack is measured against
+    the Armature stack and against that amplification of Blender's own."""
+    body, arm_mod = import_character(assets / "CesiumMan.glb")
+    body.modifiers.new("Corrective Smooth", "CORRECTIVE_SMOOTH")
+    ref = body.copy()
+    ref.data = body.data.copy()
+    bpy.context.scene.collection.objects.link(ref)
+    next(m for m in ref.modifiers if m.type == "ARMATURE").use_deform_preserve_volume = method != "LINEAR"
+    noisy = ref.copy()
+    noisy.data = body.data.copy()
+    bpy.context.scene.collection.objects.link(noisy)
+    group = bpy.data.node_groups.new("2e-7 noise", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    i, o = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+    sp, rnd = group.nodes.new("GeometryNodeSetPosition"), group.nodes.new("FunctionNodeRandomValue")
+    rnd.data_type = "FLOAT_VECTOR"
+    amp = 2e-7 * 1.75  # CesiumMan's diagonal is about 1.75
+    rnd.inputs["Min"].default_value, rnd.inputs["Max"].default_value = (-amp,) * 3, (amp,) * 3
+    group.links.new(i.outputs[0], sp.inputs["Geometry"])
+    group.links.new(rnd.outputs["Value"], sp.inputs["Offset"])
+    group.links.new(sp.outputs[0], o.inputs[0])
+    noisy.modifiers.new("noise", "NODES").node_group = group
+    noisy.modifiers.move(len(noisy.modifiers) - 1, 1)
+    add_dq_skin(body, method)
+    ours, blenders = [], []
+    for f in (5, 10, 20):
+        bpy.context.scene.frame_set(f)
+        r = evaluated_positions(ref)
+        ours.append(deviation(evaluated_positions(body), r))
+        blenders.append(deviation(evaluated_positions(noisy), r))
+    assert max(blenders) > REL_TOL  # the amplification is real
+    assert max(ours) <= 2 * max(blenders), (ours, blenders)
+    assert max(ours) <= 1e-4, ours
+    body.modifiers["Corrective Smooth"].show_viewport = ref.modifiers["Corrective Smooth"].show_viewport = False
+    bpy.context.scene.frame_set(11)
+    assert_same(body, ref)  # what reaches Corrective Smooth is exact
+
+
+# -- failures without tracebacks ------------------------------------------------------------------
+
+def test_fallbacks_print_no_traceback(dq_skin, capfd):
+    obj, arm, _ = animated_tube()
+    mod = add_dq_skin(obj, "DUAL_QUATERNION")
+    empty = bpy.data.objects.new("Not an armature", None)
+    bpy.context.scene.collection.objects.link(empty)
+    dq_skin.nodes.put(mod, "Armature", empty)
+    bpy.context.view_layer.update()
+    for f in (2, 3, 4):
+        bpy.context.scene.frame_set(f)
+    assert "not an armature" in status(dq_skin, obj).message
+    dq_skin.nodes.put(mod, "Armature", arm)
+    bpy.context.view_layer.update()
+    arm.pose.bones[0].scale = (float("nan"), 1.0, 1.0)
+    for f in (5, 6, 7):
+        bpy.context.scene.frame_set(f)
+    assert "NaN" in status(dq_skin, obj).message or "finite" in status(dq_skin, obj).message
+    assert any("instead" in line for line in draw_panel(dq_skin, obj))
+    out, err = capfd.readouterr()
+    assert "Traceback" not in out + err and "internal error" not in out + err, out + err
+    arm.pose.bones[0].scale = (1.0, 1.0, 1.0)
+    bpy.context.scene.frame_set(8)
+    assert status(dq_skin, obj).live
+
+
+# -- a Rigify character ---------------------------------------------------------------------------
+
+@pytest.fixture(scope="session")
+def rigify_folder(tmp_path_factory):
+    return tmp_path_factory.mktemp("rigify")
+
+
+@pytest.mark.parametrize("method", [*METHODS, "BLEND", "CENTERS"])
+def test_rigify_character_in_every_method(dq_skin, rigify_folder, method):
+    body, rig, _ = open_rigify_character(rigify_folder)
+    bones, bbones = bbone_counts(rig)
+    assert bones >= 100 and bbones >= 20, (bones, bbones)
+    ref = body.copy()
+    ref.data = body.data.copy()
+    bpy.context.scene.collection.objects.link(ref)
+    next(m for m in ref.modifiers if m.type == "ARMATURE").use_deform_preserve_volume = method != "LINEAR"
+    add_dq_skin(body, method)
+    st = status(dq_skin, body)
+    if method in METHODS:
+        check_frames([(body, ref)], frames=(1, 6, 12, 19, 24))
+        assert st.live
+    elif method == "BLEND":
+        # Blend with its defaults (amount and factor 1) is Dual Quaternion everywhere.
+        check_frames([(body, ref)], frames=(6, 19))
+        assert status(dq_skin, body).live
+    else:
+        # Optimized Centers takes vertex groups only: with B-Bones it says so, and Blender's
+        # Preserve Volume deforms meanwhile.
+        bpy.context.scene.frame_set(12)
+        st = status(dq_skin, body)
+        assert st.mode.value == "fallback" and "B-Bones" in st.message
+        assert_same(body, ref)
+
+
+def test_rigify_regenerate_with_dq_skin_characters_skins_once_when_it_settles(dq_skin, rigify_folder, monkeypatch):
+    body, rig, metarig = open_rigify_character(rigify_folder)
+    second = body.copy()
+    second.data = body.data.copy()
+    bpy.context.scene.collection.objects.link(second)
+    refs = []
+    for o in (body, second):
+        r = o.copy()
+        r.data = o.data.copy()
+        bpy.context.scene.collection.objects.link(r)
+        next(m for m in r.modifiers if m.type == "ARMATURE").use_deform_preserve_volume = True
+        refs.append(r)
+    for o in (body, second):
+        add_dq_skin(o, "DUAL_QUATERNION")
+    bpy.context.scene.frame_set(8)
+    skinned = []
+    real = dq_skin.modifier.dqskin.skin_many
+    monkeypatch.setattr(dq_skin.modifier.dqskin, "skin_many", lambda jobs: skinned.append(len(jobs)) or real(jobs))
+    select_only(metarig)
+    assert bpy.ops.pose.rigify_generate() == {"FINISHED"}  # (an override of the context would pin Rigify's)
+    assert sum(skinned) == 0, f"skinned {sum(skinned)} times while the rig was rebuilt"
+    bpy.context.scene.frame_set(9)
+    assert 1 <= sum(skinned) <= 2
+    check_frames(list(zip((body, second), refs)), frames=(9, 14, 20))

@@ -8,11 +8,19 @@ result the handlers (see `handlers`) keep current.
 
 import bpy
 
-from . import animation, bake, cli, compare, handlers, operators, rig, ui  # noqa: F401
+from . import animation, bake, blend_paint, cli, compare, handlers, operators, switch, ui
 # Found by the glTF exporter in every enabled add-on's module (see `exports`).
 from .exports import glTF2ExportUserExtension  # noqa: F401
 
-CLASSES = (*operators.CLASSES, *bake.CLASSES, *compare.CLASSES, *animation.CLASSES, *ui.CLASSES)
+CLASSES = (
+    *operators.CLASSES,
+    *switch.CLASSES,
+    *blend_paint.CLASSES,
+    *bake.CLASSES,
+    *compare.CLASSES,
+    *animation.CLASSES,
+    *ui.CLASSES,
+)
 
 
 def register():

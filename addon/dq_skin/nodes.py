@@ -50,14 +50,14 @@ WARNING = (
 
 # (name, socket type, default, min, max, description, hidden)
 SETTINGS = (
-    ("Armature", "NodeSocketObject", None, None, None, "The armature object that deforms the mesh", False),
-    ("Method", "NodeSocketMenu", "Dual Quaternion", None, None, "Linear, Dual Quaternion, a per-vertex blend of both, or Optimized Centers of Rotation (no candy wrapper, no bulge)", False),
-    ("Blend Amount", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend: how much Dual Quaternion per vertex (pick a vertex group with the attribute toggle)", False),
-    ("Blend Factor", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend: overall factor multiplied with the amount", False),
-    ("Use Vertex Groups", "NodeSocketBool", True, None, None, "Bind bones to vertex groups of the same name", False),
-    ("Use Envelopes", "NodeSocketBool", False, None, None, "Bind bones to vertices inside their envelopes", False),
-    ("Mask", "NodeSocketFloat", 1.0, 0.0, 1.0, "Strength per vertex (pick a vertex group with the attribute toggle), as the Armature modifier's vertex group", False),
-    ("Invert Mask", "NodeSocketBool", False, None, None, "Invert the mask", False),
+    ("Armature", "NodeSocketObject", None, None, None, "The armature whose bones deform this mesh (as the Armature modifier's Object)", False),
+    ("Method", "NodeSocketMenu", "Dual Quaternion", None, None, "How bones bend the mesh: Linear (Preserve Volume off), Dual Quaternion (Preserve Volume on: no candy wrapper when twisting), Blend (a painted mix of both) or Optimized Centers (no candy wrapper and less bulging at bent joints)", False),
+    ("Blend Amount", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend method: how much Dual Quaternion each vertex gets, 0 = Linear, 1 = Dual Quaternion (pick a vertex group with the attribute toggle, or paint one from the DQ Skin panel)", False),
+    ("Blend Factor", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend method: scales the Blend Amount everywhere (0 = all Linear)", False),
+    ("Use Vertex Groups", "NodeSocketBool", True, None, None, "Vertex Groups: bones deform the vertices of the vertex groups named after them (as the Armature modifier's Vertex Groups)", False),
+    ("Use Envelopes", "NodeSocketBool", False, None, None, "Bone Envelopes: bones deform the vertices inside their envelopes (as the Armature modifier's Bone Envelopes)", False),
+    ("Mask", "NodeSocketFloat", 1.0, 0.0, 1.0, "How strongly the armature deforms each vertex (pick a vertex group with the attribute toggle), as the Armature modifier's Vertex Group", False),
+    ("Invert Mask", "NodeSocketBool", False, None, None, "Deform where the mask group is 0 instead of 1 (as the Armature modifier's Invert)", False),
     ("Result", "NodeSocketObject", None, None, None, "Internal: the skinned result DQ Skin writes (never saved)", True),
     ("Capture", "NodeSocketBool", False, None, None, "Internal: store the incoming positions for the add-on", True),
     ("Capture Name", "NodeSocketString", "", None, None, "Internal: the attribute the incoming positions are stored in", True),
@@ -193,6 +193,11 @@ def upgrade(group) -> None:
     if group.library is not None:
         return
     add_missing_methods(group)
+    descriptions = {name: description for name, *_rest, description, _hidden in SETTINGS}
+    for item in group.interface.items_tree:
+        if getattr(item, "item_type", "") == "SOCKET" and item.in_out == "INPUT" and item.name in descriptions:
+            if item.description != descriptions[item.name]:
+                item.description = descriptions[item.name]
     warning = next((n for n in group.nodes if n.bl_idname == "GeometryNodeWarning"), None)
     if warning is not None and warning.inputs["Message"].default_value != WARNING:
         warning.inputs["Message"].default_value = WARNING

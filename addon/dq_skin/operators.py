@@ -43,16 +43,18 @@ class ActiveMeshOperator(bpy.types.Operator):
         return obj is not None and obj.type == "MESH"
 
 
-def add(obj, source, method: str = "AUTO"):
+def add(obj, source, method: str = "AUTO", made: dict | None = None):
     """Adds a DQ Skin modifier configured from the Armature modifier `source`, right before it,
-    and keeps `source` as its companion. Returns the new modifier."""
+    and keeps `source` as its companion. `made`: what `dq_skin_add` made for it (an Armature
+    modifier it created, a parent type it changed), undone when DQ Skin is removed. Returns the
+    new modifier."""
     group = nodes.ensure_group()
     index = list(obj.modifiers).index(source)
     mod = obj.modifiers.new("DQ Skin", "NODES")
     mod.node_group = group
     if method == "AUTO":
         method = "DUAL_QUATERNION" if source.use_deform_preserve_volume else "LINEAR"
-    nodes.put_companion(mod, {"name": source.name, "original": companion.snapshot(source)})
+    nodes.put_companion(mod, {"name": source.name, "original": companion.snapshot(source), **(made or {})})
     nodes.put(mod, "Armature", source.object)
     nodes.put_method(mod, MENU_NAME[method])
     nodes.put(mod, "Use Vertex Groups", source.use_vertex_groups)
@@ -69,10 +71,27 @@ def add(obj, source, method: str = "AUTO"):
     return mod
 
 
+def armature_modifier_from_parent(obj):
+    """For a mesh parented to an armature without an Armature modifier: one set up as Ctrl+P
+    With Automatic Weights sets it up (the parent's armature, vertex groups), at the top of the
+    stack, and what was made (to undo on removal). A mesh parented with the legacy Armature
+    parent type is deformed by its parent already: it becomes an object parent, so that the
+    new modifier deforms it instead (same transform)."""
+    made = {"created": True}
+    if obj.parent_type == "ARMATURE":
+        made["parent_type"] = "ARMATURE"
+        obj.parent_type = "OBJECT"
+    arm_mod = obj.modifiers.new("Armature", "ARMATURE")
+    arm_mod.object = obj.parent
+    obj.modifiers.move(len(obj.modifiers) - 1, 0)
+    return arm_mod, made
+
+
 class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
-    """Add a DQ Skin modifier configured from the Armature modifier, in its place; the Armature
-    modifier stays right after it, switched off while DQ Skin deforms, for Blender without DQ
-    Skin (render farms) and linked data"""
+    """Deform the mesh with DQ Skin in place of its Armature modifier (or with the armature it is
+    parented to): the same armature, vertex groups and mask, plus Dual Quaternion, a painted
+    Blend of both, or Optimized Centers. The Armature modifier stays right after it, switched
+    off while DQ Skin deforms, so the file renders the same without DQ Skin"""
 
     bl_idname = "object.dq_skin_add"
     bl_label = "Add DQ Skin"
@@ -122,12 +141,19 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
             return f"{obj.name} is linked from a library: make a Library Override first"
         taken = {nodes.get_companion(m).get("name") for m in modifier.dq_skin_modifiers(obj)}
         armature_mods = [m for m in obj.modifiers if m.type == "ARMATURE" and m.name not in taken]
+        made = None
         if not armature_mods:
-            return f"{obj.name} has no Armature modifier to replace"
-        source = next((m for m in armature_mods if m.show_viewport or m.show_render), armature_mods[0])
+            if obj.parent is None or obj.parent.type != "ARMATURE":
+                return (
+                    f"{obj.name} has no Armature modifier and is not parented to an armature: add an "
+                    "Armature modifier or parent it to an armature (Ctrl+P) first"
+                )
+            source, made = armature_modifier_from_parent(obj)
+        else:
+            source = next((m for m in armature_mods if m.show_viewport or m.show_render), armature_mods[0])
         if source.object is None:
             return f"The Armature modifier {source.name!r} has no armature object"
-        add(obj, source, self.method)
+        add(obj, source, self.method, made)
         return ""
 
 
@@ -146,10 +172,12 @@ def remove_modifier(obj, mod, applied: bool = False) -> None:
     if attr is not None:
         obj.data.attributes.remove(attr)
     if c is not None:
-        if applied:
+        if applied or info.get("created"):
             obj.modifiers.remove(c)
         else:
             companion.restore(c, info.get("original", {}))
+    if info.get("parent_type") and obj.parent is not None and not applied:
+        obj.parent_type = info["parent_type"]
     for r in {r.session_uid: r for r in ours}.values():
         results.remove(r)
     rec = REGISTRY.records.get(obj.session_uid)

@@ -161,8 +161,14 @@ class Registry:
             attr = obj.data.attributes.get(info.capture)
             if attr is not None:
                 obj.data.attributes.remove(attr)
-        elif c is not None:
-            companion.restore(c, info.companion.get("original", {}))
+        else:
+            if c is not None:
+                if info.companion.get("created"):
+                    obj.modifiers.remove(c)  # dq_skin_add made it: nothing to put back
+                else:
+                    companion.restore(c, info.companion.get("original", {}))
+            if info.companion.get("parent_type") and obj.parent is not None:
+                obj.parent_type = info.companion["parent_type"]
         if st is not None and st.output.result is not None:
             try:
                 results.remove(st.output.result)

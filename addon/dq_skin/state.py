@@ -41,6 +41,7 @@ class Status:
     message: str = ""  # the reason (handed over, off, linked) or the error (fallback)
     instead: str = ""  # what deforms the mesh instead (fallback)
     notes: tuple = ()  # what the panel points out about the stack while DQ Skin deforms
+    compared: str = ""  # after the A/B switch: how far DQ Skin's and Blender's deformations are apart
     source: str = ""  # what reaches the modifier: mesh, chain or capture
     method: str = ""  # the method label of the last result
     bones: int = 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import centers, handlers, modifier, nodes
+from . import blend_paint, centers, handlers, modifier, nodes, settings
 from .state import Mode
 
 
@@ -43,10 +43,42 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
             for line, icon in status_lines(obj, mod):
                 box.label(text=line, icon=icon)
             if obj.library is None:
-                op = box.operator("object.dq_skin_remove", icon="X")
-                op.modifier = mod.name
+                _tools(box, obj, mod)
         if handlers.last_error:
             layout.label(text=f"Internal error (please report it): {handlers.last_error}", icon="ERROR")
+
+
+def _tools(box, obj, mod) -> None:
+    """The A/B switch, painting the blend, and what else acts on one DQ Skin."""
+    row = box.row()
+    showing_blender = not mod.show_viewport
+    op = row.operator(
+        "object.dq_skin_show_blender",
+        text="Show DQ Skin" if showing_blender else "Show Blender's Deformation",
+        icon="MOD_ARMATURE" if showing_blender else "ARMATURE_DATA",
+        depress=showing_blender,
+    )
+    op.modifier = mod.name
+    status = modifier.find_status(obj, mod)
+    if status is not None and status.compared:
+        box.label(text=status.compared, icon="DRIVER_DISTANCE")
+    try:
+        is_blend = settings.read(mod).method.kernel == "blend"
+    except Exception:  # a damaged modifier should not break the panel
+        is_blend = False
+    if is_blend:
+        box.label(text=blend_paint.describe(obj, mod), icon="GROUP_VERTEX")
+        box.operator("object.dq_skin_paint_blend", icon="BRUSH_DATA").modifier = mod.name
+    row = box.row()
+    row.operator("object.dq_skin_apply_as_shape_key", text="Apply as Shape Key", icon="SHAPEKEY_DATA").modifier = mod.name
+    row.operator("object.dq_skin_bake", text="Bake to Cache", icon="FILE_CACHE")
+    box.operator("object.dq_skin_remove", icon="X").modifier = mod.name
+
+
+def draw_deform_entry(self, context):
+    """Add Modifier > Deform > DQ Skin, beside Blender's Armature modifier."""
+    if context.object is not None and context.object.type == "MESH":
+        self.layout.operator("object.dq_skin_add", text="DQ Skin", icon="MOD_ARMATURE")
 
 
 ICONS = {Mode.LIVE: "INFO", Mode.HANDED_OVER: "INFO", Mode.OFF: "INFO", Mode.LINKED: "INFO", Mode.FALLBACK: "ERROR", Mode.NEW: "TIME"}
@@ -89,21 +121,27 @@ def draw_menu_entry(self, context):
     self.layout.menu(VIEW3D_MT_dq_skin_animation.bl_idname)
 
 
-MENUS = ("VIEW3D_MT_object_animation", "VIEW3D_MT_pose_motion")
+# (menu, draw function): the animation tools in the Object and Pose menus; DQ Skin in the Add
+# Modifier menu's Deform column (the Properties editor's and the 3D Viewport's Object > Modifiers).
+MENUS = (
+    ("VIEW3D_MT_object_animation", draw_menu_entry),
+    ("VIEW3D_MT_pose_motion", draw_menu_entry),
+    ("OBJECT_MT_modifier_add_deform", draw_deform_entry),
+)
 
 
 def register_menus():
-    for name in MENUS:
+    for name, fn in MENUS:
         menu = getattr(bpy.types, name, None)
         if menu is not None:
-            menu.append(draw_menu_entry)
+            menu.append(fn)
 
 
 def unregister_menus():
-    for name in MENUS:
+    for name, fn in MENUS:
         menu = getattr(bpy.types, name, None)
         if menu is not None:
-            menu.remove(draw_menu_entry)
+            menu.remove(fn)
 
 
 CLASSES = (OBJECT_PT_dq_skin, VIEW3D_MT_dq_skin_animation)

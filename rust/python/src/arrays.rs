@@ -39,7 +39,7 @@ fn check_shape(name: &str, got: &[usize], shape: Shape<'_>, names: &[&str]) -> P
     )))
 }
 
-fn as_numpy<'a, 'py>(obj: &'a Bound<'py, PyAny>, name: &str, want: &str) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
+pub fn as_numpy<'a, 'py>(obj: &'a Bound<'py, PyAny>, name: &str, want: &str) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
     obj.cast::<PyUntypedArray>().map_err(|_| {
         let ty = obj.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "?".into());
         PyTypeError::new_err(format!("{name} must be a numpy array of {want}, got {ty}"))
@@ -129,6 +129,15 @@ pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<u32>> {
             })
         })
         .collect()
+}
+
+/// An integer array of the given shape, in any integer dtype, flattened (C order) to `u32` with
+/// range checks.
+pub fn index_array(obj: &Bound<'_, PyAny>, name: &str, shape: Shape<'_>, names: &[&str]) -> PyResult<Vec<u32>> {
+    let arr = as_numpy(obj, name, "integers")?;
+    check_shape(name, arr.shape(), shape, names)?;
+    let flat = obj.py().import("numpy")?.call_method1("ravel", (obj,))?;
+    indices(&flat, name)
 }
 
 /// A small input (a transform, a few weights): anything numpy can turn into float32, copied.

@@ -46,40 +46,12 @@ impl PyInfluences {
             let bone_count = args::int(bone_count, "bone_count", 0, u32::MAX as i64)? as usize;
             let w = arrays::readonly::<f32>(weights, "weights", &[None, None], &["V", "K"])?;
             let (v, k) = (w.shape()[0], w.shape()[1]);
-            if k > dqskin_core::MAX_INFLUENCES_PER_VERTEX {
-                return Err(PyValueError::new_err(format!(
-                    "weights has {k} influences per vertex; at most {} are supported",
-                    dqskin_core::MAX_INFLUENCES_PER_VERTEX
-                )));
+            let shape = arrays::as_numpy(bones, "bones", "integers")?.shape();
+            if shape != [v, k] {
+                return Err(PyValueError::new_err(format!("bones must have the same shape as weights ({v}, {k}), got {shape:?}")));
             }
-            let b_arr = bones.cast::<numpy::PyUntypedArray>().map_err(|_| {
-                let ty = bones.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-                PyTypeError::new_err(format!("bones must be a numpy array of integers, got {ty}"))
-            })?;
-            if b_arr.shape() != [v, k] {
-                return Err(PyValueError::new_err(format!(
-                    "bones must have the same shape as weights ({v}, {k}), got {:?}",
-                    b_arr.shape()
-                )));
-            }
-            let np = bones.py().import("numpy")?;
-            let flat = np.call_method1("ravel", (bones,))?;
-            let b = arrays::indices(&flat, "bones")?;
-            let wv = w.as_slice()?;
-            let mut offsets = Vec::with_capacity(v + 1);
-            let (mut ob, mut ow) = (Vec::new(), Vec::new());
-            offsets.push(0u32);
-            for row in 0..v {
-                for c in 0..k {
-                    let i = row * k + c;
-                    if wv[i] != 0.0 {
-                        ob.push(b[i]);
-                        ow.push(wv[i]);
-                    }
-                }
-                offsets.push(u32::try_from(ob.len()).map_err(|_| PyValueError::new_err("weights: too many influences"))?);
-            }
-            Influences::from_csr(&offsets, &ob, &ow, bone_count).map(Self).map_err(skin_error)
+            let b = arrays::index_array(bones, "bones", &[Some(v), Some(k)], &[])?;
+            Influences::from_dense(&b, w.as_slice()?, v, k, bone_count).map(Self).map_err(skin_error)
         })
     }
 
@@ -343,18 +315,9 @@ fn centers_arg<'py>(centers: Option<&Bound<'py, PyAny>>, kind: u8, v: usize) -> 
     }
 }
 
-/// ``(T, 3)`` integer triangles as vertex indices (range checked by the caller).
+/// ``(T, 3)`` integer triangles as vertex indices (range checked by the core).
 fn triangle_indices(triangles: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
-    let np = triangles.py().import("numpy")?;
-    let tri = triangles.cast::<numpy::PyUntypedArray>().map_err(|_| {
-        let ty = triangles.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-        PyTypeError::new_err(format!("triangles must be a numpy array of integers, got {ty}"))
-    })?;
-    let shape: Vec<usize> = tri.shape().to_vec();
-    if shape.len() != 2 || shape[1] != 3 {
-        return Err(PyValueError::new_err(format!("triangles must have shape (T, 3), got {shape:?}")));
-    }
-    let flat = arrays::indices(&np.call_method1("ravel", (triangles,))?, "triangles")?;
+    let flat = arrays::index_array(triangles, "triangles", &[None, Some(3)], &["T"])?;
     Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }
 
@@ -591,15 +554,7 @@ fn mesh_volume(positions: &Bound<'_, PyAny>, triangles: &Bound<'_, PyAny>) -> Py
     guard(|| {
         let pos = arrays::readonly::<f32>(positions, "positions", &[None, Some(3)], &["V"])?;
         let tris = triangle_indices(triangles)?;
-        let n = pos.shape()[0];
-        if let Some((t, &v)) = tris.iter().enumerate().find_map(|(t, tri)| tri.iter().find(|&&v| v as usize >= n).map(|v| (t, v))) {
-            let k = tris[t].iter().position(|&x| x == v).unwrap_or(0);
-            return Err(PyValueError::new_err(format!(
-                "triangles contains vertex index {v} (flat index {}) but there are {n} positions",
-                3 * t + k
-            )));
-        }
-        Ok(dqskin_core::rigs::mesh_volume(as_points(pos.as_slice()?), &tris))
+        dqskin_core::rigs::mesh_volume(as_points(pos.as_slice()?), &tris).map_err(skin_error)
     })
 }
 

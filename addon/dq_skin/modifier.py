@@ -171,7 +171,7 @@ class Plan:
     result: object
     mode: int
     signature: tuple
-    job: tuple  # the arguments of `dqskin.skin_many`
+    job: dqskin.SkinJob
     start: float
     quick: bool = False  # steady playback: only the positions change
 
@@ -431,21 +431,21 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
     return Plan(obj, mod, st, s, result, mode, signature, job, start)
 
 
-def _job(st: State, s: Settings, positions, influences, deform, rest, premat, postmat) -> tuple:
-    """The arguments of `dqskin.skin_many` for one modifier: its settings, kept data and output."""
-    return (
+def _job(st: State, s: Settings, positions, influences, deform, rest, premat, postmat) -> dqskin.SkinJob:
+    """The `dqskin.SkinJob` of one modifier: its settings, kept data and output."""
+    return dqskin.SkinJob(
         positions,
         influences,
         np.ascontiguousarray(deform),
         rest,
-        s.method,
-        premat,
-        postmat,
-        st.binding.mask,
-        st.blend if s.method == "blend" else None,
-        s.blend_factor,
-        st.out,
-        st.centers if s.method == "centers_of_rotation" else None,
+        method=s.method,
+        premat=premat,
+        postmat=postmat,
+        mask=st.binding.mask,
+        blend=st.blend if s.method == "blend" else None,
+        blend_factor=s.blend_factor,
+        out=st.out,
+        centers=st.centers if s.method == "centers_of_rotation" else None,
     )
 
 

@@ -298,6 +298,7 @@ def test_bad_kernel_input_leaves_out_untouched():
         assert np.all(out == 7.25)
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_a_long_precompute():
     positions, tris, influences, _ = tube(rings=700, segments=48, bones=30, seed=2, length=30.0)
     start = time.perf_counter()

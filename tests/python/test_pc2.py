@@ -155,6 +155,7 @@ with pc2.Writer(sys.argv[1], 1000, 1.0) as w:
     [(signal.SIGTERM, "default-action"), (signal.SIGINT, "default-action"), (signal.SIGINT, "KeyboardInterrupt")],
     ids=["SIGTERM", "SIGINT-default-action", "SIGINT-KeyboardInterrupt"],
 )
+@pytest.mark.slow
 def test_a_writer_signalled_mid_write_leaves_nothing(tmp_path, signum, handler):
     out = tmp_path / "cache.pc2"
     p = subprocess.Popen([sys.executable, "-c", WRITING, str(out), handler], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -190,6 +191,7 @@ print(pc2.read_header(sys.argv[1]).samples)
 """
 
 
+@pytest.mark.slow
 def test_a_previous_handler_that_returns_lets_the_write_finish_and_is_restored(tmp_path):
     out = tmp_path / "cache.pc2"
     run = subprocess.run([sys.executable, "-c", CHAINED, str(out)], capture_output=True, text=True, timeout=60)

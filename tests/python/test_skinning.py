@@ -546,6 +546,7 @@ def test_out_is_filled_in_place_and_returned(method):
     np.testing.assert_array_equal(out, expected)
 
 
+@pytest.mark.slow
 def test_results_do_not_depend_on_the_thread_count():
     cyl = dqskin.TwistCylinder(rings=200, segments=64, blend_zone=0.3)
     deform = cyl.twist(2.0)
@@ -589,6 +590,7 @@ BINS = 10
 MIN_COVERAGE = 0.2
 
 
+@pytest.mark.slow
 def test_gil_is_released_during_skin():
     rng = np.random.default_rng(5)
     bones = 16

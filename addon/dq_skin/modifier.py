@@ -88,7 +88,7 @@ class Plan:
     result: object
     kind: int
     key: FrameKey
-    job: tuple  # the arguments of `dqskin.skin_many`
+    job: object  # dqskin.SkinJob
     deforms: tuple  # (viewport, render): where DQ Skin deforms (the companion is off there)
     start: float
     quick: bool = False  # steady playback: only the positions change
@@ -334,7 +334,10 @@ def _quick(obj, mod, st: ModifierState, ctx: Context):
         return False
     premat, postmat = out.spaces
     key = FrameKey(old.settings, old.source, raw, old.spaces, old.result, old.mesh_version)
-    job = _job(st, s, data.positions, binding.influences, deform, binding.rest, premat, postmat)
+    try:
+        job = _job(st, s, data.positions, binding.influences, deform, binding.rest, premat, postmat)
+    except SkinError:
+        return False  # the full path says what is wrong
     deforms = st.companion.deforms or (True, True)
     return Plan(obj, mod, st, s, out.result, out.kind, key, job, deforms, time.perf_counter(), quick=True, render=ctx.render)
 
@@ -343,17 +346,7 @@ def run_batch(plans: list) -> None:
     """Skins every queued plan in one call (in parallel across objects) and writes the results."""
     if not plans:
         return
-    try:
-        errors = dqskin.skin_many([p.job for p in plans])
-    except (TypeError, ValueError):
-        # One job's inputs are bad (e.g. a bone scaled to NaN): skin them one by one, so that
-        # only that modifier falls back, with its own message.
-        errors = []
-        for p in plans:
-            try:
-                errors.append(dqskin.skin_many([p.job])[0])
-            except (TypeError, ValueError) as e:
-                errors.append(str(e).removeprefix("jobs[0]: "))
+    errors = dqskin.skin_many([p.job for p in plans])  # jobs were checked when built (`_job`)
     for plan, error in zip(plans, errors):
         try:
             if error is not None:
@@ -471,23 +464,27 @@ def _binding(obj, arm, st: ModifierState, s: settings.Settings, data, ctx: Conte
     return cache.binding
 
 
-def _job(st: ModifierState, s: settings.Settings, positions, influences, deform, rest, premat, postmat) -> tuple:
-    """The arguments of `dqskin.skin_many` for one modifier: its settings, kept data and output."""
+def _job(st: ModifierState, s: settings.Settings, positions, influences, deform, rest, premat, postmat) -> dqskin.SkinJob:
+    """The `dqskin.SkinJob` of one modifier: its settings, kept data and output (checked here:
+    a bad input, a bone scaled to NaN say, is this modifier's error, shown on its panel)."""
     kernel = s.method.kernel
-    return (
-        positions,
-        influences,
-        np.ascontiguousarray(deform),
-        rest,
-        kernel,
-        premat,
-        postmat,
-        st.binding.binding.mask,
-        st.binding.blend if kernel == "blend" else None,
-        s.blend_factor,
-        st.output.buffer,
-        st.binding.centers if kernel == "centers_of_rotation" else None,
-    )
+    try:
+        return dqskin.SkinJob(
+            positions,
+            influences,
+            np.ascontiguousarray(deform),
+            rest,
+            method=kernel,
+            premat=premat,
+            postmat=postmat,
+            mask=st.binding.binding.mask,
+            blend=st.binding.blend if kernel == "blend" else None,
+            blend_factor=s.blend_factor,
+            out=st.output.buffer,
+            centers=st.binding.centers if kernel == "centers_of_rotation" else None,
+        )
+    except (TypeError, ValueError) as e:
+        raise SkinError(str(e)) from None
 
 
 def _centers(obj, st: ModifierState, data, binding, ctx: Context) -> None:

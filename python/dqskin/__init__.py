@@ -11,10 +11,12 @@ Conventions
 - Matrices are row-major 4x4 with the translation in the last column, as numpy and Blender's
   ``mathutils`` write them.
 
-Skinning matches Blender's Armature modifier: ``method='linear'`` is Preserve Volume off,
-``method='dual_quaternion'`` is Preserve Volume on, and ``method='blend'`` mixes the two per vertex.
-``method='centers_of_rotation'`` skins with optimized centers of rotation (Le & Hodgins 2016),
-precomputed once per mesh by :func:`centers_of_rotation`.
+Skinning matches Blender's Armature modifier: ``Method.LINEAR`` (``method='linear'``) is Preserve
+Volume off, ``Method.DUAL_QUATERNION`` (``'dual_quaternion'``) is Preserve Volume on, and
+``Method.BLEND`` (``'blend'``) mixes the two per vertex. ``Method.CENTERS_OF_ROTATION``
+(``'centers_of_rotation'``) skins with optimized centers of rotation (Le & Hodgins 2016),
+precomputed once per mesh by :func:`centers_of_rotation`. Many meshes are skinned in one call by
+:func:`skin_many` from a :class:`SkinJob` each.
 """
 
 from ._dqskin import (
@@ -29,7 +31,9 @@ from ._dqskin import (
     Cancelled,
     DualQuat,
     Influences,
+    Method,
     Screw,
+    SkinJob,
     TwistCylinder,
     __version__,
     armature_spaces,
@@ -69,7 +73,9 @@ __all__ = [
     "Cancelled",
     "DualQuat",
     "Influences",
+    "Method",
     "Screw",
+    "SkinJob",
     "TwistCylinder",
     "__version__",
     "armature_spaces",

@@ -160,16 +160,36 @@ class Influences:
     def weights(self) -> F32Array: ...
     def __len__(self) -> int: ...
 
+@final
+class Method:
+    """A skinning method; ``Method(value)`` looks one up from its name in :func:`skin`
+    (``'linear'``, ``'dual_quaternion'``, ``'blend'``, ``'centers_of_rotation'``, any case, or
+    ``'lbs'``, ``'dqs'``, ``'cor'``) or from its label."""
+
+    LINEAR: Method  # Blender's Preserve Volume off
+    DUAL_QUATERNION: Method  # Preserve Volume on
+    BLEND: Method  # a per-vertex mix of the two
+    CENTERS_OF_ROTATION: Method  # Le & Hodgins 2016 ("Optimized Centers" in Blender)
+    def __init__(self, value: Method | str) -> None: ...
+    @property
+    def label(self) -> str:
+        """The name in Blender's menu: "Linear", "Dual Quaternion", "Blend", "Optimized Centers"."""
+    def __eq__(self, other: object) -> bool: ...
+    def __hash__(self) -> int: ...
+
+MethodName = Method | Literal[
+    "linear", "dual_quaternion", "blend", "centers_of_rotation",
+    "LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS_OF_ROTATION", "lbs", "dqs", "cor",
+    "Linear", "Dual Quaternion", "Blend", "Optimized Centers",
+]
+
 def skin(
     positions: F32Array,
     influences: Influences,
     deform: F32Array,
     rest: F32Array | None = None,
     *,
-    method: Literal[
-        "linear", "dual_quaternion", "blend", "centers_of_rotation",
-        "LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS_OF_ROTATION", "lbs", "dqs", "cor",
-    ] = "dual_quaternion",
+    method: MethodName = Method.DUAL_QUATERNION,
     blend: F32Array | None = None,
     blend_factor: float = 1.0,
     premat: ArrayLike | None = None,
@@ -179,8 +199,56 @@ def skin(
     centers: F32Array | None = None,
 ) -> F32Array:
     """Skins ``(V, 3)`` positions exactly as Blender's Armature modifier (or with centers of
-    rotation, ``method='centers_of_rotation'`` with ``centers`` from :func:`centers_of_rotation`);
-    returns ``out``."""
+    rotation, ``Method.CENTERS_OF_ROTATION`` with ``centers`` from :func:`centers_of_rotation`);
+    returns ``out``. ``method`` is a :class:`Method` or its name (strings are looked up as
+    ``Method(value)``)."""
+
+@final
+class SkinJob:
+    """One mesh's skinning for :func:`skin_many`: the arguments of :func:`skin`, checked when
+    built (``out`` allocated if not given); arrays are kept by reference and read when the job
+    runs. ``positions``, ``deform``, ``premat`` and ``postmat`` can be replaced per frame."""
+
+    def __init__(
+        self,
+        positions: F32Array,
+        influences: Influences,
+        deform: F32Array,
+        rest: F32Array | None = None,
+        *,
+        method: MethodName = Method.DUAL_QUATERNION,
+        blend: F32Array | None = None,
+        blend_factor: float = 1.0,
+        premat: ArrayLike | None = None,
+        postmat: ArrayLike | None = None,
+        mask: F32Array | None = None,
+        out: F32Array | None = None,
+        centers: F32Array | None = None,
+    ) -> None: ...
+    positions: F32Array
+    deform: F32Array
+    premat: ArrayLike | None
+    postmat: ArrayLike | None
+    @property
+    def method(self) -> Method: ...
+    @property
+    def influences(self) -> Influences: ...
+    @property
+    def rest(self) -> F32Array | None: ...
+    @property
+    def mask(self) -> F32Array | None: ...
+    @property
+    def blend(self) -> F32Array | None: ...
+    @property
+    def blend_factor(self) -> float: ...
+    @property
+    def centers(self) -> F32Array | None: ...
+    @property
+    def out(self) -> F32Array: ...
+
+def skin_many(jobs: Sequence[SkinJob]) -> list[str | None]:
+    """Runs the jobs at once, in parallel across meshes; returns None or the error message per
+    job (a failed job's ``out`` is untouched)."""
 
 @overload
 def centers_of_rotation(
@@ -317,19 +385,3 @@ class _MeshMemory:
     def deform_verts(self, mesh: object) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], F32Array] | None:
         """The vertex-group weights of a ``bpy.types.Mesh`` in CSR form (None without any)."""
 
-def skin_many(
-    jobs: list[
-        tuple[
-            F32Array, Influences, F32Array, F32Array | None, str, ArrayLike | None, ArrayLike | None,
-            F32Array | None, F32Array | None, float, F32Array,
-        ]
-        | tuple[
-            F32Array, Influences, F32Array, F32Array | None, str, ArrayLike | None, ArrayLike | None,
-            F32Array | None, F32Array | None, float, F32Array, F32Array | None,
-        ]
-    ],
-) -> list[str | None]:
-    """Many :func:`skin` calls at once, in parallel across meshes. Each job is ``(positions,
-    influences, deform, rest, method, premat, postmat, mask, blend, blend_factor, out)``,
-    optionally followed by ``centers`` for ``method='centers_of_rotation'``; returns None or the
-    error message per job."""

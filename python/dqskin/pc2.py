@@ -6,8 +6,9 @@ samples, then ``samples × points × 3`` float32 coordinates.
 
 Files are written to a temporary file beside the target and renamed into place when complete,
 so a failed or interrupted bake never leaves a partial cache under the final name. Temporary
-files are named ``.NAME.dqskin-PID.tmp``: one left by a killed process (SIGKILL cannot be
-caught) is removed by the next write of the same file.
+files are named ``.NAME.dqskin-PID.tmp``. Ctrl-C (SIGINT) and SIGTERM remove them too (see
+`Writer`); one left by a killed process (SIGKILL cannot be caught) is removed by the next write
+of the same file.
 
 Reading is defensive: every count is checked against the file's length before anything is
 allocated or looped over, and the frame numbers must be finite (the sample rate positive).
@@ -17,7 +18,9 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import struct
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -75,6 +78,16 @@ class Writer:
     """Streams samples into a PC2 file: ``with Writer(path, points, start) as w: w.add(xyz)``.
 
     The file appears under ``path`` only when the ``with`` block ends without an exception.
+
+    Signals: while a writer opened in the main thread is open, it handles SIGINT and SIGTERM
+    (Python delivers signals to the main thread only) and passes each on to the handler that
+    was there before. If that handler raises (``KeyboardInterrupt``, a batch command's own
+    interruption), the temporary file is removed and the exception goes on; if it returns, the
+    write goes on too; if there was none (the default action: the process ends, as SIGTERM
+    does in plain Python), the temporary file is removed and the process then ends by the same
+    signal. The previous handlers are restored when the last open writer closes. Ignored
+    signals and handlers installed outside Python (``signal.getsignal`` gives None) are left
+    alone; such a process leaves its temporary to the next write of the same file.
     """
 
     def __init__(self, path, points: int, start_frame: float, sample_rate: float = 1.0):
@@ -88,19 +101,27 @@ class Writer:
         self.samples = 0
         self._file = None
         self._tmp = None
+        self._interrupted = None  # the signal that discarded the temporary
 
     def __enter__(self) -> "Writer":
         self.path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path)
         self._tmp = temporary_path(self.path)
-        self._file = open(self._tmp, "xb")
-        self._file.write(HEADER.pack(MAGIC, 1, self.points, *self.header, 0))
+        _watch(self)
+        try:
+            self._file = open(self._tmp, "xb")
+            self._file.write(HEADER.pack(MAGIC, 1, self.points, *self.header, 0))
+        except BaseException:
+            self._discard()
+            _unwatch(self)
+            raise
         return self
 
     def add(self, positions) -> None:
         a = np.ascontiguousarray(positions, dtype="<f4")
         if a.shape != (self.points, 3):
             raise PC2Error(f"a sample must have shape ({self.points}, 3), got {a.shape}")
+        self._check_open()
         self._file.write(a.tobytes())
         self.samples += 1
 
@@ -109,22 +130,93 @@ class Writer:
         a = np.ascontiguousarray(samples, dtype="<f4")
         if a.ndim != 3 or a.shape[1:] != (self.points, 3):
             raise PC2Error(f"samples must have shape (n, {self.points}, 3), got {a.shape}")
+        self._check_open()
         self._file.write(a.tobytes())
         self.samples += a.shape[0]
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
             if exc_type is None:
+                self._check_open()
                 self._file.seek(0)
                 self._file.write(HEADER.pack(MAGIC, 1, self.points, *self.header, self.samples))
                 self._file.flush()
                 os.fsync(self._file.fileno())
-            self._file.close()
-            if exc_type is None:
+                self._file.close()
                 os.replace(self._tmp, self.path)
         finally:
-            if self._tmp is not None and self._tmp.exists():
-                self._tmp.unlink()
+            self._discard()
+            _unwatch(self)
+
+    def _check_open(self) -> None:
+        if self._interrupted is not None:
+            raise PC2Error(f"{self.path}: the write was stopped by {signal.Signals(self._interrupted).name}; nothing was written")
+
+    def _discard(self) -> None:
+        """Closes and removes the temporary file (nothing if it is gone already)."""
+        if self._file is not None:
+            self._file.close()
+        self._remove_temporary()
+
+    def _remove_temporary(self) -> None:
+        # Also while the file is open (a signal can come inside a write, where closing it would
+        # be a reentrant call): POSIX unlinks an open file; Windows refuses, and the close in
+        # `__exit__` removes it then.
+        if self._tmp is not None:
+            try:
+                self._tmp.unlink(missing_ok=True)
+            except OSError:
+                pass
+
+
+# Writers open in the main thread, and the handler each signal had before the first of them.
+_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_open: list[Writer] = []
+_previous: dict[int, object] = {}
+
+
+def _on_signal(signum, frame) -> None:
+    previous = _previous.get(signum, signal.SIG_DFL)
+    if callable(previous):
+        try:
+            previous(signum, frame)
+        except BaseException:
+            _discard_open(signum)
+            raise
+        return
+    _discard_open(signum)  # the default action ends the process without unwinding
+    signal.signal(signum, signal.SIG_DFL)
+    signal.raise_signal(signum)
+
+
+def _discard_open(signum: int) -> None:
+    for writer in _open:
+        writer._interrupted = signum
+        writer._remove_temporary()
+
+
+def _watch(writer: Writer) -> None:
+    if threading.current_thread() is not threading.main_thread():
+        return
+    _open.append(writer)
+    for sig in _SIGNALS:
+        current = signal.getsignal(sig)
+        if current is _on_signal or current is None or current == signal.SIG_IGN:
+            continue
+        _previous[sig] = current
+        signal.signal(sig, _on_signal)
+
+
+def _unwatch(writer: Writer) -> None:
+    if writer not in _open:
+        return
+    _open.remove(writer)
+    if _open:
+        return
+    for sig, previous in list(_previous.items()):
+        if signal.getsignal(sig) is _on_signal:  # not if someone replaced it meanwhile
+            signal.signal(sig, previous)
+        del _previous[sig]
 
 
 def temporary_path(path) -> Path:

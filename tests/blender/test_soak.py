@@ -35,6 +35,7 @@ def orphans() -> list[str]:
     return [d.name for d in (*bpy.data.meshes, *bpy.data.objects) if d.users == 0]
 
 
+@pytest.mark.slow
 def test_ten_thousand_frames_with_reloads(dq_skin, tmp_path):
     obj, _ = import_character(ASSETS / "CesiumMan.glb")
     add_dq_skin(obj, method="DUAL_QUATERNION")

@@ -107,7 +107,7 @@ SKIN_CASES = [
     ("rest wrong count", with_(rest=lambda a: a["rest"][:1].copy()), {}, ValueError, r"rest must have shape"),
     ("rest NaN", with_(rest=lambda a: np.full((B, 4, 4), np.nan, np.float32)), {}, ValueError, r"rest contains a NaN"),
     ("rest not affine", with_(rest=deform_with(lambda d: _set(d, (0, 3, 1), 1.0))), {}, ValueError, r"rest matrix of bone 0 is not affine"),
-    ("unknown method", valid, {"method": "bbone"}, ValueError, r"method must be 'linear', 'dual_quaternion', 'blend' or 'centers_of_rotation'"),
+    ("unknown method", valid, {"method": "bbone"}, ValueError, r"method must be a dqskin.Method, one of 'linear', 'dual_quaternion', 'blend', 'centers_of_rotation'"),
     ("blend with linear", valid, {"method": "linear", "blend": np.full(V, 0.5, np.float32)}, ValueError, r"blend is only used with method='blend'"),
     ("blend with dqs", valid, {"method": "dual_quaternion", "blend": np.full(V, 0.5, np.float32)}, ValueError, r"blend is only used with method='blend'"),
     ("blend above 1", valid, {"method": "blend", "blend": np.float32([0, 0.5, 1.5, 1, 0])}, ValueError, r"blend amount\[2\] = 1.5 is outside \[0, 1\]"),
@@ -331,7 +331,7 @@ def notes(exc):
 def test_wrong_python_types_for_scalar_arguments_name_the_argument():
     """Plain Python arguments of the wrong kind: a TypeError whose message names the argument."""
     a = valid()
-    with pytest.raises(TypeError, match="method must be a string"):
+    with pytest.raises(TypeError, match="method must be a dqskin.Method or a string"):
         call(a, method=3)
     with pytest.raises(TypeError, match="blend_factor must be a real number"):
         call(a, method="blend", blend_factor="half")
@@ -518,7 +518,7 @@ def test_mesh_measurements_reject_bad_input():
     cyl = dqskin.TwistCylinder(rings=3, segments=4)
     tris = cyl.triangles.astype(np.int64)
     tris[0, 0] = len(cyl.positions)
-    with pytest.raises(ValueError, match=r"triangles contains vertex index"):
+    with pytest.raises(ValueError, match=r"triangles\[0\] refers to vertex 14, but there are 14 positions"):
         dqskin.mesh_volume(cyl.positions, tris)
     with pytest.raises(ValueError, match=r"triangles must have shape \(T, 3\)"):
         dqskin.mesh_volume(cyl.positions, cyl.triangles[:, :2])

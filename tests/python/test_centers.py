@@ -234,23 +234,21 @@ def test_candy_wrapper_keeps_the_middle_cross_section():
     assert dqskin.polygon_area(lbs[cyl.ring(10)]) / rest_area < 1e-6
 
 
-def test_skin_many_takes_centers_as_a_twelfth_item():
+def test_skin_many_takes_centers_in_a_job():
     rng = np.random.default_rng(8)
     positions, tris, influences, rest = tube(rings=10, segments=8)
     centers = dqskin.centers_of_rotation(positions, tris, influences)
     deform = random_rig(rest, rng, scaled=False)
     want = dqskin.skin(positions, influences, deform, rest, method="centers_of_rotation", centers=centers)
-    out = np.zeros_like(positions)
-    lbs_out = np.zeros_like(positions)
-    res = dqskin.skin_many([
-        (positions, influences, deform, rest, "centers_of_rotation", None, None, None, None, 1.0, out, centers),
-        (positions, influences, deform, rest, "linear", None, None, None, None, 1.0, lbs_out, None),
-    ])
-    assert res == [None, None]
-    np.testing.assert_array_equal(out, want)
-    np.testing.assert_array_equal(lbs_out, dqskin.skin(positions, influences, deform, rest, method="linear"))
-    with pytest.raises(ValueError, match=r"jobs\[0\].*centers is required"):
-        dqskin.skin_many([(positions, influences, deform, rest, "cor", None, None, None, None, 1.0, out)])
+    cor = dqskin.SkinJob(positions, influences, deform, rest, method=dqskin.Method.CENTERS_OF_ROTATION, centers=centers)
+    lbs = dqskin.SkinJob(positions, influences, deform, rest, method="linear")
+    assert dqskin.skin_many([cor, lbs]) == [None, None]
+    np.testing.assert_array_equal(cor.out, want)
+    np.testing.assert_array_equal(lbs.out, dqskin.skin(positions, influences, deform, rest, method="linear"))
+    with pytest.raises(ValueError, match=r"centers is required"):
+        dqskin.SkinJob(positions, influences, deform, rest, method="cor")
+    with pytest.raises(ValueError, match=r"centers is only used"):
+        dqskin.SkinJob(positions, influences, deform, rest, method="linear", centers=centers)
 
 
 @pytest.mark.parametrize(
@@ -300,6 +298,7 @@ def test_bad_kernel_input_leaves_out_untouched():
         assert np.all(out == 7.25)
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_a_long_precompute():
     positions, tris, influences, _ = tube(rings=700, segments=48, bones=30, seed=2, length=30.0)
     start = time.perf_counter()

@@ -1,9 +1,15 @@
-"""Fuzzing every public function of `dqskin` (Hypothesis): each call starts from valid
-arguments and replaces one of them with anything (None, strings, huge or NaN numbers, complex
-numbers, ragged lists, arrays of every dtype and shape, non-contiguous, unaligned or read-only
-arrays, wrong objects). Whatever comes in, a call either works or raises TypeError/ValueError
-that names an argument (the replaced one when its kind is wrong), never crashes the process,
-never hangs (a deadline per call) and never writes to `out` when it fails.
+"""Fuzzing every public function and class of `dqskin`. Each call starts from valid arguments
+and replaces one of them with a bad value; whatever comes in, a call either works or raises
+TypeError/ValueError whose message names the replaced argument, never crashes the process, never
+lets a Rust panic through (RuntimeError "internal error"), never hangs (a deadline per call) and
+never writes to `out` when it fails.
+
+Two campaigns over the same catalogue:
+- every argument against each kind of bad value made from its valid value (wrong dtype, a view
+  at an odd byte offset, non-contiguous, Fortran order, one dimension more or less, one row
+  more, empty, NaN, infinite, huge, negative, read-only, a list, None, wrong types);
+- Hypothesis: anything at all (None, strings, huge or NaN numbers, complex numbers, ragged
+  lists, arrays of every dtype and shape and layout, wrong objects) in any argument.
 
 Deterministic under `make test` (a fixed seed, `DQSKIN_FUZZ_EXAMPLES` examples per function,
 default 60); run `DQSKIN_FUZZ_EXAMPLES=20000 DQSKIN_FUZZ_SEED=<n> pytest tests/python/test_fuzz.py`
@@ -14,6 +20,7 @@ from __future__ import annotations
 
 import inspect
 import os
+import re
 
 import numpy as np
 import pytest
@@ -52,6 +59,18 @@ def out() -> np.ndarray:
     return np.full((V, 3), 7.0, F)
 
 
+def job(**kw):
+    """A valid SkinJob (Linear), changed by `kw`."""
+    return dqskin.SkinJob(**(dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="linear") | kw))
+
+
+def replaced_on_a_job(positions=POS, deform=DEF, premat=None, postmat=None):
+    """The per-frame inputs set on a kept job, then the job run."""
+    j = job(out=out())
+    j.positions, j.deform, j.premat, j.postmat = positions, deform, premat, postmat
+    return dqskin.skin_many([j])
+
+
 # name -> (function, valid arguments, names of `out` arguments). Factories, so every call gets
 # fresh arrays.
 def catalogue():
@@ -59,7 +78,11 @@ def catalogue():
         "skin": (dqskin.skin, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="blend", blend=np.full(V, 0.5, F), blend_factor=0.5, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F), mask=np.ones(V, F), out=out()), ["out"]),
         "skin.centers_of_rotation": (dqskin.skin, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="centers_of_rotation", centers=POS * 0.5, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F), mask=np.ones(V, F), out=out()), ["out"]),
         "centers_of_rotation": (dqskin.centers_of_rotation, lambda: dict(positions=POS, triangles=TRI, influences=INF, sigma=0.1, with_mask=True), []),
-        "skin_many": (dqskin.skin_many, lambda: dict(jobs=[(POS, INF, DEF, REST, "linear", None, None, None, None, 1.0, out())]), []),
+        "skin_many": (dqskin.skin_many, lambda: dict(jobs=[job(out=out()), job(method="dqs")]), []),
+        "SkinJob": (dqskin.SkinJob, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method=dqskin.Method.BLEND, blend=np.full(V, 0.5, F), blend_factor=0.5, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F), mask=np.ones(V, F), out=out()), ["out"]),
+        "SkinJob.centers_of_rotation": (dqskin.SkinJob, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="cor", centers=POS * 0.5, out=out()), ["out"]),
+        "SkinJob setters": (replaced_on_a_job, lambda: dict(positions=POS.copy(), deform=DEF, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F)), []),
+        "Method": (dqskin.Method, lambda: dict(value="Optimized Centers"), []),
         "Influences": (dqskin.Influences, lambda: dict(offsets=np.array([0, 1, 2]), bones=np.array([0, 1]), weights=np.ones(2, F), bone_count=2), []),
         "Influences.from_dense": (dqskin.Influences.from_dense, lambda: dict(bones=np.zeros((V, 2), int), weights=np.ones((V, 2), F), bone_count=B), []),
         "Influences.effective": (lambda **kw: INF.effective(**kw), lambda: dict(positions=POS, premat=np.eye(4, dtype=F), envelopes=np.ones((B, 11), F), use_vertex_groups=True, use_envelopes=True), []),
@@ -67,6 +90,7 @@ def catalogue():
         "DualQuat": (dqskin.DualQuat, lambda: dict(real=KEYS[1], dual=np.zeros(4, F)), []),
         "DualQuat.from_rotation_translation": (dqskin.DualQuat.from_rotation_translation, lambda: dict(rotation=KEYS[1], translation=np.ones(3, F)), []),
         "DualQuat.from_translation": (dqskin.DualQuat.from_translation, lambda: dict(translation=np.ones(3, F)), []),
+        "DualQuat.from_screw": (dqskin.DualQuat.from_screw, lambda: dict(screw=dqskin.Screw((0, 0, 1), (0, 0, 0), 1.0, 0.5)), []),
         "DualQuat.from_matrix": (dqskin.DualQuat.from_matrix, lambda: dict(matrix=DEF[0], check=True, tolerance=1e-4), []),
         "DualQuat.pow": (lambda **kw: dqskin.DualQuat(KEYS[1]).pow(**kw), lambda: dict(t=0.5), []),
         "DualQuat.is_unit": (lambda **kw: dqskin.DualQuat(KEYS[1]).is_unit(**kw), lambda: dict(tolerance=1e-4), []),
@@ -102,11 +126,6 @@ def catalogue():
         "_MeshMemory": (dqskin._MeshMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
     }
     return c
-
-
-def misaligned() -> np.ndarray:
-    buf = np.zeros(4 * 21 + 1, np.uint8)
-    return np.frombuffer(buf.data, dtype=F, count=21, offset=1).reshape(7, 3)
 
 
 def readonly(a: np.ndarray) -> np.ndarray:
@@ -176,7 +195,7 @@ def anything(draw):
         return draw(arrays())
     s = draw(special)
     return {
-        "misaligned": misaligned,
+        "misaligned": lambda: odd_offset(POS),
         "influences": lambda: dqskin.Influences.from_dense(np.zeros((3, 1), int), np.ones((3, 1), F), 1),
         "big influences": lambda: INF,
         "list of floats": lambda: [0.5, 1.0, 2.0, 3.0],
@@ -190,15 +209,99 @@ def anything(draw):
 CATALOGUE = catalogue()
 
 
-def check_error(name: str, fn_params: list[str], replaced: str, value, e: BaseException) -> None:
-    assert isinstance(e, (TypeError, ValueError)), f"{name}({replaced}=...): {type(e).__name__}: {e}"
-    assert not isinstance(e, OverflowError), f"{name}({replaced}=...): OverflowError: {e}"
+# Known gaps, each to be closed where it lives: the envelope and B-Bone influences
+# (`Influences.effective`) are being moved into the core (issue 18), and their checks with them.
+# (function, argument) -> what its message names instead.
+KNOWN = {
+    ("Influences.effective", "positions"): "non-finite positions are reported as the weights they give",
+    ("Influences.effective", "envelopes"): "negative radii or weights are reported as the weights they give",
+}
+
+
+def names(message: str, argument: str) -> bool:
+    return re.search(rf"(?<![A-Za-z_]){re.escape(argument)}(?![A-Za-z_])", message) is not None
+
+
+def check_error(name: str, replaced: str, value, e: BaseException) -> None:
+    """`e`, raised by `name` with `replaced` set to `value`, is a TypeError or ValueError (not an
+    OverflowError, not a panic) whose message names `replaced`."""
+    call = f"{name}({replaced}={value!r:.80})"
+    assert isinstance(e, (TypeError, ValueError)), f"{call}: {type(e).__name__}: {e}"
+    assert not isinstance(e, OverflowError), f"{call}: OverflowError: {e}"
     msg = str(e)
-    assert "internal error" not in msg, f"{name}: a panic reached Python: {msg}"
-    assert any(p in msg for p in fn_params), f"{name}({replaced}={value!r:.80}): the message names no argument: {msg!r}"
-    plain = not isinstance(value, (np.ndarray, dqskin.Influences, list, tuple))
-    if plain and replaced not in ("jobs", "keys"):
-        assert replaced in msg, f"{name}({replaced}={value!r:.80}): the message does not name {replaced}: {msg!r}"
+    assert "internal error" not in msg, f"{call}: a panic reached Python: {msg}"
+    if (name, replaced) in KNOWN and not names(msg, replaced):
+        return
+    assert names(msg, replaced), f"{call}: the message does not name {replaced}: {msg!r}"
+
+
+def attempt(name: str, fn, kwargs: dict, replaced: str, outs: list[str]) -> None:
+    """Calls `fn(**kwargs)`; it works or fails as `check_error` wants, leaving `out` alone."""
+    value = kwargs[replaced]
+    before = {k: kwargs[k].copy() for k in outs if isinstance(kwargs.get(k), np.ndarray) and k != replaced}
+    try:
+        fn(**kwargs)
+    except (TypeError, ValueError) as e:
+        check_error(name, replaced, value, e)
+        for k, b in before.items():
+            assert np.array_equal(kwargs[k], b, equal_nan=True), f"{name}: {k} was written by a failed call"
+    except BaseException as e:  # noqa: BLE001 - any other exception is the failure
+        pytest.fail(f"{name}({replaced}={value!r:.100}): {type(e).__name__}: {e}")
+
+
+def odd_offset(x: np.ndarray) -> np.ndarray:
+    """`x` copied into a view one byte into a buffer: same dtype and shape, not aligned."""
+    buf = np.zeros(x.nbytes + 1, np.uint8)
+    view = np.frombuffer(buf.data, dtype=x.dtype, count=x.size, offset=1).reshape(x.shape)
+    view[...] = x
+    assert not view.flags.aligned or x.dtype.itemsize == 1
+    return view
+
+
+def every_other(x: np.ndarray) -> np.ndarray:
+    """`x` copied into a view of every other element of its last axis: not contiguous."""
+    big = np.zeros(x.shape[:-1] + (2 * x.shape[-1],), x.dtype)
+    view = big[..., ::2]
+    view[...] = x
+    return view
+
+
+def bad_values(x) -> list:
+    """Each kind of bad value, made from the valid value `x` of an argument."""
+    values = [None, object(), "text", b"bytes", 1j, True, 2**70, -(2**70), float("nan"), float("inf"), -1.0, 1e39, 0, [], {}, dqskin.DualQuat(), INF]
+    if isinstance(x, np.ndarray):
+        values += [x.astype(np.float64), x.astype(np.complex64), x.astype(object), x.tolist()]
+        if x.dtype.kind in "iu":
+            values += [x.astype(F), -np.ones_like(x), np.full_like(x, np.iinfo(x.dtype).max)]
+        if x.size:
+            values += [odd_offset(x), every_other(x) if x.ndim else x, x.reshape(-1)[:1].reshape(())]
+        if x.ndim >= 2:
+            values += [np.asfortranarray(x), x.T]
+        values += [x[None], x.reshape(-1)]
+        if x.ndim >= 1:
+            values += [np.concatenate([x, x[:1]]) if len(x) else np.zeros((1,) + x.shape[1:], x.dtype), x[:0]]
+        if x.dtype.kind == "f":
+            values += [np.full_like(x, np.nan), np.full_like(x, np.inf), np.full_like(x, 3e38), -np.abs(x) - 1, np.zeros_like(x)]
+        values.append(readonly(x))
+    elif isinstance(x, bool):
+        values += [np.bool_(x), 1, "yes"]
+    elif isinstance(x, (int, float)):
+        values += [np.float64(x), np.int64(int(x)), np.array([x]), np.array(x), -x, x * 1e30, 2**31, -(2**31) - 1]
+    elif isinstance(x, (list, tuple)):
+        values += [x[:0], list(x) * 2, tuple(x), np.array(x, dtype=object)]
+    return values
+
+
+ARGUMENTS = [(name, p) for name, (_, valid, _) in sorted(CATALOGUE.items()) for p in valid()]
+
+
+@pytest.mark.parametrize("name, replaced", ARGUMENTS, ids=[f"{n}-{p}" for n, p in ARGUMENTS])
+def test_every_argument_refuses_each_kind_of_bad_value_naming_it(name, replaced):
+    fn, valid, outs = CATALOGUE[name]
+    for value in bad_values(valid()[replaced]):
+        kwargs = valid()
+        kwargs[replaced] = value
+        attempt(name, fn, kwargs, replaced, outs)
 
 
 @pytest.mark.parametrize("name", sorted(CATALOGUE))
@@ -214,17 +317,20 @@ def test_every_public_function_survives_any_argument(name):
     def run(which, value):
         kwargs = valid()
         kwargs[which] = value
-        before = {k: kwargs[k].copy() for k in outs if isinstance(kwargs.get(k), np.ndarray) and k != which}
-        try:
-            fn(**kwargs)
-        except (TypeError, ValueError) as e:
-            check_error(name, params + ["jobs", "keys", "factor", "matrix", "mesh"], which, value, e)
-            for k, b in before.items():
-                assert np.array_equal(kwargs[k], b, equal_nan=True), f"{name}: {k} was written by a failed call"
-        except BaseException as e:  # noqa: BLE001 - any other exception is the failure
-            pytest.fail(f"{name}({which}={value!r:.100}): {type(e).__name__}: {e}")
+        attempt(name, fn, kwargs, which, outs)
 
     run()
+
+
+def test_the_known_gaps_are_still_open():
+    """Each entry of KNOWN is still needed (remove it when its gap is closed)."""
+    valid = CATALOGUE["Influences.effective"][1]
+    nan_positions = valid() | dict(positions=np.full((V, 3), np.nan, F))
+    negative_envelopes = valid() | dict(envelopes=-np.ones((B, 11), F))
+    for replaced, kwargs in (("positions", nan_positions), ("envelopes", negative_envelopes)):
+        with pytest.raises(ValueError) as e:
+            INF.effective(**kwargs)
+        assert not names(str(e.value), replaced), f"{replaced} is named now: remove it from KNOWN ({e.value})"
 
 
 def test_the_catalogue_covers_every_public_function():

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import os
+import signal
+import struct
 import subprocess
 import sys
 import time
-
-import struct
 
 import numpy as np
 import pytest
@@ -130,3 +130,99 @@ def test_temporaries_of_dead_processes_are_removed_by_the_next_write(tmp_path):
     other.write_bytes(b"z")
     pc2.write(out, np.zeros((1, 2, 3), np.float32), 1.0)
     assert not stale.exists() and mine.exists() and other.exists() and out.exists()
+
+
+# -- signals: the temporary goes on Ctrl-C and SIGTERM too ------------------------------------------
+
+WRITING = """
+import signal, sys, time
+import numpy as np
+from dqskin import pc2
+
+if sys.argv[2] == "default-action":
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+with pc2.Writer(sys.argv[1], 1000, 1.0) as w:
+    w.add(np.zeros((1000, 3)))
+    print("writing", flush=True)
+    while True:
+        w.add(np.ones((1000, 3)))
+        time.sleep(0.001)
+"""
+
+
+@pytest.mark.parametrize(
+    "signum, handler",
+    [(signal.SIGTERM, "default-action"), (signal.SIGINT, "default-action"), (signal.SIGINT, "KeyboardInterrupt")],
+    ids=["SIGTERM", "SIGINT-default-action", "SIGINT-KeyboardInterrupt"],
+)
+@pytest.mark.slow
+def test_a_writer_signalled_mid_write_leaves_nothing(tmp_path, signum, handler):
+    out = tmp_path / "cache.pc2"
+    p = subprocess.Popen([sys.executable, "-c", WRITING, str(out), handler], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert p.stdout.readline().strip() == "writing", p.stderr.read()
+        assert [f.name for f in tmp_path.iterdir()] == [f".cache.pc2.dqskin-{p.pid}.tmp"]
+        time.sleep(0.05)
+        p.send_signal(signum)
+        p.wait(timeout=10)
+    finally:
+        p.kill()
+    assert p.returncode == -signum, p.stderr.read()  # ended by the signal, as without a writer
+    assert list(tmp_path.iterdir()) == []
+
+
+CHAINED = """
+import signal, sys
+import numpy as np
+from dqskin import pc2
+
+got = []
+def record(signum, frame):
+    got.append(signum)
+for sig in (signal.SIGINT, signal.SIGTERM):
+    signal.signal(sig, record)
+with pc2.Writer(sys.argv[1], 10, 1.0) as w:
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        w.add(np.zeros((10, 3)))
+        signal.raise_signal(sig)
+assert got == [signal.SIGINT, signal.SIGTERM], got
+assert signal.getsignal(signal.SIGINT) is record and signal.getsignal(signal.SIGTERM) is record
+print(pc2.read_header(sys.argv[1]).samples)
+"""
+
+
+@pytest.mark.slow
+def test_a_previous_handler_that_returns_lets_the_write_finish_and_is_restored(tmp_path):
+    out = tmp_path / "cache.pc2"
+    run = subprocess.run([sys.executable, "-c", CHAINED, str(out)], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "2"
+    assert [f.name for f in tmp_path.iterdir()] == ["cache.pc2"]
+
+
+def test_handlers_are_restored_when_the_last_writer_closes(tmp_path):
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    with pc2.Writer(tmp_path / "a.pc2", 2, 1.0) as a:
+        assert signal.getsignal(signal.SIGTERM) is not before[signal.SIGTERM]
+        with pc2.Writer(tmp_path / "b.pc2", 2, 1.0) as b:
+            b.add(np.zeros((2, 3)))
+        assert signal.getsignal(signal.SIGTERM) is not before[signal.SIGTERM]  # a is still open
+        a.add(np.zeros((2, 3)))
+    assert {sig: signal.getsignal(sig) for sig in before} == before
+    with pytest.raises(KeyboardInterrupt):
+        with pc2.Writer(tmp_path / "c.pc2", 2, 1.0):
+            signal.raise_signal(signal.SIGINT)  # Python's handler: KeyboardInterrupt
+    assert {sig: signal.getsignal(sig) for sig in before} == before
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["a.pc2", "b.pc2"]
+
+
+def test_a_write_stopped_by_a_signal_refuses_to_go_on(tmp_path):
+    with pytest.raises(pc2.PC2Error, match="stopped by SIGINT"):  # the block's end refuses
+        with pc2.Writer(tmp_path / "a.pc2", 2, 1.0) as w:
+            try:
+                signal.raise_signal(signal.SIGINT)
+            except KeyboardInterrupt:
+                pass  # caught inside the block: the temporary is gone, so the write cannot finish
+            with pytest.raises(pc2.PC2Error, match="stopped by SIGINT"):
+                w.add(np.zeros((2, 3)))
+    assert list(tmp_path.iterdir()) == []

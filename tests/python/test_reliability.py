@@ -26,6 +26,7 @@ def threads_now() -> int:
     return 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [10**6, 2**31, 10**40])
 def test_absurd_thread_counts_are_refused_before_any_thread_starts(n):
     before = dqskin.get_num_threads()  # the pool exists
@@ -87,6 +88,7 @@ except KeyboardInterrupt:
 """
 
 
+@pytest.mark.slow
 def test_a_long_spring_stops_on_ctrl_c():
     p = subprocess.Popen([sys.executable, "-c", SPRING], stdout=subprocess.PIPE, text=True)
     assert p.stdout.readline().strip() == "started"

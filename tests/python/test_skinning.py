@@ -310,7 +310,33 @@ def test_method_aliases():
     np.testing.assert_array_equal(dqskin.skin(*args, method="dqs"), dq)
     np.testing.assert_array_equal(dqskin.skin(*args), dq)  # the default is dual_quaternion
     np.testing.assert_array_equal(dqskin.skin(*args, method="BLEND", blend_factor=0.5), bl)
+    np.testing.assert_array_equal(dqskin.skin(*args, method=dqskin.Method.LINEAR), lin)
+    np.testing.assert_array_equal(dqskin.skin(*args, method=dqskin.Method.DUAL_QUATERNION), dq)
+    np.testing.assert_array_equal(dqskin.skin(*args, method=dqskin.Method.BLEND, blend_factor=0.5), bl)
+    np.testing.assert_array_equal(dqskin.skin(*args, method="Dual Quaternion"), dq)
     assert not np.allclose(lin, dq)
+
+
+def test_one_method_enum_for_names_aliases_and_labels():
+    M = dqskin.Method
+    members = [M.LINEAR, M.DUAL_QUATERNION, M.BLEND, M.CENTERS_OF_ROTATION]
+    assert [m.label for m in members] == ["Linear", "Dual Quaternion", "Blend", "Optimized Centers"]
+    spellings = {
+        M.LINEAR: ["linear", "LINEAR", "lbs", "Linear"],
+        M.DUAL_QUATERNION: ["dual_quaternion", "DUAL_QUATERNION", "dqs", "Dual Quaternion"],
+        M.BLEND: ["blend", "BLEND", "Blend"],
+        M.CENTERS_OF_ROTATION: ["centers_of_rotation", "CENTERS_OF_ROTATION", "cor", "Optimized Centers"],
+    }
+    for member, names in spellings.items():
+        assert M(member) == member
+        for name in names:
+            assert M(name) == member, name
+    assert len(set(members)) == 4 and M.LINEAR != M.BLEND and M.LINEAR != 0
+    c = case(1)
+    with pytest.raises(ValueError, match=r"method must be a dqskin.Method.*got 'slerp'"):
+        dqskin.skin(c["positions"], influences_of(c), c["deform"], c["rest"], method="slerp")
+    with pytest.raises(TypeError, match=r"value must be a dqskin.Method or a string, got int"):
+        M(1)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -520,6 +546,7 @@ def test_out_is_filled_in_place_and_returned(method):
     np.testing.assert_array_equal(out, expected)
 
 
+@pytest.mark.slow
 def test_results_do_not_depend_on_the_thread_count():
     cyl = dqskin.TwistCylinder(rings=200, segments=64, blend_zone=0.3)
     deform = cyl.twist(2.0)
@@ -563,6 +590,7 @@ BINS = 10
 MIN_COVERAGE = 0.2
 
 
+@pytest.mark.slow
 def test_gil_is_released_during_skin():
     rng = np.random.default_rng(5)
     bones = 16

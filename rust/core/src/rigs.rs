@@ -112,17 +112,19 @@ impl TwistCylinder {
 }
 
 /// Enclosed volume of a closed, consistently oriented triangle mesh (divergence theorem);
-/// positive for outward-facing triangles. Triangles with out-of-range indices are skipped.
-pub fn mesh_volume(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> f64 {
-    let p = |i: u32| positions.get(i as usize).map(|v| [v[0] as f64, v[1] as f64, v[2] as f64]);
+/// positive for outward-facing triangles. A triangle naming a vertex beyond `positions` is an
+/// error.
+pub fn mesh_volume(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<f64, SkinError> {
+    crate::skin::check_triangles(triangles, positions.len())?;
+    let p = |i: u32| positions[i as usize].map(f64::from);
     let mut six_v = 0.0f64;
     for t in triangles {
-        let (Some(a), Some(b), Some(c)) = (p(t[0]), p(t[1]), p(t[2])) else { continue };
+        let (a, b, c) = (p(t[0]), p(t[1]), p(t[2]));
         // a · (b × c)
         six_v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
             + a[2] * (b[0] * c[1] - b[1] * c[0]);
     }
-    six_v / 6.0
+    Ok(six_v / 6.0)
 }
 
 /// Area of a planar polygon given by its vertices in order (the length of the vector area).
@@ -336,7 +338,7 @@ mod tests {
     #[test]
     fn cylinder_is_closed_and_has_the_expected_volume() {
         let c = TwistCylinder::new(16, 64, 4.0, 0.5, 0.5).unwrap();
-        let v = mesh_volume(&c.positions, &c.triangles);
+        let v = mesh_volume(&c.positions, &c.triangles).unwrap();
         // Inscribed 64-gon prism: (n/2)·r²·sin(2π/n)·L.
         let expected = 32.0 * 0.25 * (core::f64::consts::TAU / 64.0).sin() * 4.0;
         assert!((v - expected).abs() < 1e-4 * expected, "{v} vs {expected}");
@@ -351,6 +353,10 @@ mod tests {
             }
         }
         assert!(edges.iter().all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1)));
+        let mut bad = c.triangles.clone();
+        bad[5][2] = c.positions.len() as u32;
+        let e = mesh_volume(&c.positions, &bad).unwrap_err();
+        assert_eq!(e, SkinError::InvalidTriangle { index: 5, vertex: c.positions.len() as u32, vertex_count: c.positions.len() });
     }
 
     #[test]

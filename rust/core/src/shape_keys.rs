@@ -44,7 +44,7 @@ impl core::fmt::Display for ShapeKeyError {
                 write!(f, "reference key {reference} does not exist (there are {blocks} keys)")
             }
             ShapeKeyError::ReferencePoints { expected, got } => {
-                write!(f, "the reference key has {got} points, the mesh {expected}")
+                write!(f, "the reference key has {got} points but out has {expected}")
             }
             ShapeKeyError::WeightsLength { block, expected, got } => {
                 write!(f, "key {block}: its vertex group weights have {got} entries, expected {expected}")

@@ -9,7 +9,6 @@ use numpy::{
 };
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
 
 /// Expected shape: `None` for any length, `Some(n)` for exactly `n`.
 pub type Shape<'a> = &'a [Option<usize>];
@@ -39,7 +38,7 @@ fn check_shape(name: &str, got: &[usize], shape: Shape<'_>, names: &[&str]) -> P
     )))
 }
 
-fn as_numpy<'a, 'py>(obj: &'a Bound<'py, PyAny>, name: &str, want: &str) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
+pub fn as_numpy<'a, 'py>(obj: &'a Bound<'py, PyAny>, name: &str, want: &str) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
     obj.cast::<PyUntypedArray>().map_err(|_| {
         let ty = obj.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "?".into());
         PyTypeError::new_err(format!("{name} must be a numpy array of {want}, got {ty}"))
@@ -114,12 +113,9 @@ pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<u32>> {
     if kind != b'i' && kind != b'u' {
         return Err(PyTypeError::new_err(format!("{name} must have an integer dtype, got {}", arr.dtype())));
     }
-    let np = obj.py().import("numpy")?;
-    let kwargs = PyDict::new(obj.py());
-    kwargs.set_item("dtype", np.getattr("int64")?)?;
-    let as_i64 = np.call_method("ascontiguousarray", (obj,), Some(&kwargs))?;
+    let as_i64 = aligned_copy(obj, "int64")?;
     let a = as_i64.cast::<PyArrayDyn<i64>>()?.try_readonly()?;
-    let slice = a.as_slice()?;
+    let slice = a.as_slice().map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?;
     slice
         .iter()
         .enumerate()
@@ -129,6 +125,15 @@ pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<u32>> {
             })
         })
         .collect()
+}
+
+/// An integer array of the given shape, in any integer dtype, flattened (C order) to `u32` with
+/// range checks.
+pub fn index_array(obj: &Bound<'_, PyAny>, name: &str, shape: Shape<'_>, names: &[&str]) -> PyResult<Vec<u32>> {
+    let arr = as_numpy(obj, name, "integers")?;
+    check_shape(name, arr.shape(), shape, names)?;
+    let flat = obj.py().import("numpy")?.call_method1("ravel", (obj,))?;
+    indices(&flat, name)
 }
 
 /// A small input (a transform, a few weights): anything numpy can turn into float32, copied.
@@ -169,18 +174,24 @@ pub fn small(obj: &Bound<'_, PyAny>, name: &str, shape: Shape<'_>, names: &[&str
     }
     let dims: Vec<usize> = arr.getattr("shape")?.extract()?;
     check_shape(name, &dims, shape, names)?;
-    let kwargs = PyDict::new(obj.py());
-    kwargs.set_item("dtype", np.getattr("float32")?)?;
-    let arr = np.call_method("ascontiguousarray", (arr,), Some(&kwargs)).map_err(|e| {
+    let arr = aligned_copy(&arr, "float32").map_err(|e| {
         PyValueError::new_err(format!("{name} cannot be converted to float32: {}", one_line(&e, obj.py())))
     })?;
     let arr = arr.cast::<PyArrayDyn<f32>>()?;
     let ro = arr.try_readonly()?;
-    let data = ro.as_slice()?.to_vec();
+    let data = ro.as_slice().map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?.to_vec();
     if let Some(i) = data.iter().position(|v| !v.is_finite()) {
         return Err(PyValueError::new_err(format!("{name} contains a NaN or infinite value (flat index {i})")));
     }
     Ok((data, dims))
+}
+
+/// `obj` as a C-contiguous, aligned numpy array of `dtype` (a copy unless it is one already):
+/// `np.ascontiguousarray` alone keeps a view at an odd byte offset, which cannot be read as a
+/// slice.
+fn aligned_copy<'py>(obj: &Bound<'py, PyAny>, dtype: &str) -> PyResult<Bound<'py, PyAny>> {
+    let np = obj.py().import("numpy")?;
+    np.call_method1("require", (obj, np.getattr(dtype)?, "CA"))
 }
 
 /// The first line of an exception's message.

@@ -145,8 +145,14 @@ impl PyDualQuat {
 
     /// From screw parameters (see :class:`Screw`).
     #[staticmethod]
-    fn from_screw(screw: &PyScrew) -> Self {
-        Self(DualQuat::from_screw(&screw.screw()))
+    fn from_screw(screw: &Bound<'_, PyAny>) -> PyResult<Self> {
+        guard(|| {
+            let screw = screw.cast::<PyScrew>().map_err(|_| {
+                let ty = screw.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+                pyo3::exceptions::PyTypeError::new_err(format!("screw must be a dqskin.Screw, got {ty}"))
+            })?;
+            Ok(Self(DualQuat::from_screw(&screw.get().screw())))
+        })
     }
 
     /// Real part ``(w, x, y, z)``.

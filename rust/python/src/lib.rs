@@ -13,6 +13,8 @@ mod arrays;
 mod blender;
 mod blending;
 mod dual_quat;
+mod job;
+mod method;
 mod rigs;
 mod skinning;
 mod tracks;
@@ -71,6 +73,7 @@ fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     blending::register(m)?;
     blender::register(m)?;
     skinning::register(m)?;
+    job::register(m)?;
     rigs::register(m)?;
     tracks::register(m)?;
     Ok(())

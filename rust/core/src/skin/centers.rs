@@ -121,11 +121,7 @@ pub(super) fn centers_counted(
     if let Some(index) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
         return Err(SkinError::NotFinite { what: "positions", index });
     }
-    for (index, t) in triangles.iter().enumerate() {
-        if let Some(&vertex) = t.iter().find(|&&v| v as usize >= n) {
-            return Err(SkinError::InvalidTriangle { index, vertex, vertex_count: n });
-        }
-    }
+    super::check_triangles(triangles, n)?;
     let weights = WeightVectors::new(influences);
     let classes = VertexClasses::new(&weights);
     let index = PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance);

@@ -117,6 +117,54 @@ impl Influences {
         Ok(Self { offsets: offsets.to_vec(), entries, bone_count, max_per_vertex, slots, batch_starts })
     }
 
+    /// From dense rows, as glTF stores joints and weights: vertex `v` lists the `per_vertex`
+    /// pairs `bones[v·K + k]`, `weights[v·K + k]` (`K = per_vertex`, `vertex_count · K` entries
+    /// each). Pairs with zero weight are dropped (they never change the result, and their bone
+    /// is not checked: glTF pads with joint 0). Errors name the flat index of the dense arrays.
+    pub fn from_dense(
+        bones: &[u32],
+        weights: &[f32],
+        vertex_count: usize,
+        per_vertex: usize,
+        bone_count: usize,
+    ) -> Result<Self, SkinError> {
+        let invalid = |what: String| Err(SkinError::InvalidInfluences(what));
+        if per_vertex > MAX_INFLUENCES_PER_VERTEX {
+            return invalid(format!(
+                "weights has {per_vertex} influences per vertex; at most {MAX_INFLUENCES_PER_VERTEX} are supported"
+            ));
+        }
+        let entries = vertex_count.checked_mul(per_vertex);
+        if entries != Some(weights.len()) || bones.len() != weights.len() {
+            return invalid(format!(
+                "bones has {} entries and weights {}: both must have {vertex_count} × {per_vertex}",
+                bones.len(),
+                weights.len()
+            ));
+        }
+        if let Some(i) = weights.iter().position(|w| !(*w >= 0.0) || !w.is_finite()) {
+            return invalid(format!("weights[{i}] = {} is not a finite non-negative number", weights[i]));
+        }
+        if let Some(i) = (0..bones.len()).find(|&i| weights[i] != 0.0 && bones[i] as usize >= bone_count) {
+            return invalid(format!("bones[{i}] = {} is out of range: bone_count = {bone_count}", bones[i]));
+        }
+        let mut offsets = Vec::with_capacity(vertex_count + 1);
+        let (mut kept_bones, mut kept_weights) = (Vec::new(), Vec::new());
+        offsets.push(0u32);
+        for v in 0..vertex_count {
+            for i in v * per_vertex..(v + 1) * per_vertex {
+                if weights[i] != 0.0 {
+                    kept_bones.push(bones[i]);
+                    kept_weights.push(weights[i]);
+                }
+            }
+            offsets.push(u32::try_from(kept_bones.len()).map_err(|_| {
+                SkinError::InvalidInfluences("more than 2^32-1 influences".into())
+            })?);
+        }
+        Self::from_csr(&offsets, &kept_bones, &kept_weights, bone_count)
+    }
+
     /// From one list of `(bone, weight)` pairs per vertex (convenient for tests and examples).
     pub fn from_lists(lists: &[Vec<(u32, f32)>], bone_count: usize) -> Result<Self, SkinError> {
         let mut offsets = Vec::with_capacity(lists.len() + 1);

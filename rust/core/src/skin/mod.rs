@@ -130,7 +130,7 @@ impl core::fmt::Display for SkinError {
             SkinError::NotFinite { what, index } => write!(f, "{what}[{index}] has a NaN or infinite coordinate"),
             SkinError::InvalidTriangle { index, vertex, vertex_count } => write!(
                 f,
-                "triangles[{index}] refers to vertex {vertex}, but there are {vertex_count} vertices"
+                "triangles[{index}] refers to vertex {vertex}, but there are {vertex_count} positions"
             ),
             SkinError::InvalidSigma(s) => write!(f, "sigma = {s} must be a finite number greater than 0"),
             SkinError::Cancelled => write!(f, "cancelled"),
@@ -293,6 +293,16 @@ fn first_not_finite(points: &[[f32; 3]]) -> Option<usize> {
     }?;
     let start = block * BLOCK;
     points[start..].iter().position(|p| !p.iter().all(|x| x.is_finite())).map(|i| start + i)
+}
+
+/// Every triangle names vertices below `vertex_count`.
+pub(crate) fn check_triangles(triangles: &[[u32; 3]], vertex_count: usize) -> Result<(), SkinError> {
+    for (index, t) in triangles.iter().enumerate() {
+        if let Some(&vertex) = t.iter().find(|&&v| v as usize >= vertex_count) {
+            return Err(SkinError::InvalidTriangle { index, vertex, vertex_count });
+        }
+    }
+    Ok(())
 }
 
 fn check_unit_interval(what: &'static str, values: &[f32]) -> Result<(), SkinError> {

@@ -528,6 +528,26 @@ fn influences_are_validated() {
 }
 
 #[test]
+fn dense_influences_drop_zero_weights_and_keep_the_order() {
+    // Vertex 1 pads with an out-of-range bone at weight 0 (dropped, so never checked).
+    let bones = [2, 0, 1, 9, 3, 3];
+    let weights = [0.25, 0.0, 0.5, 0.0, 1.0, 2.0];
+    let dense = Influences::from_dense(&bones, &weights, 3, 2, 4).unwrap();
+    let csr = Influences::from_csr(&[0, 1, 2, 4], &[2, 1, 3, 3], &[0.25, 0.5, 1.0, 2.0], 4).unwrap();
+    assert_eq!(dense, csr);
+    let empty = Influences::from_dense(&[], &[], 5, 0, 1).unwrap();
+    assert_eq!((empty.vertex_count(), empty.len()), (5, 0));
+    let e = |b: &[u32], w: &[f32], v, k| Influences::from_dense(b, w, v, k, 4).unwrap_err().to_string();
+    assert!(e(&[0, 1], &[1.0, 1.0], 2, 2).contains("both must have 2 × 2"));
+    assert!(e(&[0], &[1.0, 1.0], 1, 2).contains("bones has 1 entries"));
+    assert!(e(&[0, 7], &[1.0, 0.5], 1, 2).contains("bones[1] = 7 is out of range"));
+    assert!(e(&[0, 1], &[1.0, -0.5], 1, 2).contains("weights[1] = -0.5"));
+    assert!(e(&[0, 1], &[f32::NAN, 0.0], 1, 2).contains("weights[0] = NaN"));
+    let wide = MAX_INFLUENCES_PER_VERTEX + 1;
+    assert!(e(&vec![0; wide], &vec![1.0; wide], 1, wide).contains("at most 4096"));
+}
+
+#[test]
 fn results_do_not_depend_on_the_thread_count() {
     let cyl = TwistCylinder::new(200, 64, 4.0, 0.5, 0.3).unwrap();
     let deform = cyl.twist(2.0);

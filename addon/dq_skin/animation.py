@@ -68,6 +68,7 @@ class ANIM_OT_dq_rotation_bake(bpy.types.Operator):
 
     method: bpy.props.EnumProperty(
         name="Method",
+        description="How rotations go from key to key",
         items=(("SLERP", "Slerp", "Shortest arc at constant speed between neighbouring keys"),
                ("SQUAD", "Squad", "Smooth through the keys (continuous angular velocity)")),
         default="SQUAD",
@@ -105,8 +106,8 @@ class ANIM_OT_dq_screw_inbetweens(bpy.types.Operator):
 
     step: bpy.props.FloatProperty(name="Step", description="Frames between baked keys (sub-frames allowed)", default=1.0, min=0.01, soft_max=10.0)
     use_frame_range: bpy.props.BoolProperty(name="Frame Range", description="Bake only between Start and End (else between all keys)", default=False)
-    frame_start: bpy.props.FloatProperty(name="Start", default=1.0)
-    frame_end: bpy.props.FloatProperty(name="End", default=250.0)
+    frame_start: bpy.props.FloatProperty(name="Start", description="First frame to bake (with Frame Range)", default=1.0)
+    frame_end: bpy.props.FloatProperty(name="End", description="Last frame to bake (with Frame Range)", default=250.0)
 
     def execute(self, context):
         if self.use_frame_range and not self.frame_end > self.frame_start:
@@ -153,13 +154,14 @@ class ANIM_OT_dq_blend_transforms(bpy.types.Operator):
 
     method: bpy.props.EnumProperty(
         name="Method",
+        description="How the selected transforms are blended",
         items=(("DLB", "DLB", "Dual quaternion linear blending (fast)"),
                ("DIB", "DIB", "Dual quaternion iterative blending (exact)"),
                ("SCLERP", "ScLERP", "Screw interpolation (two inputs)")),
         default="DLB",
     )
-    weights: bpy.props.FloatVectorProperty(name="Weights", size=16, default=(1.0,) * 16, min=0.0)
-    keyframe: bpy.props.BoolProperty(name="Insert Keyframe", default=False)
+    weights: bpy.props.FloatVectorProperty(name="Weights", description="How much each of the other selected transforms counts, in selection order", size=16, default=(1.0,) * 16, min=0.0)
+    keyframe: bpy.props.BoolProperty(name="Insert Keyframe", description="Key the blended transform at the current frame", default=False)
 
     def execute(self, context):
         pose = context.mode == "POSE"
@@ -269,8 +271,8 @@ class ANIM_OT_dq_rotation_speed_plot(bpy.types.Operator):
     bl_label = "Rotation Speed Plot"
     bl_options = {"REGISTER", "UNDO"}
 
-    width: bpy.props.IntProperty(name="Width", default=640, min=64, max=8192)
-    height: bpy.props.IntProperty(name="Height", default=320, min=64, max=8192)
+    width: bpy.props.IntProperty(name="Width", description="Width of the plot image in pixels", default=640, min=64, max=8192)
+    height: bpy.props.IntProperty(name="Height", description="Height of the plot image in pixels", default=320, min=64, max=8192)
     filepath: bpy.props.StringProperty(name="Save As", description="PNG to write (optional)", subtype="FILE_PATH", default="")
 
     def execute(self, context):

@@ -10,6 +10,9 @@ from .state import Mode
 
 
 class OBJECT_PT_dq_skin(bpy.types.Panel):
+    """The object's DQ Skin modifiers: what deforms the mesh and why, the A/B switch against
+    Blender's own deformation, and the tools that act on each"""
+
     bl_label = "DQ Skin"
     bl_space_type = "PROPERTIES"
     bl_region_type = "WINDOW"

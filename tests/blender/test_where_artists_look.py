@@ -1,0 +1,154 @@
+"""Where artists look for DQ Skin: the Add Modifier menu, the A/B switch against Blender's own
+deformation, painting the blend, and a description on everything they can click."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+from dqtest import METHODS, _Recorder, add_dq_skin, animated_tube, assert_same, draw_panel, dq_skin_mods, evaluated_positions, status, twin
+from scenes import rig_tube, tube
+
+
+def drawn(menu_idname: str, obj) -> list[str]:
+    """What a menu's draw functions (Blender's and those appended by add-ons) put in it."""
+    lines = []
+    menu = getattr(bpy.types, menu_idname)
+    fake = type("M", (), {"layout": _Recorder(lines)})()
+    context = type("C", (), {"object": obj, "active_object": obj})()
+    for fn in getattr(menu.draw, "_draw_funcs", [menu.draw]):
+        try:
+            fn(fake, context)
+        except (AttributeError, TypeError):
+            pass  # Blender's own entries use layout calls the recorder does not have
+    return lines
+
+
+def test_the_add_modifier_deform_menu_has_dq_skin(dq_skin):
+    obj, arm, _ = rig_tube()
+    assert "[object.dq_skin_add]" in drawn("OBJECT_MT_modifier_add_deform", obj)
+    empty = bpy.data.objects.new("Empty", None)
+    assert "[object.dq_skin_add]" not in drawn("OBJECT_MT_modifier_add_deform", empty)
+
+
+def test_the_menu_operator_gives_the_stack_dq_skin_add_gives(dq_skin):
+    a, arm_a, _ = rig_tube()
+    b, arm_b, _ = rig_tube()
+    add_dq_skin(a)
+    bpy.context.view_layer.objects.active = b
+    with bpy.context.temp_override(object=b, active_object=b):
+        assert bpy.ops.object.dq_skin_add("EXEC_DEFAULT") == {"FINISHED"}  # what the menu entry runs
+    assert [(m.type, m.name) for m in a.modifiers] == [(m.type, m.name) for m in b.modifiers] == [("NODES", "DQ Skin"), ("ARMATURE", "Armature")]
+
+
+@pytest.mark.parametrize("parent_type", ["OBJECT", "ARMATURE"])
+def test_a_mesh_parented_to_an_armature_without_armature_modifier(dq_skin, parent_type):
+    obj, arm, arm_mod = animated_tube()
+    obj.modifiers.remove(arm_mod)
+    obj.parent_type = parent_type  # ARMATURE: Blender's legacy parenting, which deforms by itself
+    reference = obj.copy()
+    reference.data = obj.data.copy()
+    bpy.context.scene.collection.objects.link(reference)
+    if parent_type == "OBJECT":
+        reference.modifiers.new("Armature", "ARMATURE").object = arm
+    add_dq_skin(obj, "LINEAR")
+    assert [m.type for m in obj.modifiers] == ["NODES", "ARMATURE"]
+    assert obj.parent_type == "OBJECT"
+    for f in (4, 12):
+        bpy.context.scene.frame_set(f)
+        assert_same(obj, reference, f"frame {f}")
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_remove() == {"FINISHED"}
+    assert [m.type for m in obj.modifiers] == [] and obj.parent_type == parent_type  # as it was
+
+
+def test_no_armature_to_use_is_reported(dq_skin):
+    obj = tube("Lonely", 4, 6, 1.0, 0.2)
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        with pytest.raises(RuntimeError, match="not parented to an armature"):
+            bpy.ops.object.dq_skin_add()
+    assert not obj.modifiers
+
+
+@pytest.mark.parametrize("method", [*METHODS, "BLEND"])
+def test_the_ab_switch_shows_exactly_blenders_deformation_and_back(dq_skin, method):
+    obj, arm, _ = animated_tube()
+    mod = add_dq_skin(obj, method)
+    if method == "BLEND":
+        dq_skin.nodes.put(mod, "Blend Factor", 0.5)
+    reference = twin(obj, share_mesh=False)  # Blender's Armature modifier with DQ Skin's settings
+    bpy.context.scene.frame_set(12)
+    ours = evaluated_positions(obj)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_show_blender() == {"FINISHED"}
+    assert not mod.show_viewport and mod.show_render  # renders keep DQ Skin
+    assert_same(obj, reference, "Blender's deformation")
+    st = status(dq_skin, obj)
+    assert st.compared.startswith("Largest difference") and "vertex" in st.compared
+    assert any(line.startswith("Largest difference") for line in draw_panel(dq_skin, obj))
+    bpy.context.scene.frame_set(13)
+    assert_same(obj, reference, "Blender's deformation, next frame")
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_show_blender() == {"FINISHED"}
+    assert mod.show_viewport and status(dq_skin, obj).live
+    bpy.context.scene.frame_set(12)
+    np.testing.assert_array_equal(evaluated_positions(obj), ours)
+    if method == "BLEND":
+        # Blend differs from Preserve Volume: the switch shows it.
+        assert float(st.compared.split()[2]) > 1e-4
+
+
+def test_painting_the_blend_creates_selects_and_enters_weight_paint(dq_skin):
+    obj, arm, _ = animated_tube()
+    mod = add_dq_skin(obj, "BLEND")
+    dq_skin.nodes.put(mod, "Blend Factor", 0.3)
+    bpy.context.scene.frame_set(9)
+    before = evaluated_positions(obj)
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_paint_blend() == {"FINISHED"}
+    try:
+        assert obj.mode == "WEIGHT_PAINT"
+        group = obj.vertex_groups.active
+        assert group.name == "DQ Skin Blend" and dq_skin.nodes.get_attribute(mod, "Blend Amount") == group.name
+        weights = dq_skin.meshdata.get(obj).group_weights(group.name)
+        assert np.allclose(weights, 0.3)  # filled with the factor, which is now 1
+        assert dq_skin.nodes.get(mod, "Blend Factor") == 1.0
+        assert any("vertex group 'DQ Skin Blend'" in line and "0.30 to 0.30" in line for line in draw_panel(dq_skin, obj))
+    finally:
+        bpy.ops.object.mode_set(mode="OBJECT")
+    bpy.context.scene.frame_set(9)
+    np.testing.assert_allclose(evaluated_positions(obj), before, atol=1e-6)  # the look did not change
+    # A second time it selects the same group.
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_paint_blend() == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    assert [g.name for g in obj.vertex_groups].count("DQ Skin Blend") == 1
+
+
+def test_painting_the_blend_needs_the_blend_method(dq_skin):
+    obj, arm, _ = animated_tube()
+    add_dq_skin(obj, "LINEAR")
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        with pytest.raises(RuntimeError, match="choose the Blend method"):
+            bpy.ops.object.dq_skin_paint_blend()
+
+
+def test_everything_an_artist_can_click_says_what_it_does(dq_skin):
+    for cls in dq_skin.CLASSES:
+        doc = (getattr(cls, "bl_description", "") or cls.__doc__ or "").strip()
+        assert len(doc) > 20, f"{cls.__name__} has no description"
+        rna = getattr(cls, "bl_rna", None)
+        for prop in (rna.properties if rna is not None else []):
+            if prop.identifier not in ("rna_type",) and not prop.is_hidden and prop.identifier in getattr(cls, "__annotations__", {}):
+                assert len(prop.description) > 10, f"{cls.__name__}.{prop.identifier} has no description"
+    group = dq_skin.nodes.ensure_group()
+    for item in group.interface.items_tree:
+        if getattr(item, "item_type", "") == "SOCKET" and item.in_out == "INPUT" and item.name != "Geometry":
+            assert len(item.description) > 15, f"the DQ Skin input {item.name!r} has no description"
+    # Blender's own names where the meaning is the same.
+    descriptions = " ".join(i.description for i in group.interface.items_tree if getattr(i, "item_type", "") == "SOCKET")
+    for blender_name in ("Preserve Volume", "Vertex Groups", "Bone Envelopes"):
+        assert blender_name in descriptions

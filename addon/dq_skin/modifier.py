@@ -332,11 +332,11 @@ def _quick(obj, mod, st: ModifierState, ctx: Context):
         return None  # the pose did not change: the result is already this
     if s.method.kernel == "centers_of_rotation" and st.binding.centers is None:
         return False
-    premat, postmat = out.spaces
     key = FrameKey(old.settings, old.source, raw, old.spaces, old.result, old.mesh_version)
+    job = out.job  # the last full evaluation's: only the pose changed
     try:
-        job = _job(st, s, data.positions, binding.influences, deform, binding.rest, premat, postmat)
-    except SkinError:
+        job.deform = deform
+    except (AttributeError, TypeError, ValueError):
         return False  # the full path says what is wrong
     deforms = st.companion.deforms or (True, True)
     return Plan(obj, mod, st, s, out.result, out.kind, key, job, deforms, time.perf_counter(), quick=True, render=ctx.render)
@@ -438,7 +438,7 @@ def _prepare(obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: C
         )
         matrices = rig.with_bbone_joints(matrices, arm_eval, binding, cache.segments)
         deform, rest = matrices.deform, matrices.rest
-    job = _job(st, s, positions, influences, deform, rest, premat, postmat)
+    job = out.job = _job(st, s, positions, influences, deform, rest, premat, postmat)
     return Plan(obj, mod, st, s, result, kind, key, job, deforms, start, render=ctx.render)
 
 

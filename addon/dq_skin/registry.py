@@ -355,8 +355,8 @@ class Registry:
                     if orig.type == "MESH" and any(nodes.is_dq_skin(m) for m in orig.modifiers):
                         self.add(orig)
                         moved.add(uid)
-                    elif update.is_updated_geometry:
-                        self._other_object_changed(orig)
+                    elif update.is_updated_geometry and uid not in self.watch:
+                        self._other_object_changed(orig)  # (not the armatures, posed every frame)
                 elif len(orig.modifiers) != rec.modifier_count:
                     self.refresh(rec)
                     moved.add(uid)

@@ -135,10 +135,11 @@ def write_positions(result, positions) -> None:
     """New positions. The attribute write alone leaves Blender's caches of the mesh (bounds,
     normals, the BVH trees Shrinkwrap, Surface Deform and ray casts use) as they were; writing
     one vertex through `MeshVertex.co` makes Blender tag the positions as changed, which
-    invalidates them, and `Mesh.update()` tells the dependency graph."""
+    invalidates them and tells the dependency graph."""
     mesh = result.data
     mesh.attributes["position"].data.foreach_set("vector", positions.ravel())
     if len(mesh.vertices):
         v = mesh.vertices[0]
         v.co = v.co
-    mesh.update()
+    else:
+        mesh.update()

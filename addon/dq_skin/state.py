@@ -103,6 +103,7 @@ class Output:
     mixed: np.ndarray | None = field(default=None, repr=False)  # the shape keys mixed
     mixed_key: tuple = ()
     written: FrameKey | None = None
+    job: object = None  # the dqskin.SkinJob of the last full evaluation (steady playback resets its pose)
     copied_version: int = 0  # mesh version the replace-mode result mesh was copied from
     copied_revision: int = -1  # and its revision (see `meshdata.revision`)
     generation: int = 0  # counts the outputs (a following DQ Skin's input key)
@@ -111,6 +112,7 @@ class Output:
     def invalidate(self) -> None:
         """The next evaluation computes and writes again."""
         self.written = None
+        self.job = None
 
 
 @dataclass

@@ -667,3 +667,4 @@ def test_texture_bake_from_the_posed_mesh(dq_skin, assets, tmp_path, method):
         pictures.append(np.array(image.pixels[:]).reshape(64, 64, 4))
     assert np.abs(pictures[0] - pictures[1]).max() <= 1e-3
     assert pictures[0][..., :3].std() > 0.01  # something was baked
+

@@ -151,7 +151,8 @@ class Scan:
         known: dict = {}
         for owner in bpy.data.objects:
             parent = owner.parent
-            if parent is not None and owner.parent_type in ("VERTEX", "VERTEX_3") and not owner.use_parent_final_indices:
+            final = getattr(owner, "use_parent_final_indices", False)  # Blender 4.3+
+            if parent is not None and owner.parent_type in ("VERTEX", "VERTEX_3") and not final:
                 by_index.setdefault(parent.session_uid, []).append(f"{owner.name} (vertex parent)")
             surface = getattr(owner.data, "surface", None) if owner.type == "CURVES" else None
             if surface is not None:

@@ -9,8 +9,9 @@ while one of them exports, every DQ Skin hands over to its companion (see `consu
 exporter then finds an Armature modifier set up like DQ Skin and exports exactly what it
 exports for the same character under Blender's Armature modifier.
 
-- glTF: through its own extension point, a `glTF2ExportUserExtension` class in the add-on's
-  module (`pre_export_hook`, `post_export_hook`).
+- glTF: through its own extension point, the `glTF2_pre_export_callback` and
+  `glTF2_post_export_callback` functions of the add-on's module (glTF calls them around its
+  export on Blender 4.2 to 5.x).
 - FBX has none: its export operator's `execute` runs inside `exporting()` (wrapped while the
   add-on is enabled, unwrapped when it is disabled).
 
@@ -48,22 +49,21 @@ def _changed() -> None:
         fn()
 
 
-class glTF2ExportUserExtension:
+_gltf_scopes: list = []
+
+
+def glTF2_pre_export_callback(export_settings):
     """Found by the glTF exporter in every enabled add-on's module (see `__init__`)."""
+    if not export_settings.get("gltf_skins", True):
+        return
+    scope = exporting("glTF")
+    scope.__enter__()
+    _gltf_scopes.append(scope)
 
-    def __init__(self):
-        self._scope = None
 
-    def pre_export_hook(self, export_settings):
-        if not export_settings.get("gltf_skins", True):
-            return
-        self._scope = exporting("glTF")
-        self._scope.__enter__()
-
-    def post_export_hook(self, export_settings):
-        if self._scope is not None:
-            scope, self._scope = self._scope, None
-            scope.__exit__(None, None, None)
+def glTF2_post_export_callback(export_settings):
+    if _gltf_scopes:
+        _gltf_scopes.pop().__exit__(None, None, None)
 
 
 # -- operators without extension points --------------------------------------------------------

@@ -282,3 +282,25 @@ def reference_copy(obj, preserve_volume: bool):
     arm_mod.show_render = True
     arm_mod.use_deform_preserve_volume = preserve_volume
     return copy
+
+
+def perturbed(obj, relative: float = 2e-7):
+    """A copy of `obj` whose deformed mesh is moved by random offsets of `relative` times its
+    size, what two exact float32 skinnings differ by: how much a consumer amplifies that is the
+    precision a comparison of consumers can expect."""
+    copy = obj.copy()
+    copy.data = obj.data.copy()
+    bpy.context.scene.collection.objects.link(copy)
+    group = bpy.data.node_groups.new("float noise", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    i, o = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+    sp, rnd = group.nodes.new("GeometryNodeSetPosition"), group.nodes.new("FunctionNodeRandomValue")
+    rnd.data_type = "FLOAT_VECTOR"
+    amp = relative * float(np.linalg.norm(np.ptp(np.array([list(c) for c in obj.bound_box]), axis=0)))
+    rnd.inputs["Min"].default_value, rnd.inputs["Max"].default_value = (-amp,) * 3, (amp,) * 3
+    group.links.new(i.outputs[0], sp.inputs["Geometry"])
+    group.links.new(rnd.outputs["Value"], sp.inputs["Offset"])
+    group.links.new(sp.outputs[0], o.inputs[0])
+    copy.modifiers.new("float noise", "NODES").node_group = group
+    return copy

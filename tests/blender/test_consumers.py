@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from mathutils import Vector
 
-from dqtest import METHODS, REL_TOL, add_dq_skin, deviation, dq_skin_mods, evaluated_positions, import_character, status
+from dqtest import METHODS, REL_TOL, add_dq_skin, deviation, dq_skin_mods, evaluated_positions, import_character, perturbed, status
 
 # Where the reference character stands: at the same place (simulations in world space round
 # differently elsewhere; nothing here makes the two characters interact).
@@ -179,15 +179,25 @@ def test_particle_hair_on_the_character(dq_skin, assets, method):
 
 @pytest.mark.parametrize("method", METHODS)
 def test_shrinkwrap_onto_the_character(dq_skin, assets, method):
+    """Within 1e-4 of the Armature scene, or of twice what Shrinkwrap makes of a 2e-7 perturbation
+    of its target under Blender's own Armature modifier, where that is more (projections onto the
+    nearest surface jump at folds: on Blender 4.2 up to 1.2e-4)."""
     body, ref = characters(assets, method)
+    noisy = perturbed(ref)
     wraps = []
-    for obj in (body, ref):
+    for obj in (body, ref, noisy):
         centre = sum((obj.matrix_world @ Vector(c) for c in obj.bound_box), Vector()) / 8
         bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=centre)
         s = bpy.context.active_object
         s.modifiers.new("Shrinkwrap", "SHRINKWRAP").target = obj
         wraps.append(s)
-    play((1, 5, 10, 20, 30), lambda f: same(world_positions(wraps[0]), world_positions(wraps[1]), f"Shrinkwrap at frame {f}", SHRINKWRAP_TOL))
+
+    def check(f):
+        expected = world_positions(wraps[1])
+        amplified = deviation(world_positions(wraps[2]), expected)
+        same(world_positions(wraps[0]), expected, f"Shrinkwrap at frame {f}", max(SHRINKWRAP_TOL, 2 * amplified))
+
+    play((1, 5, 10, 20, 30), check)
     assert status(dq_skin, body).live
     assert moves((1, 20), wraps[0]) > 0.01
 

@@ -31,6 +31,7 @@ from dqtest import (
     evaluated_positions,
     get_input,
     import_character,
+    perturbed,
     select_only,
     status,
     twin,
@@ -325,22 +326,8 @@ def test_corrective_smooth_after_dq_skin(dq_skin, assets, method):
     ref.data = body.data.copy()
     bpy.context.scene.collection.objects.link(ref)
     next(m for m in ref.modifiers if m.type == "ARMATURE").use_deform_preserve_volume = method != "LINEAR"
-    noisy = ref.copy()
-    noisy.data = body.data.copy()
-    bpy.context.scene.collection.objects.link(noisy)
-    group = bpy.data.node_groups.new("2e-7 noise", "GeometryNodeTree")
-    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    i, o = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
-    sp, rnd = group.nodes.new("GeometryNodeSetPosition"), group.nodes.new("FunctionNodeRandomValue")
-    rnd.data_type = "FLOAT_VECTOR"
-    amp = 2e-7 * 1.75  # CesiumMan's diagonal is about 1.75
-    rnd.inputs["Min"].default_value, rnd.inputs["Max"].default_value = (-amp,) * 3, (amp,) * 3
-    group.links.new(i.outputs[0], sp.inputs["Geometry"])
-    group.links.new(rnd.outputs["Value"], sp.inputs["Offset"])
-    group.links.new(sp.outputs[0], o.inputs[0])
-    noisy.modifiers.new("noise", "NODES").node_group = group
-    noisy.modifiers.move(len(noisy.modifiers) - 1, 1)
+    noisy = perturbed(ref)
+    noisy.modifiers.move(len(noisy.modifiers) - 1, 1)  # the noise before Corrective Smooth
     add_dq_skin(body, method)
     ours, blenders = [], []
     for f in (5, 10, 20):

@@ -26,7 +26,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import dqskin
+from . import dqskin, interrupts
 from .progress import Progress
 
 SIGMA = 0.1  # the paper's default similarity width
@@ -66,11 +66,6 @@ def in_background() -> bool:
 
 
 _throttle = 0.0  # seconds to wait at each progress report (tests: a computation slow enough to cancel)
-
-
-def interrupted() -> bool:
-    """Replaced by the batch command line: whether Ctrl-C or SIGTERM came (stop computing)."""
-    return False
 
 
 _memory: OrderedDict[str, np.ndarray] = OrderedDict()
@@ -177,7 +172,7 @@ def compute(positions, triangles, influences, key: str, label: str = "", check=N
                 last[0] = step
         if check is not None:
             check()
-        return not interrupted()
+        return not interrupts.requested()  # Ctrl-C or SIGTERM in a batch command
 
     try:
         centers = dqskin.centers_of_rotation(positions, triangles, influences, sigma=SIGMA, progress=report)

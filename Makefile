@@ -2,11 +2,16 @@
 SHELL := /bin/bash
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
-PY := $(VENV)/bin/python
+# Windows venvs keep their programs in Scripts/ (the hosted runners of .github/workflows/).
+VENV_BIN := $(VENV)/$(if $(filter Windows_NT,$(OS)),Scripts,bin)
+PY := $(VENV_BIN)/python
+# The platform whose wheel and zip `make setup` builds and the Blender tests install: this
+# machine's (`make platforms` builds the others from Linux).
+PLATFORM ?= linux-x64
 STAMPS := .stamps
 RUST_SOURCES := $(shell find rust bench -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: setup build addon platforms test test-rust test-python test-blenders demo bench clean
+.PHONY: setup build addon platforms test test-rust test-python test-blender test-blenders demo bench clean
 
 setup: $(STAMPS)/deps $(STAMPS)/module $(STAMPS)/addon
 
@@ -19,44 +24,48 @@ $(STAMPS)/deps: requirements-dev.txt | $(PY)
 
 # The extension module, built in release mode into .venv (editable: python/ is used in place).
 $(STAMPS)/module: $(STAMPS)/deps $(RUST_SOURCES) python/dqskin/__init__.py
-	VIRTUAL_ENV=$(abspath $(VENV)) $(VENV)/bin/maturin develop --release --quiet
+	VIRTUAL_ENV=$(abspath $(VENV)) $(VENV_BIN)/maturin develop --release --quiet
 	@mkdir -p $(STAMPS) && touch $@
 
-# The Blender extension: the installable zip in dist/ (validated by Blender's own tool), then
-# installed and enabled in the repo's Blender user folder, .blender_user/, which the Blender
-# tests use through BLENDER_USER_RESOURCES, as users' scripts do.
-# The module in it is linked through zig for manylinux2014 (glibc 2.17), so the zip loads on
-# every Linux Blender runs on; addon/build.py refuses a module that needs a newer glibc.
+# The Blender extension: the compiled core as the wheel a release uploads to PyPI (linked through
+# zig for manylinux2014, glibc 2.17, so it loads on every Linux Blender runs on; addon/build.py
+# refuses a module that needs a newer glibc) in dist/, and the installable zip Blender's own
+# builder makes around it (validated by Blender's own tool); then the zip is installed and
+# enabled in the repo's Blender user folder, .blender_user/, which the Blender tests use through
+# BLENDER_USER_RESOURCES, as users' scripts do.
 ADDON_SOURCES := $(shell find addon -type f -not -path '*/__pycache__/*') $(wildcard python/dqskin/*.py python/dqskin/*.pyi)
 $(STAMPS)/addon: $(STAMPS)/module $(ADDON_SOURCES)
-	$(PY) addon/build_native.py linux-x64 --out target/wheels/linux-x64
-	$(PY) addon/build.py target/wheels/linux-x64/dqskin-*.whl --out dist
-	$(PY) addon/install.py dist/dq_skin-*-linux_x64.zip .blender_user
+	$(PY) addon/build_native.py $(PLATFORM) --out target/wheels/$(PLATFORM)
+	$(PY) addon/build.py target/wheels/$(PLATFORM)/dqskin-*.whl --out dist
+	$(PY) addon/install.py dist/dq_skin-*-$(subst -,_,$(PLATFORM)).zip .blender_user
 	@mkdir -p $(STAMPS) && touch $@
 
 addon: $(STAMPS)/addon
 
-# Zips for the platforms this machine can build but not run: Windows x64 and macOS (arm64,
-# x86-64). Their binaries are checked (imports, linked libraries, minimum OS) but they have never
-# been loaded in Blender, so they go to dist/unverified/ (see README, "Platforms").
+# The wheels and zips of the platforms this machine builds but cannot load in Blender: Windows
+# x64 and macOS (arm64, x86-64), beside the Linux ones in dist/. Their binaries are checked
+# (imports, exports, linked libraries, minimum OS).
 OTHER_PLATFORMS := windows-x64 macos-arm64 macos-x64
 platforms: setup
-	for p in $(OTHER_PLATFORMS); do \
-	  $(PY) addon/build_native.py $$p --out target/wheels/$$p && \
-	  $(PY) addon/build.py target/wheels/$$p/dqskin-*.whl --out dist/unverified || exit 1; \
-	done
+	for p in $(OTHER_PLATFORMS); do $(PY) addon/build_native.py $$p --out target/wheels/$$p || exit 1; done
+	$(PY) addon/build.py $(foreach p,linux-x64 $(OTHER_PLATFORMS),target/wheels/$(p)/dqskin-*.whl) --out dist
 
 build: setup
 
-test: setup test-rust test-python
+test: setup test-rust test-python test-blender
 
 # Property tests use a fixed seed here so that CI is deterministic; plain `cargo test` draws new
 # random cases every run (and replays rust/core/proptest-regressions/ first).
 test-rust:
 	PROPTEST_RNG_SEED=20261122 cargo test --workspace --release
 
+# The module's tests (on the editable module of .venv), then the Blender tests in their own
+# process, on the module of the installed extension zip (tests/blender/conftest.py).
 test-python: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q tests/python
+
+test-blender: setup
+	$(PY) -m pytest -q tests/blender
 
 # The Blender tests on the other Blender releases, each from its own bpy wheel and CPython in
 # .venvs/ (see tests/run_blenders.py); `make test` covers the pinned one.

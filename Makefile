@@ -11,7 +11,7 @@ PLATFORM ?= linux-x64
 STAMPS := .stamps
 RUST_SOURCES := $(shell find rust bench -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: setup build addon platforms test test-rust test-python test-blender test-blenders demo bench clean
+.PHONY: setup build addon platforms test test-rust test-python test-blender test-blenders test-windows demo bench clean
 
 setup: $(STAMPS)/deps $(STAMPS)/module $(STAMPS)/addon
 
@@ -44,7 +44,8 @@ addon: $(STAMPS)/addon
 
 # The wheels and zips of the platforms this machine builds but cannot load in Blender: Windows
 # x64 and macOS (arm64, x86-64), beside the Linux ones in dist/. Their binaries are checked
-# (imports, exports, linked libraries, minimum OS).
+# (imports, exports, linked libraries, minimum OS); the Windows core's tests run under Wine
+# (test-windows); hosted runners run everything natively (.github/workflows/platforms.yml).
 OTHER_PLATFORMS := windows-x64 macos-arm64 macos-x64
 platforms: setup
 	for p in $(OTHER_PLATFORMS); do $(PY) addon/build_native.py $$p --out target/wheels/$$p || exit 1; done
@@ -66,6 +67,30 @@ test-python: setup
 
 test-blender: setup
 	$(PY) -m pytest -q tests/blender
+
+# The Rust core's tests (every SIMD copy the CPU has, the thread pool, the centers precompute)
+# built for Windows (x86_64-pc-windows-gnu, linked by zig as the Windows module is) and run under
+# Wine: Debian's wine64, installed here if missing (as root, as CI runs).
+WINE = $(or $(shell command -v wine64),/usr/lib/wine/wine64)
+$(STAMPS)/wine:
+	command -v wine64 >/dev/null || test -x /usr/lib/wine/wine64 || \
+	  (apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends wine64)
+	@mkdir -p $(STAMPS) && touch $@
+
+# Wine 8 has no bcryptprimitives.dll, from which Rust's standard library takes random bytes on
+# Windows 10+ (which all ship it): the prefix gets a small one that forwards to bcrypt.dll.
+WINE_ENV = WINEPREFIX=$(abspath target/wine) WINEDEBUG=-all WINEDLLOVERRIDES="mscoree,mshtml="
+WINE_PRNG := target/wine/drive_c/windows/system32/bcryptprimitives.dll
+$(WINE_PRNG): tests/wine/bcryptprimitives.c $(STAMPS)/wine $(STAMPS)/deps
+	$(WINE_ENV) $(WINE) wineboot --init
+	$(PY) -m ziglang cc -target x86_64-windows-gnu -shared -O2 -o $@ $< -lbcrypt
+
+test-windows: $(STAMPS)/deps $(STAMPS)/wine $(WINE_PRNG)
+	rustup target list --installed | grep -qx x86_64-pc-windows-gnu || rustup target add x86_64-pc-windows-gnu
+	PATH=$(abspath addon/zig):$$PATH DQSKIN_ZIG_PYTHON=$(abspath $(PY)) \
+	CARGO_TARGET_X86_64_PC_WINDOWS_GNU_LINKER=$(abspath addon/zig/windows-gnu-cc) \
+	CARGO_TARGET_X86_64_PC_WINDOWS_GNU_RUNNER=$(WINE) \
+	$(WINE_ENV) PROPTEST_RNG_SEED=20261122 nice -n 10 cargo test -p dqskin-core --release --target x86_64-pc-windows-gnu
 
 # The Blender tests on the other Blender releases, each from its own bpy wheel and CPython in
 # .venvs/ (see tests/run_blenders.py); `make test` covers the pinned one.

@@ -13,7 +13,8 @@ const vm = require("vm");
 
 const SETTING_TYPES = { string: "string", int32: "number", float: "number", bool: "boolean" };
 // Flamenco Worker's commands (Usage → Jobs, Tasks, Commands → List of Commands) and the types of
-// their parameters.
+// their parameters. `exec` takes `exe` as in that page's example and every other command (its
+// table spells the parameter `exec`).
 const COMMANDS = {
     "exec": { exe: "string", args: "string[]" },
     "blender-render": { exe: "string", exeArgs: "string", argsBefore: "string[]", blendfile: "string", args: "string[]" },

@@ -53,7 +53,14 @@ def main(argv: list[str] | None = None) -> int:
         where = os.environ.get("BLENDER_USER_RESOURCES", "the default Blender user folder")
         print(f"{PROG}: the DQ Skin extension is not installed in {where}", file=sys.stderr)
         return 1
-    return extension.batch.main(argv, prog=PROG, launched=True)
+    code = extension.batch.main(argv, prog=PROG, launched=True)
+    if code >= 128:
+        # Stopped by a signal, its temporaries removed: skip Blender's teardown at exit (about
+        # half a second with bpy loaded), so that the command stops within a second.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
 
 
 if __name__ == "__main__":

@@ -27,7 +27,10 @@ VERSIONS = {
     "5.1.2": ("3.13", []),
     "5.2.3": ("3.13", []),
 }
-PYTEST = "pytest==9.2.0"
+# What the Blender tests need besides bpy, pinned as in requirements-dev.txt: pytest, and openjd-cli
+# (with PyYAML) for the farm template.
+TEST_TOOLS = [line.strip() for line in (ROOT / "requirements-dev.txt").read_text().splitlines()
+              if line.startswith(("pytest==", "openjd-cli=="))]
 
 
 def python_for(minor: str) -> str:
@@ -51,11 +54,13 @@ def prepare(version: str, minor: str, extras: list[str]) -> Path:
     venv = ROOT / ".venvs" / f"bpy-{version}"
     py = venv / "bin" / "python"
     stamp = venv / "bpy-installed"
-    if not stamp.exists():
-        shutil.rmtree(venv, ignore_errors=True)
-        run([python_for(minor), "-m", "venv", str(venv)])
-        run([str(py), "-m", "pip", "install", "--quiet", f"bpy=={version}", PYTEST, *extras])
-        stamp.write_text(version)
+    wanted = " ".join([version, *TEST_TOOLS, *extras])
+    if not stamp.exists() or stamp.read_text() != wanted:
+        if not stamp.exists():
+            shutil.rmtree(venv, ignore_errors=True)
+            run([python_for(minor), "-m", "venv", str(venv)])
+        run([str(py), "-m", "pip", "install", "--quiet", f"bpy=={version}", *TEST_TOOLS, *extras])
+        stamp.write_text(wanted)
     zips = sorted((ROOT / "dist").glob("dq_skin-*-linux_x64.zip"))
     if len(zips) != 1:
         raise SystemExit(f"expected one Linux extension zip in dist/, found {zips}: run `make addon` first")

@@ -2,11 +2,16 @@
 SHELL := /bin/bash
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
-PY := $(VENV)/bin/python
+# Windows venvs keep their programs in Scripts/ (the hosted runners of .github/workflows/).
+VENV_BIN := $(VENV)/$(if $(filter Windows_NT,$(OS)),Scripts,bin)
+PY := $(VENV_BIN)/python
+# The platform whose wheel and zip `make setup` builds and the Blender tests install: this
+# machine's (`make platforms` builds the others from Linux).
+PLATFORM ?= linux-x64
 STAMPS := .stamps
 RUST_SOURCES := $(shell find rust bench -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: setup build addon platforms test test-rust test-python test-blenders demo bench clean
+.PHONY: setup build addon platforms test test-rust test-python test-blender test-blenders test-windows demo bench clean
 
 setup: $(STAMPS)/deps $(STAMPS)/module $(STAMPS)/addon
 
@@ -19,44 +24,73 @@ $(STAMPS)/deps: requirements-dev.txt | $(PY)
 
 # The extension module, built in release mode into .venv (editable: python/ is used in place).
 $(STAMPS)/module: $(STAMPS)/deps $(RUST_SOURCES) python/dqskin/__init__.py
-	VIRTUAL_ENV=$(abspath $(VENV)) $(VENV)/bin/maturin develop --release --quiet
+	VIRTUAL_ENV=$(abspath $(VENV)) $(VENV_BIN)/maturin develop --release --quiet
 	@mkdir -p $(STAMPS) && touch $@
 
-# The Blender extension: the installable zip in dist/ (validated by Blender's own tool), then
-# installed and enabled in the repo's Blender user folder, .blender_user/, which the Blender
-# tests use through BLENDER_USER_RESOURCES, as users' scripts do.
-# The module in it is linked through zig for manylinux2014 (glibc 2.17), so the zip loads on
-# every Linux Blender runs on; addon/build.py refuses a module that needs a newer glibc.
+# The Blender extension: the compiled core as the wheel a release uploads to PyPI (linked through
+# zig for manylinux2014, glibc 2.17, so it loads on every Linux Blender runs on; addon/build.py
+# refuses a module that needs a newer glibc) in dist/, and the installable zip Blender's own
+# builder makes around it (validated by Blender's own tool); then the zip is installed and
+# enabled in the repo's Blender user folder, .blender_user/, which the Blender tests use through
+# BLENDER_USER_RESOURCES, as users' scripts do.
 ADDON_SOURCES := $(shell find addon -type f -not -path '*/__pycache__/*') $(wildcard python/dqskin/*.py python/dqskin/*.pyi)
 $(STAMPS)/addon: $(STAMPS)/module $(ADDON_SOURCES)
-	$(PY) addon/build_native.py linux-x64 --out target/wheels/linux-x64
-	$(PY) addon/build.py target/wheels/linux-x64/dqskin-*.whl --out dist
-	$(PY) addon/install.py dist/dq_skin-*-linux_x64.zip .blender_user
+	$(PY) addon/build_native.py $(PLATFORM) --out target/wheels/$(PLATFORM)
+	$(PY) addon/build.py target/wheels/$(PLATFORM)/dqskin-*.whl --out dist
+	$(PY) addon/install.py dist/dq_skin-*-$(subst -,_,$(PLATFORM)).zip .blender_user
 	@mkdir -p $(STAMPS) && touch $@
 
 addon: $(STAMPS)/addon
 
-# Zips for the platforms this machine can build but not run: Windows x64 and macOS (arm64,
-# x86-64). Their binaries are checked (imports, linked libraries, minimum OS) but they have never
-# been loaded in Blender, so they go to dist/unverified/ (see README, "Platforms").
+# The wheels and zips of the platforms this machine builds but cannot load in Blender: Windows
+# x64 and macOS (arm64, x86-64), beside the Linux ones in dist/. Their binaries are checked
+# (imports, exports, linked libraries, minimum OS); the Windows core's tests run under Wine
+# (test-windows); hosted runners run everything natively (.github/workflows/platforms.yml).
 OTHER_PLATFORMS := windows-x64 macos-arm64 macos-x64
 platforms: setup
-	for p in $(OTHER_PLATFORMS); do \
-	  $(PY) addon/build_native.py $$p --out target/wheels/$$p && \
-	  $(PY) addon/build.py target/wheels/$$p/dqskin-*.whl --out dist/unverified || exit 1; \
-	done
+	for p in $(OTHER_PLATFORMS); do $(PY) addon/build_native.py $$p --out target/wheels/$$p || exit 1; done
+	$(PY) addon/build.py $(foreach p,linux-x64 $(OTHER_PLATFORMS),target/wheels/$(p)/dqskin-*.whl) --out dist
 
 build: setup
 
-test: setup test-rust test-python
+test: setup test-rust test-python test-blender
 
 # Property tests use a fixed seed here so that CI is deterministic; plain `cargo test` draws new
 # random cases every run (and replays rust/core/proptest-regressions/ first).
 test-rust:
 	PROPTEST_RNG_SEED=20261122 cargo test --workspace --release
 
+# The module's tests (on the editable module of .venv), then the Blender tests in their own
+# process, on the module of the installed extension zip (tests/blender/conftest.py).
 test-python: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q tests/python
+
+test-blender: setup
+	$(PY) -m pytest -q tests/blender
+
+# The Rust core's tests (every SIMD copy the CPU has, the thread pool, the centers precompute)
+# built for Windows (x86_64-pc-windows-gnu, linked by zig as the Windows module is) and run under
+# Wine: Debian's wine64, installed here if missing (as root, as CI runs).
+WINE = $(or $(shell command -v wine64),/usr/lib/wine/wine64)
+$(STAMPS)/wine:
+	command -v wine64 >/dev/null || test -x /usr/lib/wine/wine64 || \
+	  (apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends wine64)
+	@mkdir -p $(STAMPS) && touch $@
+
+# Wine 8 has no bcryptprimitives.dll, from which Rust's standard library takes random bytes on
+# Windows 10+ (which all ship it): the prefix gets a small one that forwards to bcrypt.dll.
+WINE_ENV = WINEPREFIX=$(abspath target/wine) WINEDEBUG=-all WINEDLLOVERRIDES="mscoree,mshtml="
+WINE_PRNG := target/wine/drive_c/windows/system32/bcryptprimitives.dll
+$(WINE_PRNG): tests/wine/bcryptprimitives.c $(STAMPS)/wine $(STAMPS)/deps
+	$(WINE_ENV) $(WINE) wineboot --init
+	$(PY) -m ziglang cc -target x86_64-windows-gnu -shared -O2 -o $@ $< -lbcrypt
+
+test-windows: $(STAMPS)/deps $(STAMPS)/wine $(WINE_PRNG)
+	rustup target list --installed | grep -qx x86_64-pc-windows-gnu || rustup target add x86_64-pc-windows-gnu
+	PATH=$(abspath addon/zig):$$PATH DQSKIN_ZIG_PYTHON=$(abspath $(PY)) \
+	CARGO_TARGET_X86_64_PC_WINDOWS_GNU_LINKER=$(abspath addon/zig/windows-gnu-cc) \
+	CARGO_TARGET_X86_64_PC_WINDOWS_GNU_RUNNER=$(WINE) \
+	$(WINE_ENV) PROPTEST_RNG_SEED=20261122 nice -n 10 cargo test -p dqskin-core --release --target x86_64-pc-windows-gnu
 
 # The Blender tests on the other Blender releases, each from its own bpy wheel and CPython in
 # .venvs/ (see tests/run_blenders.py); `make test` covers the pinned one.

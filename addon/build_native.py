@@ -1,13 +1,15 @@
-"""Builds the compiled dqskin wheel for one Blender platform, from this Linux machine.
+"""Builds the compiled dqskin wheel for one Blender platform: the file a release uploads to PyPI.
 
-Every platform links through zig (the `ziglang` package, pinned in requirements-dev.txt), so no
-other toolchain is needed:
+From Linux every platform links through zig (the `ziglang` package, pinned in
+requirements-dev.txt), so no other toolchain is needed:
 - linux-x64: manylinux2014 (glibc 2.17), older than Blender's own manylinux_2_28, so the module
   loads wherever Blender does (a plain build would need this machine's glibc);
 - windows-x64: Rust's GNU target, linked by zig against its MinGW-w64 UCRT runtime, with an
   import library for python3.dll (the stable ABI);
 - macos-arm64, macos-x64: zig's macOS linker (the module looks Python up in the process).
-The Rust standard library of a cross target comes from `rustup target add`.
+The Rust standard library of a cross target comes from `rustup target add`. On a Windows or
+macOS machine (the hosted runners of .github/workflows/platforms.yml) its own platform is built
+natively, with the system's linker.
 
 Usage: python addon/build_native.py PLATFORM --out DIR
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import platform as host
 import shutil
 import subprocess
 import sys
@@ -31,6 +34,13 @@ TARGETS = {
 }
 
 
+def native_platform() -> str:
+    """This machine's Blender platform name (linux-x64, windows-x64, macos-arm64, macos-x64)."""
+    system = {"Linux": "linux", "Windows": "windows", "Darwin": "macos"}.get(host.system(), host.system().lower())
+    machine = {"x86_64": "x64", "amd64": "x64", "arm64": "arm64", "aarch64": "arm64"}.get(host.machine().lower(), host.machine())
+    return f"{system}-{machine}"
+
+
 def ensure_target(triple: str) -> None:
     installed = subprocess.run(["rustup", "target", "list", "--installed"], capture_output=True, text=True, check=True)
     if triple not in installed.stdout.split():
@@ -38,13 +48,18 @@ def ensure_target(triple: str) -> None:
 
 
 def build(platform: str, out: Path) -> Path:
-    triple = TARGETS[platform]
+    native = platform == native_platform() and platform != "linux-x64"
+    # On Windows itself: the MSVC target, its C runtime linked in (no VCRUNTIME140.dll to import).
+    triple = "x86_64-pc-windows-msvc" if native and platform == "windows-x64" else TARGETS[platform]
     ensure_target(triple)
     maturin = shutil.which("maturin", path=str(Path(sys.executable).parent)) or "maturin"
     command = [maturin, "build", "--release", "--quiet", "--target", triple, "--out", str(out)]
     env = dict(os.environ, VIRTUAL_ENV=str(Path(sys.executable).parent.parent))
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
-    if platform == "windows-x64":
+    if native:
+        if platform == "windows-x64":
+            env["RUSTFLAGS"] = f"{env.get('RUSTFLAGS', '')} -C target-feature=+crt-static".strip()
+    elif platform == "windows-x64":
         # maturin's own zig mode writes a wrong export for a dotted module name (dqskin._dqskin);
         # zig as a plain linker with these wrappers gets it right.
         env["DQSKIN_ZIG_PYTHON"] = sys.executable

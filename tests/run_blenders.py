@@ -1,10 +1,10 @@
 """`make test-blenders`: the Blender tests on other Blender releases than the pinned one.
 
 Each release gets its own virtual environment, `.venvs/bpy-VERSION/`, with its own CPython (3.11
-up to Blender 5.0, 3.13 from 5.1), its `bpy` wheel from PyPI, the module's wheel from
-`target/wheels/linux-x64/` and the extension zip from `dist/` installed into its own Blender user folder
-(`.venvs/bpy-VERSION/user`); then `tests/blender` runs there with DQSKIN_BLENDER_USER pointing at
-that folder. Usage: python tests/run_blenders.py [VERSION ...] (default: all of VERSIONS).
+up to Blender 5.0, 3.13 from 5.1) and its `bpy` wheel from PyPI, and the Linux extension zip
+from `dist/` installed into its own Blender user folder (`.venvs/bpy-VERSION/user`), which puts
+the zip's `dqskin` wheel into that folder's extension site-packages; then `tests/blender` runs
+there, on that module, with DQSKIN_BLENDER_USER pointing at the folder. Usage: python tests/run_blenders.py [VERSION ...] (default: all of VERSIONS).
 """
 
 from __future__ import annotations
@@ -27,7 +27,10 @@ VERSIONS = {
     "5.1.2": ("3.13", []),
     "5.2.3": ("3.13", []),
 }
-PYTEST = "pytest==9.2.0"
+# What the Blender tests need besides bpy, pinned as in requirements-dev.txt: pytest, and openjd-cli
+# (with PyYAML) for the farm template.
+TEST_TOOLS = [line.strip() for line in (ROOT / "requirements-dev.txt").read_text().splitlines()
+              if line.startswith(("pytest==", "openjd-cli=="))]
 
 
 def python_for(minor: str) -> str:
@@ -51,17 +54,19 @@ def prepare(version: str, minor: str, extras: list[str]) -> Path:
     venv = ROOT / ".venvs" / f"bpy-{version}"
     py = venv / "bin" / "python"
     stamp = venv / "bpy-installed"
-    if not stamp.exists():
-        shutil.rmtree(venv, ignore_errors=True)
-        run([python_for(minor), "-m", "venv", str(venv)])
-        run([str(py), "-m", "pip", "install", "--quiet", f"bpy=={version}", PYTEST, *extras])
-        stamp.write_text(version)
-    wheels = sorted((ROOT / "target" / "wheels" / "linux-x64").glob("dqskin-*.whl"))
-    zips = sorted((ROOT / "dist").glob("dq_skin-*.zip"))
-    if not wheels or not zips:
-        raise SystemExit("no module wheel or extension zip: run `make addon` first")
-    run([str(py), "-m", "pip", "install", "--quiet", "--force-reinstall", "--no-deps", str(wheels[-1])])
-    run([str(py), str(ROOT / "addon" / "install.py"), str(zips[-1]), str(venv / "user")], cwd=venv)
+    wanted = " ".join([version, *TEST_TOOLS, *extras])
+    if not stamp.exists() or stamp.read_text() != wanted:
+        if not stamp.exists():
+            shutil.rmtree(venv, ignore_errors=True)
+            run([python_for(minor), "-m", "venv", str(venv)])
+        run([str(py), "-m", "pip", "install", "--quiet", f"bpy=={version}", *TEST_TOOLS, *extras])
+        stamp.write_text(wanted)
+    zips = sorted((ROOT / "dist").glob("dq_skin-*-linux_x64.zip"))
+    if len(zips) != 1:
+        raise SystemExit(f"expected one Linux extension zip in dist/, found {zips}: run `make addon` first")
+    # A dqskin of its own in the venv (as earlier runs installed) would only be shadowed; take it out.
+    run([str(py), "-m", "pip", "uninstall", "--quiet", "--yes", "dqskin"])
+    run([str(py), str(ROOT / "addon" / "install.py"), str(zips[0]), str(venv / "user")], cwd=venv)
     return venv
 
 

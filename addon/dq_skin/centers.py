@@ -25,7 +25,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import dqskin
+from . import dqskin, interrupts
 from .progress import Progress
 
 SIGMA = 0.1  # the paper's default similarity width
@@ -62,11 +62,6 @@ class Job:
 def in_background() -> bool:
     """No interactive session (command line, render farm): compute on the spot."""
     return bpy.app.background
-
-
-def interrupted() -> bool:
-    """Replaced by the batch command line: whether Ctrl-C or SIGTERM came (stop computing)."""
-    return False
 
 
 _memory: OrderedDict[str, np.ndarray] = OrderedDict()
@@ -171,7 +166,7 @@ def compute(positions, triangles, influences, key: str, label: str = "", check=N
                 last[0] = step
         if check is not None:
             check()
-        return not interrupted()
+        return not interrupts.requested()  # Ctrl-C or SIGTERM in a batch command
 
     try:
         centers = dqskin.centers_of_rotation(positions, triangles, influences, sigma=SIGMA, progress=report)

@@ -1,13 +1,13 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Blender's own command line: `blender -b --command dq_skin compare|bake|apply|merge ...` runs the
-batch commands of `python -m dqskin.blender` (bundled in the extension), with the same options,
-exit codes and atomic writes."""
+batch commands (`batch`), with the same options, exit codes and atomic writes as
+`python -m dqskin.blender`."""
 
 from __future__ import annotations
 
 import bpy
 
-from .dqskin import blender as batch
+from . import batch
 
 COMMAND = "dq_skin"
 _registered = []

@@ -4,11 +4,19 @@
 here BLENDER_USER_RESOURCES points there before bpy is imported, and the extension is enabled the
 way any installed extension is: `addon_utils.enable("bl_ext.user_default.dq_skin")`. Every test
 starts from an empty factory scene.
+
+The compiled core these tests run is the one from the zip: the `dqskin` wheel that Blender
+installed into the user folder's extension site-packages. Any other `dqskin` on the path (the
+editable one `maturin develop` puts in .venv for tests/python) is taken off `sys.path` before
+`bpy` is imported, and the extension's site-packages goes first on the PYTHONPATH of every
+process the tests start (`python -m dqskin.blender`, scripts opening saved files), so none of
+them can pick up another copy. test_packaging.py checks which file was imported.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pytest
@@ -18,6 +26,16 @@ ROOT = Path(__file__).resolve().parents[2]
 # tests of other Blender versions use their own, see the Makefile's test-blenders).
 USER = Path(os.environ.get("DQSKIN_BLENDER_USER", ROOT / ".blender_user"))
 ASSETS = ROOT.parent / "shared" / "assets"
+# Where Blender puts the wheels of installed extensions (addon_utils: `.local/lib/pythonX.Y/site-packages`).
+EXTENSION_SITE_PACKAGES = USER / "extensions" / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+
+if "dqskin" in sys.modules:
+    raise pytest.UsageError(
+        f"dqskin was imported from {sys.modules['dqskin'].__file__} before the Blender tests: run tests/blender in its "
+        "own pytest process (make test does), so that they use the module of the installed extension"
+    )
+sys.path[:] = [p for p in sys.path if not (Path(p or ".") / "dqskin" / "__init__.py").is_file()]
+os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(EXTENSION_SITE_PACKAGES), os.environ.get("PYTHONPATH")]))
 os.environ["BLENDER_USER_RESOURCES"] = str(USER)
 
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)

@@ -139,3 +139,19 @@ def test_long_commands_report_progress(tmp_path):
     assert r.returncode == 0 and "Adding DQ Skin to 1 object(s) [" in r.stderr and "2/2" in r.stderr, r.stderr
     r = run("compare", "--out", str(tmp_path / "c"), "--no-render", "--frames", "1-4")
     assert r.returncode == 0 and "Comparing 3 row(s) over 4 frame(s) [" in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("args, option", [
+    (["compare", "--width", "0"], "--width"),
+    (["compare", "--height", "-5"], "--height"),
+    (["compare", "--width", "wide"], "--width"),
+    (["compare", "--samples", "0"], "--samples"),
+    (["compare", "--frames", "5-1"], "--frames"),
+    (["compare", "--frames", "1-x"], "--frames"),
+    (["bake", "shot.blend", "--object", "A", "--out", "x.pc2", "--frames", "1-99999999"], "--frames"),
+], ids=lambda v: " ".join(v) if isinstance(v, list) else v)
+def test_out_of_range_options_are_usage_errors_naming_the_option(args, option, tmp_path):
+    r = run(*args, cwd=tmp_path)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert f"error: argument {option}:" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not list(tmp_path.iterdir())  # nothing rendered or written

@@ -20,7 +20,7 @@ const JOB_TYPE = {
         { key: "chunk_size", type: "int32", default: 12, propargs: { min: 1 },
           description: "At most this many frames per bake task" },
         { key: "method", type: "string", default: "AUTO",
-          choices: ["AUTO", "LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS"],
+          choices: ["AUTO", "LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS_OF_ROTATION"],
           description: "AUTO keeps the object's DQ Skin method" },
         { key: "output", type: "string", subtype: "file_path", required: true,
           description: "The merged PC2 cache (chunks go to OUTPUT.chunks/)" },

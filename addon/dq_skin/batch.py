@@ -35,13 +35,13 @@ from pathlib import Path
 
 import bpy
 
-from . import bake, compare, interrupts, modifier
+from . import bake, compare, interrupts, modifier, settings
 from .dqskin import pc2
 from .interrupts import check, deferred
 from .progress import Progress
 
 LAUNCHER = "python -m dqskin.blender"
-METHODS = ["AUTO", "LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS"]
+METHODS = ["AUTO", *settings.BY_NAME]  # the operators' method values (`dqskin.Method` names)
 # Blender's own limits: RenderSettings.resolution_x/y, Cycles' samples, MINAFRAME..MAXFRAME.
 PICTURE_SIZE = (4, 65536)
 SAMPLES = (1, 16777216)

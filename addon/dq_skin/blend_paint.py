@@ -8,7 +8,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from . import meshdata, modifier, nodes, operators, settings
+from . import dqskin, meshdata, nodes, operators, settings
 
 GROUP_NAME = "DQ Skin Blend"
 
@@ -50,7 +50,7 @@ class OBJECT_OT_dq_skin_paint_blend(operators.ActiveMeshOperator):
         mod = operators._named_modifier(self, obj)
         if mod is None:
             return {"CANCELLED"}
-        if settings.read(mod).method.kernel != "blend":
+        if settings.read(mod).method != dqskin.Method.BLEND:
             self.report({"ERROR"}, f"{mod.name} uses {nodes.get_method(mod)}: choose the Blend method to paint a blend")
             return {"CANCELLED"}
         group = blend_group(obj, mod)

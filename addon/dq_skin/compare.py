@@ -21,7 +21,7 @@ VARIANTS = (
     ("DQ Skin Linear", "LINEAR", None),
     ("DQ Skin Dual Quaternion", "DUAL_QUATERNION", None),
     ("DQ Skin Blend", "BLEND", None),
-    ("DQ Skin Optimized Centers", "CENTERS", None),
+    ("DQ Skin Optimized Centers", "CENTERS_OF_ROTATION", None),
 )
 FRAMES = (1, 48)
 

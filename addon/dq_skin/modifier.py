@@ -173,7 +173,7 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: str, 
 
 def _instead(s: settings.Settings) -> str:
     """What shows instead of a method Blender does not have."""
-    if s.method.kernel in settings.BLENDER_METHODS:
+    if s.method in settings.BLENDER_METHODS:
         return ""
     return f" ({s.method.label} shows as Preserve Volume meanwhile)"
 
@@ -330,7 +330,7 @@ def _quick(obj, mod, st: ModifierState, ctx: Context):
     old = out.written
     if raw == old.pose:
         return None  # the pose did not change: the result is already this
-    if s.method.kernel == "centers_of_rotation" and st.binding.centers is None:
+    if s.method == dqskin.Method.CENTERS_OF_ROTATION and st.binding.centers is None:
         return False
     key = FrameKey(old.settings, old.source, raw, old.spaces, old.result, old.mesh_version)
     job = out.job  # the last full evaluation's: only the pose changed
@@ -459,7 +459,7 @@ def _binding(obj, arm, st: ModifierState, s: settings.Settings, data, ctx: Conte
         cache.key = key
         st.output.invalidate()
     st.needs_effective = s.use_envelopes or cache.uses_envelopes or cache.uses_bbones
-    if s.method.kernel == "centers_of_rotation":
+    if s.method == dqskin.Method.CENTERS_OF_ROTATION:
         _centers(obj, st, data, cache.binding, ctx)
     return cache.binding
 
@@ -467,21 +467,21 @@ def _binding(obj, arm, st: ModifierState, s: settings.Settings, data, ctx: Conte
 def _job(st: ModifierState, s: settings.Settings, positions, influences, deform, rest, premat, postmat) -> dqskin.SkinJob:
     """The `dqskin.SkinJob` of one modifier: its settings, kept data and output (checked here:
     a bad input, a bone scaled to NaN say, is this modifier's error, shown on its panel)."""
-    kernel = s.method.kernel
+    method = s.method
     try:
         return dqskin.SkinJob(
             positions,
             influences,
             np.ascontiguousarray(deform),
             rest,
-            method=kernel,
+            method=method,
             premat=premat,
             postmat=postmat,
             mask=st.binding.binding.mask,
-            blend=st.binding.blend if kernel == "blend" else None,
+            blend=st.binding.blend if method == dqskin.Method.BLEND else None,
             blend_factor=s.blend_factor,
             out=st.output.buffer,
-            centers=st.binding.centers if kernel == "centers_of_rotation" else None,
+            centers=st.binding.centers if method == dqskin.Method.CENTERS_OF_ROTATION else None,
         )
     except (TypeError, ValueError) as e:
         raise SkinError(str(e)) from None

@@ -11,9 +11,8 @@ from .state import STATES
 
 METHOD_ITEMS = (
     ("AUTO", "From Armature Modifier", "Dual Quaternion if the Armature modifier's Preserve Volume is on, else Linear"),
-    *((m.id, m.label, m.description) for m in settings.METHODS),
+    *((m.name, m.label, settings.DESCRIPTIONS[m]) for m in settings.METHODS),
 )
-MENU_NAME = {m.id: m.label for m in settings.METHODS}
 
 
 def set_input(mod, name: str, value) -> None:
@@ -56,7 +55,7 @@ def add(obj, source, method: str = "AUTO", made: dict | None = None):
         method = "DUAL_QUATERNION" if source.use_deform_preserve_volume else "LINEAR"
     nodes.put_companion(mod, {"name": source.name, "original": companion.snapshot(source), **(made or {})})
     nodes.put(mod, "Armature", source.object)
-    nodes.put_method(mod, MENU_NAME[method])
+    nodes.put_method(mod, settings.BY_NAME[method].label)
     nodes.put(mod, "Use Vertex Groups", source.use_vertex_groups)
     nodes.put(mod, "Use Envelopes", source.use_bone_envelopes)
     nodes.put_attribute(mod, "Mask", source.vertex_group)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import blend_paint, centers, handlers, modifier, nodes, settings
+from . import blend_paint, centers, dqskin, handlers, modifier, nodes, settings
 from .state import Mode
 
 
@@ -66,7 +66,7 @@ def _tools(box, obj, mod) -> None:
     if status is not None and status.compared:
         box.label(text=status.compared, icon="DRIVER_DISTANCE")
     try:
-        is_blend = settings.read(mod).method.kernel == "blend"
+        is_blend = settings.read(mod).method == dqskin.Method.BLEND
     except Exception:  # a damaged modifier should not break the panel
         is_blend = False
     if is_blend:

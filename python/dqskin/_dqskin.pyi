@@ -174,6 +174,12 @@ class Method:
     @property
     def label(self) -> str:
         """The name in Blender's menu: "Linear", "Dual Quaternion", "Blend", "Optimized Centers"."""
+    @property
+    def name(self) -> str:
+        """The member's name ("LINEAR", ...), what Blender's operators and the command line take."""
+    @staticmethod
+    def members() -> list[Method]:
+        """Every method, in the order of Blender's menu."""
     def __eq__(self, other: object) -> bool: ...
     def __hash__(self) -> int: ...
 

@@ -376,7 +376,7 @@ def rigify_folder(tmp_path_factory):
     return tmp_path_factory.mktemp("rigify")
 
 
-@pytest.mark.parametrize("method", [*METHODS, "BLEND", "CENTERS"])
+@pytest.mark.parametrize("method", [*METHODS, "BLEND", "CENTERS_OF_ROTATION"])
 def test_rigify_character_in_every_method(dq_skin, rigify_folder, method):
     body, rig, _ = open_rigify_character(rigify_folder)
     bones, bbones = bbone_counts(rig)

@@ -124,7 +124,7 @@ def test_settings_come_from_the_armature_modifier(dq_skin):
     arm_mod.use_deform_preserve_volume = False
     mod = add_dq_skin(obj)
     s = dq_skin.settings.read(mod)
-    assert (s.armature, s.method.kernel, s.mask_group, s.invert_mask) == (arm, "linear", "Mask", True)
+    assert (s.armature, s.method.name, s.mask_group, s.invert_mask) == (arm, "LINEAR", "Mask", True)
     assert list(obj.modifiers).index(mod) == 0  # where the Armature modifier was
 
 
@@ -178,8 +178,8 @@ def test_several_objects_keep_their_own_settings_through_save_and_load(dq_skin, 
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     a, b = (bpy.data.objects[n] for n in names)
-    methods = [dq_skin.settings.read(next(m for m in o.modifiers if m.type == "NODES")).method.kernel for o in (a, b)]
-    assert methods == ["linear", "dual_quaternion"]
+    methods = [dq_skin.settings.read(next(m for m in o.modifiers if m.type == "NODES")).method.name for o in (a, b)]
+    assert methods == ["LINEAR", "DUAL_QUATERNION"]
     bpy.context.scene.frame_set(7)
     for obj, pv in ((a, False), (b, True)):
         reference = reference_copy(obj, pv)

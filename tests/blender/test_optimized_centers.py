@@ -47,7 +47,7 @@ def counted(dq_skin, monkeypatch):
 def test_modifier_equals_the_module_on_a_character(dq_skin, assets):
     obj, arm_mod = import_character(assets / "CesiumMan.glb")
     arm = arm_mod.object
-    add_dq_skin(obj, "CENTERS")
+    add_dq_skin(obj, "CENTERS_OF_ROTATION")
     mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
     assert dq_skin.nodes.get_method(mod) == "Optimized Centers"
     for frame in (1, 12, 30):
@@ -61,7 +61,7 @@ def test_modifier_equals_the_module_on_a_character(dq_skin, assets):
 def test_rest_pose_is_unchanged_and_translations_are_linear(dq_skin):
     obj, arm, _ = rig_tube(bones=3, length=6.0)
     rest = evaluated_positions(obj)
-    add_dq_skin(obj, "CENTERS")
+    add_dq_skin(obj, "CENTERS_OF_ROTATION")
     bpy.context.scene.frame_set(1)
     assert deviation(evaluated_positions(obj), rest) <= REL_TOL
     # Moving bones without rotating them: exactly what linear blend skinning does.
@@ -108,7 +108,7 @@ def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_ski
     monkeypatch.setattr(dq_skin.centers, "_folder", lambda: folder)  # a cache of its own
     obj, arm_mod = import_character(assets / "CesiumMan.glb")
     dq_skin.centers._memory.clear()
-    add_dq_skin(obj, "CENTERS")
+    add_dq_skin(obj, "CENTERS_OF_ROTATION")
     bpy.context.scene.frame_set(5)
     evaluated_positions(obj)
     first = len(counted)
@@ -162,7 +162,7 @@ def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancell
     obj, arm, _ = rig_tube(rings=80, segments=48, bones=3, length=6.0)
     monkeypatch.setattr(centers, "_folder", lambda: None)  # not found on disk either
     slow_down(monkeypatch, centers, 0.01)  # about a second: still running when checked
-    add_dq_skin(obj, "CENTERS")
+    add_dq_skin(obj, "CENTERS_OF_ROTATION")
     arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), math.radians(90))
     bpy.context.view_layer.update()
     mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]

@@ -102,4 +102,22 @@ impl PyMethod {
     fn label(&self) -> &'static str {
         self.label_text()
     }
+
+    /// The member's name: "LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS_OF_ROTATION" (what
+    /// the Blender operators and the command line take).
+    #[getter]
+    fn name(&self) -> &'static str {
+        match self {
+            Self::Linear => "LINEAR",
+            Self::DualQuaternion => "DUAL_QUATERNION",
+            Self::Blend => "BLEND",
+            Self::CentersOfRotation => "CENTERS_OF_ROTATION",
+        }
+    }
+
+    /// Every method, in the order of Blender's menu.
+    #[staticmethod]
+    fn members() -> Vec<PyMethod> {
+        ALL.to_vec()
+    }
 }

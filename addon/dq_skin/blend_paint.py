@@ -34,7 +34,7 @@ def describe(obj, mod) -> str:
     return f"Blend: vertex group '{group.name}', {lo:.2f} to {hi:.2f} Dual Quaternion, times {factor:.2f}"
 
 
-class OBJECT_OT_dq_skin_paint_blend(operators.ActiveMeshOperator):
+class OBJECT_OT_dq_skin_paint_blend(operators.ModifierOperator):
     """Paint where the Blend method uses Dual Quaternion (white) or Linear (black): selects the
     vertex group that drives the blend (creating one from the Blend Factor if there is none) and
     enters Weight Paint"""
@@ -43,11 +43,8 @@ class OBJECT_OT_dq_skin_paint_blend(operators.ActiveMeshOperator):
     bl_label = "Paint Blend"
     bl_options = {"REGISTER", "UNDO"}
 
-    modifier: bpy.props.StringProperty(name="Modifier", description="Name of the DQ Skin modifier (default: the first)")
-
     def execute(self, context):
-        obj = context.active_object
-        mod = operators._named_modifier(self, obj)
+        obj, mod = self.target(context)
         if mod is None:
             return {"CANCELLED"}
         if settings.read(mod).method != dqskin.Method.BLEND:

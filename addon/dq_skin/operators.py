@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import bpy
 
-from . import centers, companion, compat, modifier, nodes, results, settings
-from .registry import REGISTRY
-from .state import STATES
+from . import centers, companion, compat, modifier, nodes, settings
+from .registry import REGISTRY, ModInfo
 
 METHOD_ITEMS = (
     ("AUTO", "From Armature Modifier", "Dual Quaternion if the Armature modifier's Preserve Volume is on, else Linear"),
@@ -157,66 +156,56 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
 
 
 def remove_modifier(obj, mod, applied: bool = False) -> None:
-    """Removes a DQ Skin modifier and its result, and puts its companion Armature modifier back
-    as it was before `dq_skin_add` (or, with `applied`, removes it too: its deformation is in
-    the mesh now)."""
-    info = nodes.get_companion(mod) if nodes.version_of(mod.node_group) == nodes.VERSION else {}
-    c = companion.find(obj, mod, info) if info else None
+    """Removes a DQ Skin modifier and everything of it (see `Registry.forget_modifier`): its
+    companion is put back as it was before `dq_skin_add`, or, with `applied`, removed too."""
+    current = nodes.version_of(mod.node_group) == nodes.VERSION
+    info = ModInfo(mod.name, nodes.get_companion(mod) if current else {}, modifier.capture_name(mod))
     uid = compat.modifier_uid(mod)
-    st = STATES.pop(obj.session_uid, uid)
-    # Its own results only: a copied modifier may still point at another modifier's.
-    ours = [r for r in (nodes.get(mod, "Result") if info else None, st.output.result if st else None) if results.owned_by(r, obj, mod)]
-    attr = obj.data.attributes.get(modifier.capture_name(mod))
     obj.modifiers.remove(mod)
-    if attr is not None:
-        obj.data.attributes.remove(attr)
-    if c is not None:
-        if applied or info.get("created"):
-            obj.modifiers.remove(c)
-        else:
-            companion.restore(c, info.get("original", {}))
-    if info.get("parent_type") and obj.parent is not None and not applied:
-        obj.parent_type = info["parent_type"]
-    for r in {r.session_uid: r for r in ours}.values():
-        results.remove(r)
+    REGISTRY.forget_modifier(obj, uid, info, applied)
     rec = REGISTRY.records.get(obj.session_uid)
     if rec is not None:
         rec.mods.pop(uid, None)
         REGISTRY.refresh(rec)
 
 
-class OBJECT_OT_dq_skin_remove(ActiveMeshOperator):
+class ModifierOperator(ActiveMeshOperator):
+    """Base of the operators acting on one DQ Skin modifier of the active object."""
+
+    modifier: bpy.props.StringProperty(name="Modifier", description="Name of the DQ Skin modifier (default: the first)")
+
+    def target(self, context):
+        """The active object and the modifier named (or its first DQ Skin); None for the
+        modifier after reporting why."""
+        obj = context.active_object
+        mods = modifier.dq_skin_modifiers(obj)
+        if self.modifier:
+            mods = [m for m in mods if m.name == self.modifier]
+        if not mods:
+            self.report({"ERROR"}, f"{obj.name} has no DQ Skin modifier" + (f" named {self.modifier!r}" if self.modifier else ""))
+            return obj, None
+        if obj.library is not None:
+            self.report({"ERROR"}, f"{obj.name} is linked from a library and cannot be changed")
+            return obj, None
+        return obj, mods[0]
+
+
+class OBJECT_OT_dq_skin_remove(ModifierOperator):
     """Remove the DQ Skin modifier and put back the Armature modifier it replaced"""
 
     bl_idname = "object.dq_skin_remove"
     bl_label = "Remove DQ Skin"
     bl_options = {"REGISTER", "UNDO"}
 
-    modifier: bpy.props.StringProperty(name="Modifier", description="Name of the DQ Skin modifier (default: the first)")
-
     def execute(self, context):
-        obj = context.active_object
-        mod = _named_modifier(self, obj)
+        obj, mod = self.target(context)
         if mod is None:
             return {"CANCELLED"}
         remove_modifier(obj, mod)
         return {"FINISHED"}
 
 
-def _named_modifier(op, obj):
-    mods = modifier.dq_skin_modifiers(obj)
-    if op.modifier:
-        mods = [m for m in mods if m.name == op.modifier]
-    if not mods:
-        op.report({"ERROR"}, f"{obj.name} has no DQ Skin modifier" + (f" named {op.modifier!r}" if op.modifier else ""))
-        return None
-    if obj.library is not None:
-        op.report({"ERROR"}, f"{obj.name} is linked from a library and cannot be changed")
-        return None
-    return mods[0]
-
-
-class OBJECT_OT_dq_skin_apply_as_shape_key(ActiveMeshOperator):
+class OBJECT_OT_dq_skin_apply_as_shape_key(ModifierOperator):
     """Store DQ Skin's deformation of the current frame in a new shape key (Blender's own Apply
     as Shape Key only takes deform-only modifiers, which a Geometry Nodes modifier is not)"""
 
@@ -224,7 +213,6 @@ class OBJECT_OT_dq_skin_apply_as_shape_key(ActiveMeshOperator):
     bl_label = "Apply DQ Skin as Shape Key"
     bl_options = {"REGISTER", "UNDO"}
 
-    modifier: bpy.props.StringProperty(name="Modifier", description="Name of the DQ Skin modifier (default: the first)")
     keep_modifier: bpy.props.BoolProperty(
         name="Keep Modifier",
         description="Keep DQ Skin in the stack (Save as Shape Key); off: remove it and its Armature modifier, as Apply does",
@@ -232,8 +220,7 @@ class OBJECT_OT_dq_skin_apply_as_shape_key(ActiveMeshOperator):
     )
 
     def execute(self, context):
-        obj = context.active_object
-        mod = _named_modifier(self, obj)
+        obj, mod = self.target(context)
         if mod is None:
             return {"CANCELLED"}
         REGISTRY.evaluate(REGISTRY.record_of(obj), context.evaluated_depsgraph_get(), force=True)

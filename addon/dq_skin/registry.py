@@ -149,26 +149,26 @@ class Registry:
             self._drop(rec)
 
     def _gone(self, obj, uid: str, info: ModInfo) -> None:
-        """A DQ Skin modifier disappeared: applied (its companion goes too, the mesh keeps the
-        deformation) or removed (its companion is put back as it was)."""
+        """A DQ Skin modifier disappeared: applied (Ctrl+A) or removed (its X button)."""
+        self.forget_modifier(obj, uid, info, _was_applied(obj, info, STATES.find(obj.session_uid, uid)))
+
+    def forget_modifier(self, obj, uid: str, info: ModInfo, applied: bool) -> None:
+        """Everything of a DQ Skin modifier that is gone: its companion (removed too when the
+        modifier was applied, since the mesh keeps the deformation, or when `dq_skin_add` made
+        it; else put back as it was before `dq_skin_add`), the parent type `dq_skin_add`
+        changed, what the node group stored in the mesh, its results and its state."""
         st = STATES.pop(obj.session_uid, uid)
         c = obj.modifiers.get(info.companion.get("name", "")) if info.companion.get("name") else None
-        if c is not None and c.type != "ARMATURE":
-            c = None
-        if _was_applied(obj, info, st):
-            if c is not None:
+        if c is not None and c.type == "ARMATURE":
+            if applied or info.companion.get("created"):
                 obj.modifiers.remove(c)
-            attr = obj.data.attributes.get(info.capture)
-            if attr is not None:
-                obj.data.attributes.remove(attr)
-        else:
-            if c is not None:
-                if info.companion.get("created"):
-                    obj.modifiers.remove(c)  # dq_skin_add made it: nothing to put back
-                else:
-                    companion.restore(c, info.companion.get("original", {}))
-            if info.companion.get("parent_type") and obj.parent is not None:
-                obj.parent_type = info.companion["parent_type"]
+            else:
+                companion.restore(c, info.companion.get("original", {}))
+        if not applied and info.companion.get("parent_type") and obj.parent is not None:
+            obj.parent_type = info.companion["parent_type"]
+        attr = obj.data.attributes.get(info.capture)
+        if attr is not None:
+            obj.data.attributes.remove(attr)
         if st is not None and st.output.result is not None:
             try:
                 results.remove(st.output.result)

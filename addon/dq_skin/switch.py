@@ -11,7 +11,6 @@ vertex group), relative to the mesh's size.
 
 from __future__ import annotations
 
-import bpy
 import numpy as np
 
 from . import modifier, operators
@@ -51,7 +50,7 @@ def describe_difference(obj, a: np.ndarray, b: np.ndarray) -> str:
     return f"Largest difference: {d[i]:.4g} ({100 * d[i] / size:.2f} % of the size) at {where}"
 
 
-class OBJECT_OT_dq_skin_show_blender(operators.ActiveMeshOperator):
+class OBJECT_OT_dq_skin_show_blender(operators.ModifierOperator):
     """Switch the viewport between DQ Skin's deformation and Blender's own Armature modifier
     with the same settings (Preserve Volume off for Linear, on otherwise), to compare them;
     renders keep DQ Skin. The panel then shows how far the two are apart"""
@@ -60,11 +59,8 @@ class OBJECT_OT_dq_skin_show_blender(operators.ActiveMeshOperator):
     bl_label = "Show Blender's Deformation"
     bl_options = {"REGISTER", "UNDO"}
 
-    modifier: bpy.props.StringProperty(name="Modifier", description="Name of the DQ Skin modifier (default: the first)")
-
     def execute(self, context):
-        obj = context.active_object
-        mod = operators._named_modifier(self, obj)
+        obj, mod = self.target(context)
         if mod is None:
             return {"CANCELLED"}
         before = _world_positions(obj, context.evaluated_depsgraph_get())

@@ -5,7 +5,7 @@ use proptest::prelude::*;
 
 /// A general (non-unit) dual quaternion with components in [-2, 2].
 fn general() -> impl Strategy<Value = DualQuat> {
-    proptest::array::uniform8(-2.0f32..2.0).prop_map(|a| DualQuat::from_array_wxyz(a))
+    proptest::array::uniform8(-2.0f32..2.0).prop_map(DualQuat::from_array_wxyz)
 }
 
 fn close(a: &DualQuat, b: &DualQuat, tol: f32) -> bool {

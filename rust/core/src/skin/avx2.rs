@@ -1,18 +1,16 @@
 //! The batch kernels' vector operations for AVX2+FMA: eight lanes per vector, so a 16-vertex
 //! batch runs as two parts.
 //!
-//! Bone records are loaded as rows and transposed with shuffles (much cheaper than gathering
-//! each component); each row pairs lanes `l` and `l + 4`, assembled from two 128-bit loads by
-//! `vinsertf128` (which executes beside the shuffles), so that the transpose needs only in-lane
-//! shuffles.
+//! The rotations the sign pass needs are loaded as rows and transposed with shuffles (much
+//! cheaper than gathering each component); each row pairs lanes `l` and `l + 4`, assembled from
+//! two 128-bit loads by `vinsertf128`, so that the transpose needs only in-lane shuffles. The
+//! linear sums accumulate each lane's record rows with its weight broadcast (a load), four lanes
+//! at a time, and are transposed once per vertex.
 
 use core::arch::x86_64::*;
 
-use super::batch::VectorOps;
-use super::influences::Slot;
-use super::pose::LinearBone;
-
-const _: () = assert!(core::mem::size_of::<LinearBone>() == 64);
+use super::batch::{each4, transposed_window_sums, VectorOps};
+use super::influences::{Slot, LANES};
 
 /// Proof that the CPU has AVX2 and FMA.
 #[derive(Clone, Copy)]
@@ -70,7 +68,6 @@ impl VectorOps for Avx2 {
         mul(a, b) -> __m256 = _mm256_mul_ps;
         div(a, b) -> __m256 = _mm256_div_ps;
         mul_add(a, b, c) -> __m256 = _mm256_fmadd_ps;
-        mul_sub(a, b, c) -> __m256 = _mm256_fmsub_ps;
         neg_mul_add(a, b, c) -> __m256 = _mm256_fnmadd_ps;
         and(a, b) -> __m256 = _mm256_and_ps;
     }
@@ -86,6 +83,13 @@ impl VectorOps for Avx2 {
         assert!(a.len() >= 8);
         // SAFETY: eight floats (checked); AVX as in `instructions!`.
         unsafe { _mm256_loadu_ps(a.as_ptr()) }
+    }
+
+    #[inline(always)]
+    fn store(self, v: __m256, a: &mut [f32]) {
+        assert!(a.len() >= 8);
+        // SAFETY: eight floats (checked); AVX as in `instructions!`.
+        unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) }
     }
 
     #[inline(always)]
@@ -173,41 +177,64 @@ impl VectorOps for Avx2 {
         }
     }
 
-    /// Accumulated per lane, four lanes at a time (rows 0–1 in one register, row 2 in a half:
-    /// eight accumulators), and transposed once at the end: a row load per influence instead of
-    /// a transpose per influence.
+    /// Two rows or more: accumulated per lane, four lanes at a time (rows in pairs, one
+    /// register each: at most eight accumulators), and transposed once at the end, which needs
+    /// per influence only loads (the bone index, the weight broadcast, the rows) and FMAs. One
+    /// row: from transposed records, fewer instructions there.
     #[inline(always)]
-    unsafe fn linear_sums(self, slots: &[Slot], lane0: usize, linear: &[LinearBone]) -> ([__m256; 12], __m256) {
-        let base = linear.as_ptr() as *const f32;
-        let mut contrib = self.splat(0.0);
+    unsafe fn window_sums<T, const ROWS: usize>(
+        self,
+        slots: &[Slot],
+        signed: Option<&[[f32; LANES]]>,
+        lane0: usize,
+        table: &[T],
+        offset: usize,
+    ) -> [[__m256; 4]; ROWS] {
+        const { assert!(ROWS <= 4) };
+        if ROWS == 1 {
+            // SAFETY: the caller's contract.
+            return unsafe { transposed_window_sums(self, slots, signed, lane0, table, offset) };
+        }
+        let base = table.as_ptr() as *const f32;
+        let stride = core::mem::size_of::<T>() / 4;
+        // An odd last row is loaded with the four floats after it (ignored): they must lie in
+        // the record too. Known at compile time.
+        assert!(offset + 4 * ROWS.next_multiple_of(2) <= stride, "the window's pairs of rows lie inside the record");
+        debug_assert!(signed.is_none_or(|s| s.len() == slots.len()));
         // SAFETY: AVX as in `instructions!`; the loads as below.
         unsafe {
-            let mut rows01 = [[_mm256_setzero_ps(); 4]; 2];
-            let mut rows2 = [[_mm_setzero_ps(); 4]; 2];
+            // [group][lane][pair]: rows 2j (low half) and 2j + 1 (high half) of the lane.
+            let mut pairs = [[[_mm256_setzero_ps(); 2]; 4]; 2];
             for g in 0..2 {
-                for slot in slots {
+                for (s, slot) in slots.iter().enumerate() {
+                    let weights = signed.map_or(&slot.weights, |w| &w[s]);
                     for l in 0..4 {
                         let lane = lane0 + 4 * g + l;
-                        let bone = slot.bones[lane] as usize;
-                        debug_assert!(bone < linear.len());
-                        // SAFETY: the caller's contract; a LinearBone's first 12 floats are its rows.
-                        let record = base.add(bone * 16);
-                        let w = _mm256_set1_ps(slot.weights[lane]);
-                        rows01[g][l] = _mm256_fmadd_ps(_mm256_loadu_ps(record), w, rows01[g][l]);
-                        rows2[g][l] = _mm_fmadd_ps(_mm_loadu_ps(record.add(8)), _mm256_castps256_ps128(w), rows2[g][l]);
-                    }
-                    if g == 0 {
-                        contrib = self.add(contrib, self.load(&slot.weights[lane0..]));
+                        debug_assert!((slot.bones[lane] as usize) < table.len());
+                        // SAFETY: the caller's contract: the lane's bone indexes `table`; the
+                        // pairs of rows lie inside its record (asserted above).
+                        let record = base.add(slot.bones[lane] as usize * stride + offset);
+                        let w = _mm256_broadcast_ss(&weights[lane]);
+                        for j in 0..ROWS.div_ceil(2) {
+                            pairs[g][l][j] = _mm256_fmadd_ps(_mm256_loadu_ps(record.add(8 * j)), w, pairs[g][l][j]);
+                        }
                     }
                 }
             }
-            // Lane l low, lane l + 4 high, then the in-half transposes.
-            let row0 = core::array::from_fn(|l| _mm256_permute2f128_ps::<0x20>(rows01[0][l], rows01[1][l]));
-            let row1 = core::array::from_fn(|l| _mm256_permute2f128_ps::<0x31>(rows01[0][l], rows01[1][l]));
-            let row2 = core::array::from_fn(|l| _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(rows2[0][l]), rows2[1][l]));
-            let ([a, b, c, d], [e, f, g, h], [i, j, k, m]) =
-                (transpose_halves(self, row0), transpose_halves(self, row1), transpose_halves(self, row2));
-            ([a, b, c, d, e, f, g, h, i, j, k, m], contrib)
+            // Row r of lanes l (low half) and l + 4 (high half), then the in-half transposes.
+            let mut sums = [[_mm256_setzero_ps(); 4]; ROWS];
+            for (r, sum) in sums.iter_mut().enumerate() {
+                let rows = each4(|l| {
+                    let (a, b) = (pairs[0][l][r / 2], pairs[1][l][r / 2]);
+                    if r % 2 == 1 {
+                        _mm256_permute2f128_ps::<0x31>(a, b)
+                    } else {
+                        _mm256_permute2f128_ps::<0x20>(a, b)
+                    }
+                });
+                *sum = transpose_halves(self, rows);
+            }
+            sums
         }
     }
 }

@@ -1,19 +1,26 @@
 //! The batch kernels written once for every SIMD instruction set that implements [`VectorOps`]
-//! (AVX2+FMA in `avx2.rs`, NEON in `neon.rs`): everything skinning does to [`VectorOps::WIDTH`]
-//! vertices of a full batch, in registers: load, `premat`, the sums over the influence slots,
-//! LBS, DQS (Blender's `mul_v3m3_dq`), their blend or the centers-of-rotation step, strength,
-//! `postmat`, the untouched lanes, store. The arithmetic is the portable copy's in
-//! `kernels.rs`, term for term.
+//! (AVX2+FMA in `avx2.rs`, NEON in `neon.rs`): everything skinning does to a full batch of
+//! [`LANES`] vertices, as `LANES / WIDTH` parts of one vector each. The arithmetic is the
+//! portable copy's in `kernels.rs`; what is summed per influence is arranged for throughput:
 //!
-//! What differs between instruction sets is behind the trait: the vector type, loading a lane's
-//! bone record window transposed into component vectors, (de)interleaving points, and the LBS
-//! sums (which each set accumulates in the layout its registers suit best).
+//! 1. **Signs.** The quaternion sum whose running value picks each influence's sign (DQS, Blend,
+//!    centers of rotation) is a serial chain per vertex. All parts' chains run in one loop, so
+//!    that they overlap instead of waiting on each other; the signed weights are kept.
+//! 2. **Linear sums.** Everything else is linear in the bones' per-frame records: `Σ wᵢ·Mᵢ`
+//!    (LBS, the centers' anchor), `Σ ±wᵢ·dᵢ` (the rigid dual parts), `Σ ±wᵢ·Pᵢ` (the dual parts of
+//!    bones with scale, see `PivotDualBone`), `Σ wᵢ·Sᵢ` (the scale/shear parts). Each is a sum of
+//!    record windows that an instruction set may accumulate per lane and transpose once per
+//!    vertex ([`VectorOps::window_sums`]), instead of transposing every influence's record.
+//! 3. **Finish** per part: apply the sums to the point (and its center), the strength,
+//!    `postmat`, the untouched lanes, store.
 
 use glam::Affine3A;
 
 use super::influences::{Slot, LANES};
-use super::kernels::{CENTERS, DUAL_QUATERNION, LINEAR};
-use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
+use super::kernels::{BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
+#[cfg(target_arch = "x86_64")]
+use super::pose::CorRigidBone;
+use super::pose::{CorBone, DqBone, LinearBone, PivotBone, PivotDualBone};
 use super::MIN_TOTAL_WEIGHT;
 
 /// The vector operations of one SIMD instruction set, `WIDTH` f32 lanes (one vertex per lane).
@@ -21,10 +28,9 @@ use super::MIN_TOTAL_WEIGHT;
 /// Implementors are zero-sized proofs that the CPU has the instruction set: a value can only
 /// be made where it was detected (see each implementation's constructor), so every method is
 /// safe to call. The batch kernels are instantiated inside a function compiled for the set
-/// (`#[target_feature]`, or the target's baseline), where the methods inline to single
-/// instructions.
+/// (`#[target_feature]`), where the methods inline to single instructions.
 pub(super) trait VectorOps: Copy {
-    /// Lanes per vector; divides [`LANES`].
+    /// Lanes per vector; divides [`LANES`], at least `LANES / MAX_PARTS`.
     const WIDTH: usize;
     /// `WIDTH` floats.
     type F: Copy;
@@ -34,6 +40,8 @@ pub(super) trait VectorOps: Copy {
     fn splat(self, x: f32) -> Self::F;
     /// The first `WIDTH` floats of `a` (which must have that many).
     fn load(self, a: &[f32]) -> Self::F;
+    /// Writes the first `WIDTH` floats of `a` (which must have that many).
+    fn store(self, v: Self::F, a: &mut [f32]);
     fn add(self, a: Self::F, b: Self::F) -> Self::F;
     fn sub(self, a: Self::F, b: Self::F) -> Self::F;
     fn mul(self, a: Self::F, b: Self::F) -> Self::F;
@@ -41,8 +49,6 @@ pub(super) trait VectorOps: Copy {
     fn neg(self, a: Self::F) -> Self::F;
     /// `a·b + c`, fused.
     fn mul_add(self, a: Self::F, b: Self::F, c: Self::F) -> Self::F;
-    /// `a·b − c`, fused.
-    fn mul_sub(self, a: Self::F, b: Self::F, c: Self::F) -> Self::F;
     /// `c − a·b`, fused.
     fn neg_mul_add(self, a: Self::F, b: Self::F, c: Self::F) -> Self::F;
     fn lt(self, a: Self::F, b: Self::F) -> Self::Mask;
@@ -60,254 +66,284 @@ pub(super) trait VectorOps: Copy {
     /// (`repr(C)`) and `offset + 4` floats lie inside it.
     unsafe fn load_columns4<T>(self, table: &[T], bones: &[u32], offset: usize) -> [Self::F; 4];
 
-    /// [`Self::load_columns4`] for eight floats.
-    ///
-    /// # Safety
-    /// As [`Self::load_columns4`], with `offset + 8` floats inside `T`.
-    #[inline(always)]
-    unsafe fn load_columns<T>(self, table: &[T], bones: &[u32], offset: usize) -> [Self::F; 8] {
-        // SAFETY: the caller's contract.
-        let ([a, b, c, d], [e, f, g, h]) = unsafe { (self.load_columns4(table, bones, offset), self.load_columns4(table, bones, offset + 4)) };
-        [a, b, c, d, e, f, g, h]
-    }
-
     /// `WIDTH` points `x y z x y z …` split into coordinate vectors.
     fn load_points(self, points: &[[f32; 3]]) -> [Self::F; 3];
     /// Coordinate vectors written back as `WIDTH` points.
     fn store_points(self, p: [Self::F; 3], out: &mut [[f32; 3]]);
 
-    /// LBS sums over the slots for lanes `lane0 .. lane0 + WIDTH`: `Σ wᵢ·Mᵢ` (row-major 3×4,
-    /// 12 vectors) and `Σ wᵢ`. By default from transposed record windows.
+    /// For the lanes `lane0 .. lane0 + WIDTH`: the sum over the slots of each lane's weight
+    /// times the floats `offset .. offset + 4·ROWS` of its bone record, as `ROWS` rows of four
+    /// component vectors. The weight of slot `s` is `signed[s]` if given, else the slot's own.
+    /// By default from transposed records ([`transposed_window_sums`]).
     ///
     /// # Safety
-    /// Every bone index of those lanes of `slots` indexes `linear`.
+    /// Every bone index of those lanes of `slots` indexes `table`; `T` is made of f32 and the
+    /// window lies inside it; `signed`, if given, has one entry per slot.
     #[inline(always)]
-    unsafe fn linear_sums(self, slots: &[Slot], lane0: usize, linear: &[LinearBone]) -> ([Self::F; 12], Self::F) {
-        let mut acc = [self.splat(0.0); 12];
-        let mut contrib = self.splat(0.0);
-        for slot in slots {
-            let bones = &slot.bones[lane0..];
-            // SAFETY: the caller's contract; a LinearBone's first 12 floats are its three rows.
-            let (a, b) = unsafe { (self.load_columns(linear, bones, 0), self.load_columns4(linear, bones, 8)) };
-            let w = self.load(&slot.weights[lane0..]);
-            for k in 0..8 {
-                acc[k] = self.mul_add(a[k], w, acc[k]);
-            }
-            for k in 0..4 {
-                acc[8 + k] = self.mul_add(b[k], w, acc[8 + k]);
-            }
-            contrib = self.add(contrib, w);
-        }
-        (acc, contrib)
+    unsafe fn window_sums<T, const ROWS: usize>(
+        self,
+        slots: &[Slot],
+        signed: Option<&[[f32; LANES]]>,
+        lane0: usize,
+        table: &[T],
+        offset: usize,
+    ) -> [[Self::F; 4]; ROWS] {
+        // SAFETY: the caller's contract.
+        unsafe { transposed_window_sums(self, slots, signed, lane0, table, offset) }
     }
 }
+
+/// [`VectorOps::window_sums`] from transposed records: one transpose per slot and row (which
+/// beats per-lane sums for a single row).
+///
+/// # Safety
+/// As [`VectorOps::window_sums`].
+#[inline(always)]
+pub(super) unsafe fn transposed_window_sums<V: VectorOps, T, const ROWS: usize>(
+    v: V,
+    slots: &[Slot],
+    signed: Option<&[[f32; LANES]]>,
+    lane0: usize,
+    table: &[T],
+    offset: usize,
+) -> [[V::F; 4]; ROWS] {
+    let mut acc = [[v.splat(0.0); 4]; ROWS];
+    for (s, slot) in slots.iter().enumerate() {
+        let w = v.load(&signed.map_or(&slot.weights, |w| &w[s])[lane0..]);
+        for (r, row) in acc.iter_mut().enumerate() {
+            // SAFETY: the caller's contract.
+            let c = unsafe { v.load_columns4(table, &slot.bones[lane0..], offset + 4 * r) };
+            for k in 0..4 {
+                row[k] = v.mul_add(c[k], w, row[k]);
+            }
+        }
+    }
+    acc
+}
+
+/// The most parts a batch has (four for NEON's four lanes).
+const MAX_PARTS: usize = 4;
 
 /// Inputs of the batch kernels that are the same for every batch of a call.
 pub(super) struct BatchJob<'a> {
     pub linear: &'a [LinearBone],
     pub dq: &'a [DqBone],
     pub pivot: &'a [PivotBone],
+    pub pivot_dual: &'a [PivotDualBone],
     pub cor: &'a [CorBone],
+    /// These two are read by the AVX-512 kernels only (the others have `SCALED`).
+    #[cfg(target_arch = "x86_64")]
     pub cor_rigid: &'a [CorRigidBone],
+    #[cfg(target_arch = "x86_64")]
     pub scaled: bool,
     pub premat: Option<&'a Affine3A>,
     pub postmat: Option<&'a Affine3A>,
     pub blend_factor: f32,
 }
 
-/// `WIDTH` vertices of a full batch: lanes `lane0 ..` of its slots.
-pub(super) struct Part<'a> {
-    pub positions: &'a [[f32; 3]],
-    pub out: &'a mut [[f32; 3]],
-    pub slots: &'a [Slot],
-    pub lane0: usize,
-    /// The mask weights, if any.
-    pub strength: Option<&'a [f32]>,
-    pub blend_amount: Option<&'a [f32]>,
-    pub centers: Option<&'a [[f32; 3]]>,
+/// Working memory of the batch kernels, reused for every batch of a call.
+pub(super) struct Scratch {
+    /// The signed weights of a batch's slots (written by the sign pass before they are read).
+    signed: Vec<[f32; LANES]>,
 }
 
-/// Skins one part with the method `KIND` (`SCALED`: some bone takes Blender's scale path).
+impl Scratch {
+    /// For batches of up to `slots` slots (the most influences of any vertex).
+    pub(super) fn new(slots: usize) -> Self {
+        Scratch { signed: vec![[0.0; LANES]; slots] }
+    }
+}
+
+/// One full batch: its points and slots and, where the method has them, its mask weights,
+/// blend amounts and centers.
+pub(super) struct FullBatch<'a> {
+    pub positions: &'a [[f32; 3]; LANES],
+    pub out: &'a mut [[f32; 3]; LANES],
+    pub slots: &'a [Slot],
+    pub strength: Option<&'a [f32; LANES]>,
+    pub blend_amount: Option<&'a [f32; LANES]>,
+    pub centers: Option<&'a [[f32; 3]; LANES]>,
+}
+
+/// Skins one full batch with the method `KIND` (`SCALED`: some bone takes Blender's scale path).
 ///
 /// # Safety
-/// Every bone index of the part's lanes of its slots indexes the tables of `job` that the
-/// method reads (all of them except for LBS, which reads `linear` only); with `CENTERS`, the
-/// part has its centers.
+/// Every bone index of the batch's slots indexes the tables of `job` that the method reads
+/// (all of them except for LBS, which reads `linear` only).
 #[inline(always)]
-pub(super) unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(v: V, job: &BatchJob<'_>, part: Part<'_>) {
-    debug_assert!(LANES.is_multiple_of(V::WIDTH) && part.lane0 + V::WIDTH <= LANES);
-    let o = v.load_points(part.positions);
-    let one = v.splat(1.0);
-    let a = part.strength.map_or(one, |s| v.load(s));
-    let moved = if let (CENTERS, Some(centers)) = (KIND, part.centers) {
-        let c = v.load_points(centers);
-        let (p, c) = match job.premat {
-            Some(m) => (apply(v, m, o), apply(v, m, c)),
-            None => (o, c),
-        };
-        // SAFETY: the caller's contract.
-        unsafe { centers_step::<V, SCALED>(v, job, &part, p, c, a) }
-    } else {
+pub(super) unsafe fn skin_batch<V: VectorOps, const KIND: u8, const SCALED: bool>(
+    v: V,
+    job: &BatchJob<'_>,
+    batch: FullBatch<'_>,
+    scratch: &mut Scratch,
+) {
+    let parts = LANES / V::WIDTH;
+    debug_assert!(LANES.is_multiple_of(V::WIDTH) && parts <= MAX_PARTS);
+    let slots = batch.slots;
+    let zero = v.splat(0.0);
+    let centers = KIND == CENTERS && batch.centers.is_some();
+    let signed = &mut scratch.signed[..slots.len()];
+    let mut real = [[zero; 4]; MAX_PARTS];
+    // `if`s rather than closures here and below: a closure compiled on its own would not have
+    // the instruction set of the function it is written in, and its vector operations would
+    // become calls.
+    if KIND != LINEAR {
+        // The rotation is floats 12–15 of a CorBone and of a PivotBone, 0–3 of a DqBone.
+        if centers && SCALED {
+            // SAFETY: the caller's contract.
+            unsafe { sign_pass(v, slots, job.cor, 12, &mut real, signed) };
+        } else if !centers && SCALED {
+            // SAFETY: the caller's contract.
+            unsafe { sign_pass(v, slots, job.pivot, 12, &mut real, signed) };
+        } else {
+            // SAFETY: the caller's contract.
+            unsafe { sign_pass(v, slots, job.dq, 0, &mut real, signed) };
+        }
+    }
+    let signed = &*signed;
+    for (p, real) in real.iter().enumerate().take(parts) {
+        let lanes = p * V::WIDTH..(p + 1) * V::WIDTH;
+        let lane0 = lanes.start;
+        let o = v.load_points(&batch.positions[lanes.clone()]);
+        let a = batch.strength.map_or(v.splat(1.0), |s| v.load(&s[lanes.clone()]));
+        let mut contrib = zero;
+        for slot in slots {
+            contrib = v.add(contrib, v.load(&slot.weights[lanes.clone()]));
+        }
         let p = job.premat.map_or(o, |m| apply(v, m, o));
-        // SAFETY: the caller's contract.
-        unsafe { blend_step::<V, KIND>(v, job, &part, p, a) }
-    };
-    let r = job.postmat.map_or(moved, |m| apply(v, m, moved));
-    // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
-    let untouched = v.eq(a, v.splat(0.0));
-    let r = core::array::from_fn(|k| v.select(untouched, o[k], r[k]));
-    v.store_points(r, part.out);
+        // The windows: a LinearBone's rows (floats 0–11), a DqBone's dual part (4–7), a
+        // PivotDualBone (0–15), a CorBone's rows (0–11) and scale/shear part (16–27).
+        let moved = if let (true, Some(c)) = (centers, batch.centers) {
+            let c = v.load_points(&c[lanes.clone()]);
+            let c = job.premat.map_or(c, |m| apply(v, m, c));
+            if SCALED {
+                // SAFETY: the caller's contract.
+                let (matrix, stretch) = unsafe {
+                    (v.window_sums::<_, 3>(slots, None, lane0, job.cor, 0), v.window_sums::<_, 3>(slots, None, lane0, job.cor, 16))
+                };
+                // Σ wᵢ·Sᵢ from the window s00 s01 s02 s10 | s11 s12 s20 s21 | s22 0 0 0.
+                let [[s00, s01, s02, s10], [s11, s12, s20, s21], [s22, ..]] = stretch;
+                let d: [V::F; 3] = each3(|k| v.sub(p[k], c[k]));
+                let row = |a, b, c| v.mul_add(a, d[0], v.mul_add(b, d[1], v.mul(c, d[2])));
+                let offset = [row(s00, s01, s02), row(s10, s11, s12), row(s20, s21, s22)];
+                finish_centers::<V, SCALED>(v, &matrix, real, offset, contrib, p, c, a)
+            } else {
+                // SAFETY: the caller's contract.
+                let matrix = unsafe { v.window_sums::<_, 3>(slots, None, lane0, job.linear, 0) };
+                let d = each3(|k| v.sub(p[k], c[k]));
+                finish_centers::<V, SCALED>(v, &matrix, real, d, contrib, p, c, a)
+            }
+        } else {
+            let lbs = if KIND == LINEAR || KIND == BLEND {
+                // SAFETY: the caller's contract.
+                let matrix = unsafe { v.window_sums::<_, 3>(slots, None, lane0, job.linear, 0) };
+                linear(v, &matrix, contrib, p, a)
+            } else {
+                p
+            };
+            let dqs = if KIND == DUAL_QUATERNION || KIND == BLEND {
+                let dual = if SCALED {
+                    // SAFETY: the caller's contract.
+                    let rows = unsafe { v.window_sums::<_, 4>(slots, Some(signed), lane0, job.pivot_dual, 0) };
+                    each4(|c| affine_row(v, &rows[c], &p))
+                } else {
+                    // SAFETY: the caller's contract.
+                    let [dual] = unsafe { v.window_sums::<_, 1>(slots, Some(signed), lane0, job.dq, 4) };
+                    dual
+                };
+                apply_dual_quaternion(v, *real, dual, contrib, p, a)
+            } else {
+                p
+            };
+            match KIND {
+                LINEAR => lbs,
+                BLEND => {
+                    let factor = v.splat(job.blend_factor);
+                    let alpha = batch.blend_amount.map_or(factor, |amount| v.mul(factor, v.load(&amount[lanes.clone()])));
+                    each3(|k| v.mul_add(alpha, v.sub(dqs[k], lbs[k]), lbs[k]))
+                }
+                _ => dqs,
+            }
+        };
+        let r = job.postmat.map_or(moved, |m| apply(v, m, moved));
+        // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
+        let untouched = v.eq(a, zero);
+        let r = each3(|k| v.select(untouched, o[k], r[k]));
+        v.store_points(r, &mut batch.out[lanes]);
+    }
+}
+
+/// Pass 1: the sign-aligned quaternion sums of every part over the slots, the parts' chains
+/// interleaved; each slot's signed weights go to `signed`. The rotation of a lane's bone is
+/// floats `offset .. offset + 4` (x, y, z, w) of its record.
+///
+/// # Safety
+/// Every bone index of the slots indexes `table`, whose records hold the rotation there.
+#[inline(always)]
+unsafe fn sign_pass<V: VectorOps, T>(
+    v: V,
+    slots: &[Slot],
+    table: &[T],
+    offset: usize,
+    real: &mut [[V::F; 4]; MAX_PARTS],
+    signed: &mut [[f32; LANES]],
+) {
+    for (slot, out) in slots.iter().zip(signed.iter_mut()) {
+        for (p, real) in real.iter_mut().enumerate().take(LANES / V::WIDTH) {
+            let lane0 = p * V::WIDTH;
+            // SAFETY: the caller's contract.
+            let q = unsafe { v.load_columns4(table, &slot.bones[lane0..], offset) };
+            let w = v.load(&slot.weights[lane0..]);
+            let ws = v.select(v.lt(dot4(v, &q, real), v.splat(0.0)), v.neg(w), w);
+            for c in 0..4 {
+                real[c] = v.mul_add(q[c], ws, real[c]);
+            }
+            v.store(ws, &mut out[lane0..]);
+        }
+    }
+}
+
+/// `[f(0), f(1), f(2)]`. The kernels build their small arrays with this and [`each4`] rather
+/// than `array::from_fn` or `array::map`, whose generic machinery the compiler may leave out of
+/// line, compiled without the instruction set of the kernel that uses it.
+#[inline(always)]
+fn each3<T>(f: impl Fn(usize) -> T) -> [T; 3] {
+    [f(0), f(1), f(2)]
+}
+
+/// `[f(0), f(1), f(2), f(3)]` (see [`each3`]).
+#[inline(always)]
+pub(super) fn each4<T>(f: impl Fn(usize) -> T) -> [T; 4] {
+    [f(0), f(1), f(2), f(3)]
 }
 
 /// `m·p` for an affine `m` (its entries broadcast).
 #[inline(always)]
 fn apply<V: VectorOps>(v: V, m: &Affine3A, p: [V::F; 3]) -> [V::F; 3] {
     let c = [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation];
-    core::array::from_fn(|r| {
-        let e = |k: usize| v.splat(c[k][r]);
-        v.mul_add(e(0), p[0], v.mul_add(e(1), p[1], v.mul_add(e(2), p[2], e(3))))
-    })
+    let e = |k: usize, r: usize| v.splat(c[k][r]);
+    each3(|r| v.mul_add(e(0, r), p[0], v.mul_add(e(1, r), p[1], v.mul_add(e(2, r), p[2], e(3, r)))))
 }
 
-/// `w`, negated in the lanes where `dot < 0`: a quaternion's sign chosen against the running sum.
+/// `row·(p, 1)` for a row of four component vectors.
 #[inline(always)]
-fn signed_weight<V: VectorOps>(v: V, dot: V::F, w: V::F) -> V::F {
-    v.select(v.lt(dot, v.splat(0.0)), v.neg(w), w)
+fn affine_row<V: VectorOps>(v: V, m: &[V::F; 4], p: &[V::F; 3]) -> V::F {
+    v.mul_add(m[0], p[0], v.mul_add(m[1], p[1], v.mul_add(m[2], p[2], m[3])))
 }
 
 /// `a·b` of quaternions per lane, in two independent halves: the sign choice that waits on it is
 /// the serial chain, so keep it short.
 #[inline(always)]
-fn dot4<V: VectorOps>(v: V, a: &[V::F], b: &[V::F]) -> V::F {
+fn dot4<V: VectorOps>(v: V, a: &[V::F; 4], b: &[V::F; 4]) -> V::F {
     v.add(v.mul_add(a[1], b[1], v.mul(a[0], b[0])), v.mul_add(a[3], b[3], v.mul(a[2], b[2])))
 }
 
-/// LBS, DQS or their blend of points `p` (armature space) with strength `a`.
-///
-/// # Safety
-/// As [`skin_part`].
+/// LBS of one part's points `p` (armature space) with strength `a`, from `Σ wᵢ·Mᵢ`:
+/// `co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)`.
 #[inline(always)]
-unsafe fn blend_step<V: VectorOps, const KIND: u8>(v: V, job: &BatchJob<'_>, part: &Part<'_>, p: [V::F; 3], a: V::F) -> [V::F; 3] {
-    let zero = v.splat(0.0);
-    let threshold = v.splat(MIN_TOTAL_WEIGHT);
-    // `if`s rather than closures: a closure compiled on its own would not have the instruction
-    // set of the function it is written in, and its vector operations would become calls.
-    let lbs = if KIND != DUAL_QUATERNION {
-        // SAFETY: the caller's contract.
-        let (acc, contrib) = unsafe { v.linear_sums(part.slots, part.lane0, job.linear) };
-        let f = v.select(v.gt(contrib, threshold), v.div(a, contrib), zero);
-        // co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)
-        let axis = |r: usize| {
-            let m = &acc[4 * r..4 * r + 4];
-            let moved = v.mul_add(m[0], p[0], v.mul_add(m[1], p[1], v.mul_add(m[2], p[2], m[3])));
-            v.mul_add(v.neg_mul_add(p[r], contrib, moved), f, p[r])
-        };
-        Some([axis(0), axis(1), axis(2)])
-    } else {
-        None
-    };
-    let dqs = if KIND != LINEAR {
-        // SAFETY: the caller's contract.
-        let (real, dual, contrib) =
-            unsafe { if job.scaled { scaled_sums(v, part, job.pivot, p) } else { rigid_sums(v, part, job.dq) } };
-        Some(apply_dual_quaternion(v, real, dual, contrib, p, a))
-    } else {
-        None
-    };
-    match (lbs, dqs) {
-        (Some(l), Some(d)) => {
-            let mut alpha = v.splat(job.blend_factor);
-            if let Some(amount) = part.blend_amount {
-                alpha = v.mul(alpha, v.load(amount));
-            }
-            core::array::from_fn(|k| v.mul_add(alpha, v.sub(d[k], l[k]), l[k]))
-        }
-        (Some(l), None) => l,
-        (None, Some(d)) => d,
-        (None, None) => p,
-    }
-}
-
-/// The sums in registers: real (x, y, z, w), dual (x, y, z, w), total weight.
-type Sums<F> = ([F; 4], [F; 4], F);
-
-/// Adds `±w·q` to the rotation sum, the sign chosen by `q·sum < 0` per lane; returns `±w`.
-#[inline(always)]
-fn add_signed_rotation<V: VectorOps>(v: V, real: &mut [V::F; 4], q: &[V::F; 4], w: V::F) -> V::F {
-    let ws = signed_weight(v, dot4(v, q, real), w);
-    for c in 0..4 {
-        real[c] = v.mul_add(q[c], ws, real[c]);
-    }
-    ws
-}
-
-/// Adds `±w·(q, d)` to the sums, the sign chosen by `q·sum < 0` per lane.
-#[inline(always)]
-fn add_signed<V: VectorOps>(v: V, s: &mut Sums<V::F>, q: &[V::F; 4], d: &[V::F; 4], w: V::F) {
-    let ws = add_signed_rotation(v, &mut s.0, q, w);
-    for c in 0..4 {
-        s.1[c] = v.mul_add(d[c], ws, s.1[c]);
-    }
-    s.2 = v.add(s.2, w);
-}
-
-/// DQS sums for rigid bones.
-///
-/// # Safety
-/// Every bone index of the part's lanes indexes `dq`.
-#[inline(always)]
-unsafe fn rigid_sums<V: VectorOps>(v: V, part: &Part<'_>, dq: &[DqBone]) -> Sums<V::F> {
-    let zero = v.splat(0.0);
-    let (mut real, mut dual, mut contrib) = ([zero; 4], [zero; 4], zero);
-    for slot in part.slots {
-        let bones = &slot.bones[part.lane0..];
-        let w = v.load(&slot.weights[part.lane0..]);
-        // The rotation first and the dual part once its sign is known, so that only one half of
-        // the record is in registers beside the sums. SAFETY: the caller's contract; a DqBone is
-        // 8 floats.
-        let q = unsafe { v.load_columns4(dq, bones, 0) };
-        let ws = add_signed_rotation(v, &mut real, &q, w);
-        // SAFETY: as above.
-        let d = unsafe { v.load_columns4(dq, bones, 4) };
-        for c in 0..4 {
-            dual[c] = v.mul_add(d[c], ws, dual[c]);
-        }
-        contrib = v.add(contrib, w);
-    }
-    (real, dual, contrib)
-}
-
-/// DQS sums when some bone has scale: each bone moves `p` rigidly to where its matrix puts it.
-///
-/// # Safety
-/// Every bone index of the part's lanes indexes `pivot`.
-#[inline(always)]
-unsafe fn scaled_sums<V: VectorOps>(v: V, part: &Part<'_>, pivot: &[PivotBone], [x, y, z]: [V::F; 3]) -> Sums<V::F> {
-    let zero = v.splat(0.0);
-    let half = v.splat(0.5);
-    let mut s = ([zero; 4], [zero; 4], zero);
-    for slot in part.slots {
-        let bones = &slot.bones[part.lane0..];
-        // SAFETY: the caller's contract; a PivotBone is 16 floats: rows 0–1, then row 2 and the
-        // rotation.
-        let (a, b) = unsafe { (v.load_columns(pivot, bones, 0), v.load_columns(pivot, bones, 8)) };
-        let row = |m0, m1, m2, t| v.mul_add(m0, x, v.mul_add(m1, y, v.mul_add(m2, z, t)));
-        let tx = row(a[0], a[1], a[2], a[3]);
-        let ty = row(a[4], a[5], a[6], a[7]);
-        let tz = row(b[0], b[1], b[2], b[3]);
-        let q = [b[4], b[5], b[6], b[7]];
-        // ½·(0, t)·q = ½·(w·t + t × v, −t·v), q = (v, w); each component is
-        // 0.5·(p·r − (s·u − tw·w)).
-        let cross_plus = |p, r, s, u, tw| v.mul(half, v.mul_sub(p, r, v.mul_sub(s, u, v.mul(tw, q[3]))));
-        let d = [
-            cross_plus(ty, q[2], tz, q[1], tx),
-            cross_plus(tz, q[0], tx, q[2], ty),
-            cross_plus(tx, q[1], ty, q[0], tz),
-            v.mul(v.splat(-0.5), v.mul_add(tx, q[0], v.mul_add(ty, q[1], v.mul(tz, q[2])))),
-        ];
-        add_signed(v, &mut s, &q, &d, v.load(&slot.weights[part.lane0..]));
-    }
-    s
+fn linear<V: VectorOps>(v: V, matrix: &[[V::F; 4]; 3], contrib: V::F, p: [V::F; 3], a: V::F) -> [V::F; 3] {
+    let f = v.select(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.div(a, contrib), v.splat(0.0));
+    each3(|r| v.mul_add(v.neg_mul_add(p[r], contrib, affine_row(v, &matrix[r], &p)), f, p[r]))
 }
 
 /// Applies summed dual quaternions to `p` (Blender's `mul_v3m3_dq`, dividing by `|q|²` instead
@@ -326,7 +362,7 @@ fn apply_dual_quaternion<V: VectorOps>(v: V, real: [V::F; 4], dual: [V::F; 4], c
     let ty = mul(two, add(sub(mul(t1, z), mul(t0, y)), sub(mul(w, t2), mul(x, t3))));
     let tz = mul(two, add(sub(mul(x, t2), mul(t0, z)), sub(mul(w, t3), mul(t1, y))));
     let t = [tx, ty, tz];
-    let n: [V::F; 3] = core::array::from_fn(|r| {
+    let n = each3(|r| {
         let m = &q.rows[r];
         v.mul_add(m[0], p[0], v.mul_add(m[1], p[1], v.mul_add(m[2], p[2], t[r])))
     });
@@ -335,7 +371,7 @@ fn apply_dual_quaternion<V: VectorOps>(v: V, real: [V::F; 4], dual: [V::F; 4], c
     let f = v.select(valid, v.div(a, q.len2), v.splat(0.0));
     let keep = v.select(valid, v.sub(one, a), one);
     // co + a·(n/|q|² − co) = n·(a/|q|²) + co·(1 − a)
-    core::array::from_fn(|k| v.mul_add(n[k], f, v.mul(p[k], keep)))
+    each3(|k| v.mul_add(n[k], f, v.mul(p[k], keep)))
 }
 
 /// The unnormalized rotation matrix of a quaternion sum, `|q|²·R` (rows), and `|q|²`.
@@ -361,86 +397,28 @@ fn quaternion_matrix<V: VectorOps>(v: V, [x, y, z, w]: [V::F; 4]) -> QuaternionM
     }
 }
 
-/// `½·(R·p + t − p)` for the unit quaternions `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v ×
-/// a + h)` with `a = v × p` (see `rotation_offset` in `kernels.rs`).
+/// Skinning with centers of rotation of one part's points `p` with centers `c` (both in armature
+/// space), from `Σ wᵢ·Mᵢ` (`matrix`), the quaternion sum and the offset `dd`: `co − c` for rigid
+/// bones, `Σ wᵢ·Sᵢ·(co − c)` with scale. `co' = Σ wᵢ·Mᵢ·c/contrib + R·dd` (`dd/contrib` with
+/// scale), `R` the rotation of the quaternion sum; then the strength (see `finish_centers` in
+/// `kernels.rs`, which sums the rigid anchor as `Σ wᵢ·(Mᵢ·c − c)`).
+#[allow(clippy::too_many_arguments)] // the sums and the part's points, one by one
 #[inline(always)]
-fn rotation_offset<V: VectorOps>(v: V, q: &[V::F], h: &[V::F], p: &[V::F; 3]) -> [V::F; 3] {
-    let a = [
-        v.mul_sub(q[1], p[2], v.mul(q[2], p[1])),
-        v.mul_sub(q[2], p[0], v.mul(q[0], p[2])),
-        v.mul_sub(q[0], p[1], v.mul(q[1], p[0])),
-    ];
-    let b = [
-        v.mul_sub(q[1], a[2], v.mul_sub(q[2], a[1], h[0])),
-        v.mul_sub(q[2], a[0], v.mul_sub(q[0], a[2], h[1])),
-        v.mul_sub(q[0], a[1], v.mul_sub(q[1], a[0], h[2])),
-    ];
-    core::array::from_fn(|k| v.mul_add(q[3], a[k], b[k]))
-}
-
-/// Skinning with centers of rotation of points `p` with centers `c` (both in armature space):
-/// the sums (where each bone puts the center, the sign-aligned rotations, with `SCALED` the
-/// blended scale/shear of the offset), then `co' = anchor/contrib (+ c) + R·d` and the strength
-/// (see `finish_centers` in `kernels.rs`).
-///
-/// # Safety
-/// Every bone index of the part's lanes indexes `job.cor` and `job.cor_rigid`.
-#[inline(always)]
-unsafe fn centers_step<V: VectorOps, const SCALED: bool>(
+fn finish_centers<V: VectorOps, const SCALED: bool>(
     v: V,
-    job: &BatchJob<'_>,
-    part: &Part<'_>,
+    matrix: &[[V::F; 4]; 3],
+    real: &[V::F; 4],
+    dd: [V::F; 3],
+    contrib: V::F,
     p: [V::F; 3],
     c: [V::F; 3],
     a: V::F,
 ) -> [V::F; 3] {
     let zero = v.splat(0.0);
-    let d: [V::F; 3] = core::array::from_fn(|k| v.sub(p[k], c[k]));
-    let mut anchor = [zero; 3];
-    let mut offset = [zero; 3];
-    let mut real = [zero; 4];
-    let mut contrib = zero;
-    for slot in part.slots {
-        let bones = &slot.bones[part.lane0..];
-        let w = v.load(&slot.weights[part.lane0..]);
-        let q = if SCALED {
-            // SAFETY: the caller's contract; a CorBone's first 24 floats are matrix rows 0–1,
-            // row 2 and the rotation, and the first 8 entries of its scale/shear part.
-            let (a, b, s) =
-                unsafe { (v.load_columns(job.cor, bones, 0), v.load_columns(job.cor, bones, 8), v.load_columns(job.cor, bones, 16)) };
-            let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
-            for r in 0..3 {
-                let m = rows[r];
-                let moved = v.mul_add(m[0], c[0], v.mul_add(m[1], c[1], v.mul_add(m[2], c[2], m[3])));
-                anchor[r] = v.mul_add(w, moved, anchor[r]);
-            }
-            // SAFETY: the caller's contract.
-            let s22 = unsafe { load_s22(v, job.cor, bones) };
-            let rows = [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], s22]];
-            for r in 0..3 {
-                let m = rows[r];
-                let stretched = v.mul_add(m[0], d[0], v.mul_add(m[1], d[1], v.mul(m[2], d[2])));
-                offset[r] = v.mul_add(w, stretched, offset[r]);
-            }
-            [b[4], b[5], b[6], b[7]]
-        } else {
-            // SAFETY: the caller's contract; a CorRigidBone is 8 floats: the rotation, half the
-            // translation and a zero.
-            let r = unsafe { v.load_columns(job.cor_rigid, bones, 0) };
-            let moved = rotation_offset(v, &r[0..4], &r[4..7], &c);
-            let w2 = v.add(w, w);
-            for k in 0..3 {
-                anchor[k] = v.mul_add(w2, moved[k], anchor[k]);
-            }
-            [r[0], r[1], r[2], r[3]]
-        };
-        add_signed_rotation(v, &mut real, &q, w);
-        contrib = v.add(contrib, w);
-    }
     let one = v.splat(1.0);
-    let q = quaternion_matrix(v, real);
-    let dd = if SCALED { offset } else { d };
-    let n: [V::F; 3] = core::array::from_fn(|r| {
+    let anchor = each3(|r| affine_row(v, &matrix[r], &c));
+    let q = quaternion_matrix(v, *real);
+    let n = each3(|r| {
         let m = &q.rows[r];
         v.mul_add(m[0], dd[0], v.mul_add(m[1], dd[1], v.mul(m[2], dd[2])))
     });
@@ -449,31 +427,7 @@ unsafe fn centers_step<V: VectorOps, const SCALED: bool>(
     let inv = v.select(valid, v.div(a, v.mul(q.len2, contrib)), zero);
     let fa = v.mul(inv, q.len2);
     let fr = if SCALED { inv } else { v.mul(inv, contrib) };
-    let base: [V::F; 3] = if SCALED {
-        let keep = v.select(valid, v.sub(one, a), one);
-        core::array::from_fn(|k| v.mul(p[k], keep))
-    } else {
-        // co + a·(c − co): the rigid anchor is Σ wᵢ·(Mᵢ·c − c).
-        let av = v.select(valid, a, zero);
-        core::array::from_fn(|k| v.neg_mul_add(av, d[k], p[k]))
-    };
-    // anchor·(a/contrib) + n·(a/|q|²) + base
-    core::array::from_fn(|k| v.mul_add(anchor[k], fa, v.mul_add(n[k], fr, base[k])))
-}
-
-/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), by scalar loads through
-/// a small buffer: on the load side, none on the vector ports that the transposes fill (a fourth
-/// window for one float would cost a whole transpose).
-///
-/// # Safety
-/// The first `WIDTH` entries of `bones` index `cor`.
-#[inline(always)]
-unsafe fn load_s22<V: VectorOps>(v: V, cor: &[CorBone], bones: &[u32]) -> V::F {
-    let mut values = [0.0f32; LANES];
-    for l in 0..V::WIDTH {
-        debug_assert!((bones[l] as usize) < cor.len());
-        // SAFETY: the caller's contract.
-        values[l] = unsafe { cor.get_unchecked(bones[l] as usize) }.s22;
-    }
-    v.load(&values)
+    let keep = v.select(valid, v.sub(one, a), one);
+    // anchor·(a/contrib) + n·fr + co·(1 − a)
+    each3(|k| v.mul_add(anchor[k], fa, v.mul_add(n[k], fr, v.mul(p[k], keep))))
 }

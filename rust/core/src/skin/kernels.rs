@@ -12,7 +12,7 @@
 use glam::{Affine3A, Mat4, Vec4};
 use rayon::prelude::*;
 
-use super::batch::{skin_part, BatchJob, Part, VectorOps};
+use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{Slot, LANES};
 use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
 use super::{Influences, Pose, MIN_TOTAL_WEIGHT};
@@ -79,6 +79,7 @@ const _: () = assert!(CHUNK.is_multiple_of(LANES));
 
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     assert_eq!(out.len(), job.positions.len(), "one output point per vertex");
+    assert!(job.kind != Kind::CentersOfRotation || job.centers.is_some(), "centers of rotation need the centers");
     let task = |(i, chunk): (usize, &mut [[f32; 3]])| simd.chunk(job, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
@@ -277,13 +278,17 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
         linear: &pose.linear,
         dq: &pose.dq,
         pivot: &pose.pivot,
+        pivot_dual: &pose.pivot_dual,
         cor: &pose.cor,
+        #[cfg(target_arch = "x86_64")]
         cor_rigid: &pose.cor_rigid,
+        #[cfg(target_arch = "x86_64")]
         scaled: SCALED,
         premat: premat.as_ref(),
         postmat: postmat.as_ref(),
         blend_factor: job.blend_factor,
     };
+    let mut scratch = Scratch::new(job.influences.max_per_vertex());
     for (k, out) in out.chunks_mut(LANES).enumerate() {
         let first = start + k * LANES;
         let n = out.len();
@@ -291,7 +296,7 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
             // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction sets
             // were detected; the job's influences and pose fit together (`Job::new`), so every
             // bone index of the batch's slots indexes every table the method reads.
-            unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, job, first, out.try_into().expect("a full batch")) };
+            unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, job, first, out.try_into().expect("a full batch"), &mut scratch) };
             continue;
         }
         let original = load_points::<ISA>(&job.positions[first..first + n]);
@@ -338,15 +343,16 @@ unsafe fn full_batch<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
     job: &Job<'a>,
     first: usize,
     out: &mut [[f32; 3]; LANES],
+    scratch: &mut Scratch,
 ) {
     let slots = job.influences.batch(first / LANES);
+    let full = |a: &'a [f32]| -> &'a [f32; LANES] { a[first..first + LANES].try_into().expect("a full batch") };
+    let positions = job.positions[first..first + LANES].try_into().expect("a full batch");
+    let centers = job.centers.map(|c| c[first..first + LANES].try_into().expect("a full batch"));
     match ISA {
         #[cfg(target_arch = "x86_64")]
         ISA_AVX512 => {
-            let full = |a: &'a [f32]| -> &'a [f32; LANES] { a[first..first + LANES].try_into().expect("a full batch") };
-            let positions = job.positions[first..first + LANES].try_into().expect("a full batch");
-            if let (CENTERS, Some(centers)) = (KIND, job.centers) {
-                let centers = centers[first..first + LANES].try_into().expect("a full batch");
+            if let (CENTERS, Some(centers)) = (KIND, centers) {
                 // SAFETY: the caller's contract.
                 unsafe { super::avx512::batch_centers::<SCALED>(simd_job, positions, centers, out, slots, job.mask.map(full)) };
             } else {
@@ -354,42 +360,18 @@ unsafe fn full_batch<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
                 unsafe { super::avx512::batch::<KIND>(simd_job, positions, out, slots, job.mask.map(full), job.blend_amount.map(full)) };
             }
         }
-        // SAFETY: the caller's contract.
-        #[cfg(target_arch = "x86_64")]
-        ISA_AVX2 => unsafe { parts::<_, KIND, SCALED>(super::avx2::Avx2::new(), simd_job, job, first, out, slots) },
-        // SAFETY: the caller's contract.
-        #[cfg(target_arch = "aarch64")]
-        ISA_NEON => unsafe { parts::<_, KIND, SCALED>(super::neon::Neon::new(), simd_job, job, first, out, slots) },
-        _ => unreachable!("no SIMD kernels for copy {ISA}"),
-    }
-}
-
-/// A full batch as parts of `V::WIDTH` vertices, each skinned by the generic kernels of `batch.rs`.
-///
-/// # Safety
-/// Every bone index of `slots` indexes every table of `simd_job` that the method reads.
-#[inline(always)]
-unsafe fn parts<V: VectorOps, const KIND: u8, const SCALED: bool>(
-    v: V,
-    simd_job: &BatchJob<'_>,
-    job: &Job<'_>,
-    first: usize,
-    out: &mut [[f32; 3]; LANES],
-    slots: &[Slot],
-) {
-    for (p, out) in out.chunks_exact_mut(V::WIDTH).enumerate() {
-        let lanes = first + p * V::WIDTH..first + (p + 1) * V::WIDTH;
-        let part = Part {
-            positions: &job.positions[lanes.clone()],
-            out,
-            slots,
-            lane0: p * V::WIDTH,
-            strength: job.mask.map(|m| &m[lanes.clone()]),
-            blend_amount: job.blend_amount.map(|a| &a[lanes.clone()]),
-            centers: job.centers.map(|c| &c[lanes.clone()]),
-        };
-        // SAFETY: the caller's contract.
-        unsafe { skin_part::<V, KIND, SCALED>(v, simd_job, part) };
+        _ => {
+            let batch = FullBatch { positions, out, slots, strength: job.mask.map(full), blend_amount: job.blend_amount.map(full), centers };
+            match ISA {
+                // SAFETY: the caller's contract.
+                #[cfg(target_arch = "x86_64")]
+                ISA_AVX2 => unsafe { skin_batch::<_, KIND, SCALED>(super::avx2::Avx2::new(), simd_job, batch, scratch) },
+                // SAFETY: the caller's contract.
+                #[cfg(target_arch = "aarch64")]
+                ISA_NEON => unsafe { skin_batch::<_, KIND, SCALED>(super::neon::Neon::new(), simd_job, batch, scratch) },
+                _ => unreachable!("no SIMD kernels for copy {ISA}"),
+            }
+        }
     }
 }
 

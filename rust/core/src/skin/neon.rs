@@ -3,17 +3,14 @@
 //!
 //! NEON is part of every aarch64 target, so its intrinsics need no run-time detection. Points
 //! (de)interleave in one instruction (`ld3`/`st3`); bone records are loaded as rows and
-//! transposed 4×4 (`trn1`/`trn2` on floats, then on pairs); the LBS sums accumulate each lane's
-//! matrix rows with the weight taken from its lane of the weight vector (`fmla` by element), so
-//! they are transposed once per vertex instead of once per influence.
+//! transposed 4×4 (`trn1`/`trn2` on floats, then on pairs); the linear sums accumulate each
+//! lane's record rows with the weight taken from its lane of the weight vector (`fmla` by
+//! element), so they are transposed once per vertex instead of once per influence.
 
 use core::arch::aarch64::*;
 
 use super::batch::VectorOps;
-use super::influences::Slot;
-use super::pose::LinearBone;
-
-const _: () = assert!(core::mem::size_of::<LinearBone>() == 64);
+use super::influences::{Slot, LANES};
 
 /// Proof that the CPU has NEON (every aarch64 CPU does).
 #[derive(Clone, Copy)]
@@ -77,8 +74,6 @@ impl VectorOps for Neon {
         div(a: F, b: F) -> F = vdivq_f32(a, b);
         neg(a: F) -> F = vnegq_f32(a);
         mul_add(a: F, b: F, c: F) -> F = vfmaq_f32(c, a, b);
-        // a·b − c = a·b + (−c): one rounding, as on x86.
-        mul_sub(a: F, b: F, c: F) -> F = vfmaq_f32(vnegq_f32(c), a, b);
         neg_mul_add(a: F, b: F, c: F) -> F = vfmsq_f32(c, a, b);
         lt(a: F, b: F) -> M = vcltq_f32(a, b);
         gt(a: F, b: F) -> M = vcgtq_f32(a, b);
@@ -92,6 +87,13 @@ impl VectorOps for Neon {
         assert!(a.len() >= 4);
         // SAFETY: four floats (checked); NEON as in `instructions!`.
         unsafe { vld1q_f32(a.as_ptr()) }
+    }
+
+    #[inline(always)]
+    fn store(self, v: F, a: &mut [f32]) {
+        assert!(a.len() >= 4);
+        // SAFETY: four floats (checked); NEON as in `instructions!`.
+        unsafe { vst1q_f32(a.as_mut_ptr(), v) }
     }
 
     #[inline(always)]
@@ -123,38 +125,45 @@ impl VectorOps for Neon {
         unsafe { vst3q_f32(out.as_mut_ptr() as *mut f32, float32x4x3_t(x, y, z)) }
     }
 
+    /// Accumulated per lane, each row's weight taken from its lane of the weight vector (`fmla`
+    /// by element), and transposed once at the end.
     #[inline(always)]
-    unsafe fn linear_sums(self, slots: &[Slot], lane0: usize, linear: &[LinearBone]) -> ([F; 12], F) {
+    unsafe fn window_sums<T, const ROWS: usize>(
+        self,
+        slots: &[Slot],
+        signed: Option<&[[f32; LANES]]>,
+        lane0: usize,
+        table: &[T],
+        offset: usize,
+    ) -> [[F; 4]; ROWS] {
+        let base = table.as_ptr() as *const f32;
+        let stride = core::mem::size_of::<T>() / 4;
+        debug_assert!(offset + 4 * ROWS <= stride && signed.is_none_or(|s| s.len() == slots.len()));
         let zero = self.splat(0.0);
-        // Per lane, the three rows of Σ wᵢ·Mᵢ.
-        let mut acc = [[zero; 3]; 4];
-        let mut contrib = zero;
-        let base = linear.as_ptr() as *const f32;
-        for slot in slots {
-            let w = self.load(&slot.weights[lane0..]);
+        let mut acc = [[zero; ROWS]; 4];
+        for (s, slot) in slots.iter().enumerate() {
+            let w = self.load(&signed.map_or(&slot.weights, |w| &w[s])[lane0..]);
             let bones = &slot.bones[lane0..lane0 + 4];
-            let rows = |l: usize| -> [F; 3] {
-                debug_assert!((bones[l] as usize) < linear.len());
-                // SAFETY: the caller's contract; a LinearBone's first 12 floats are its rows.
-                core::array::from_fn(|r| unsafe { vld1q_f32(base.add(bones[l] as usize * 16 + 4 * r)) })
+            let row = |l: usize, r: usize| {
+                debug_assert!((bones[l] as usize) < table.len());
+                // SAFETY: the caller's contract: the lane's bone indexes `table` and the window
+                // lies inside its record; NEON as in `instructions!`.
+                unsafe { vld1q_f32(base.add(bones[l] as usize * stride + offset + 4 * r)) }
             };
-            let (m0, m1, m2, m3) = (rows(0), rows(1), rows(2), rows(3));
-            // SAFETY: NEON as in `instructions!`.
-            unsafe {
-                for r in 0..3 {
-                    acc[0][r] = vfmaq_laneq_f32::<0>(acc[0][r], m0[r], w);
-                    acc[1][r] = vfmaq_laneq_f32::<1>(acc[1][r], m1[r], w);
-                    acc[2][r] = vfmaq_laneq_f32::<2>(acc[2][r], m2[r], w);
-                    acc[3][r] = vfmaq_laneq_f32::<3>(acc[3][r], m3[r], w);
+            for r in 0..ROWS {
+                // SAFETY: NEON as in `instructions!`.
+                unsafe {
+                    acc[0][r] = vfmaq_laneq_f32::<0>(acc[0][r], row(0, r), w);
+                    acc[1][r] = vfmaq_laneq_f32::<1>(acc[1][r], row(1, r), w);
+                    acc[2][r] = vfmaq_laneq_f32::<2>(acc[2][r], row(2, r), w);
+                    acc[3][r] = vfmaq_laneq_f32::<3>(acc[3][r], row(3, r), w);
                 }
             }
-            contrib = self.add(contrib, w);
         }
-        let mut sums = [zero; 12];
-        for r in 0..3 {
-            let columns = transpose4(self, [acc[0][r], acc[1][r], acc[2][r], acc[3][r]]);
-            sums[4 * r..4 * r + 4].copy_from_slice(&columns);
+        let mut sums = [[zero; 4]; ROWS];
+        for (r, sum) in sums.iter_mut().enumerate() {
+            *sum = transpose4(self, [acc[0][r], acc[1][r], acc[2][r], acc[3][r]]);
         }
-        (sums, contrib)
+        sums
     }
 }

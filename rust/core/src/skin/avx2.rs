@@ -177,10 +177,11 @@ impl VectorOps for Avx2 {
         }
     }
 
-    /// Two rows or more: accumulated per lane, four lanes at a time (rows in pairs, one
-    /// register each: at most eight accumulators), and transposed once at the end, which needs
-    /// per influence only loads (the bone index, the weight broadcast, the rows) and FMAs. One
-    /// row: from transposed records, fewer instructions there.
+    /// Two rows or more: accumulated per lane, a few lanes at a time (rows in pairs, one
+    /// register each; four lanes for up to four rows, two for up to eight: at most eight
+    /// accumulators), and transposed once at the end, which needs per influence only loads (the
+    /// bone index, the weight broadcast, the rows) and FMAs. One row: from transposed records,
+    /// fewer instructions there.
     #[inline(always)]
     unsafe fn window_sums<T, const ROWS: usize>(
         self,
@@ -190,7 +191,7 @@ impl VectorOps for Avx2 {
         table: &[T],
         offset: usize,
     ) -> [[__m256; 4]; ROWS] {
-        const { assert!(ROWS <= 4) };
+        const { assert!(ROWS <= 8) };
         if ROWS == 1 {
             // SAFETY: the caller's contract.
             return unsafe { transposed_window_sums(self, slots, signed, lane0, table, offset) };
@@ -201,22 +202,23 @@ impl VectorOps for Avx2 {
         // the record too. Known at compile time.
         assert!(offset + 4 * ROWS.next_multiple_of(2) <= stride, "the window's pairs of rows lie inside the record");
         debug_assert!(signed.is_none_or(|s| s.len() == slots.len()));
+        let group = if ROWS <= 4 { 4 } else { 2 };
         // SAFETY: AVX as in `instructions!`; the loads as below.
         unsafe {
-            // [group][lane][pair]: rows 2j (low half) and 2j + 1 (high half) of the lane.
-            let mut pairs = [[[_mm256_setzero_ps(); 2]; 4]; 2];
-            for g in 0..2 {
+            // [lane][pair]: rows 2j (low half) and 2j + 1 (high half) of the lane.
+            let mut pairs = [[_mm256_setzero_ps(); 4]; 8];
+            for g in 0..8 / group {
                 for (s, slot) in slots.iter().enumerate() {
                     let weights = signed.map_or(&slot.weights, |w| &w[s]);
-                    for l in 0..4 {
-                        let lane = lane0 + 4 * g + l;
+                    for l in g * group..(g + 1) * group {
+                        let lane = lane0 + l;
                         debug_assert!((slot.bones[lane] as usize) < table.len());
                         // SAFETY: the caller's contract: the lane's bone indexes `table`; the
                         // pairs of rows lie inside its record (asserted above).
                         let record = base.add(slot.bones[lane] as usize * stride + offset);
                         let w = _mm256_broadcast_ss(&weights[lane]);
                         for j in 0..ROWS.div_ceil(2) {
-                            pairs[g][l][j] = _mm256_fmadd_ps(_mm256_loadu_ps(record.add(8 * j)), w, pairs[g][l][j]);
+                            pairs[l][j] = _mm256_fmadd_ps(_mm256_loadu_ps(record.add(8 * j)), w, pairs[l][j]);
                         }
                     }
                 }
@@ -225,7 +227,7 @@ impl VectorOps for Avx2 {
             let mut sums = [[_mm256_setzero_ps(); 4]; ROWS];
             for (r, sum) in sums.iter_mut().enumerate() {
                 let rows = each4(|l| {
-                    let (a, b) = (pairs[0][l][r / 2], pairs[1][l][r / 2]);
+                    let (a, b) = (pairs[l][r / 2], pairs[l + 4][r / 2]);
                     if r % 2 == 1 {
                         _mm256_permute2f128_ps::<0x31>(a, b)
                     } else {

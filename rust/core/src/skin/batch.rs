@@ -212,17 +212,18 @@ pub(super) unsafe fn skin_batch<V: VectorOps, const KIND: u8, const SCALED: bool
         }
         let p = job.premat.map_or(o, |m| apply(v, m, o));
         // The windows: a LinearBone's rows (floats 0–11), a DqBone's dual part (4–7), a
-        // PivotDualBone (0–15), a CorBone's rows (0–11) and scale/shear part (16–27).
+        // PivotDualBone (0–15), a CorBone's rows, rotation and scale/shear part (0–27).
         let moved = if let (true, Some(c)) = (centers, batch.centers) {
             let c = v.load_points(&c[lanes.clone()]);
             let c = job.premat.map_or(c, |m| apply(v, m, c));
             if SCALED {
-                // SAFETY: the caller's contract.
-                let (matrix, stretch) = unsafe {
-                    (v.window_sums::<_, 3>(slots, None, lane0, job.cor, 0), v.window_sums::<_, 3>(slots, None, lane0, job.cor, 16))
-                };
+                // One window over the rows, the rotation (its sum unused) and the scale/shear
+                // part: one index and weight per influence for both sums. SAFETY: the caller's
+                // contract.
+                let [m0, m1, m2, _, s0, s1, s2] = unsafe { v.window_sums::<_, 7>(slots, None, lane0, job.cor, 0) };
+                let matrix = [m0, m1, m2];
                 // Σ wᵢ·Sᵢ from the window s00 s01 s02 s10 | s11 s12 s20 s21 | s22 0 0 0.
-                let [[s00, s01, s02, s10], [s11, s12, s20, s21], [s22, ..]] = stretch;
+                let [[s00, s01, s02, s10], [s11, s12, s20, s21], [s22, ..]] = [s0, s1, s2];
                 let d: [V::F; 3] = each3(|k| v.sub(p[k], c[k]));
                 let row = |a, b, c| v.mul_add(a, d[0], v.mul_add(b, d[1], v.mul(c, d[2])));
                 let offset = [row(s00, s01, s02), row(s10, s11, s12), row(s20, s21, s22)];

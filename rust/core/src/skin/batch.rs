@@ -93,8 +93,9 @@ pub(super) trait VectorOps: Copy {
     }
 }
 
-/// [`VectorOps::window_sums`] from transposed records: one transpose per slot and row (which
-/// beats per-lane sums for a single row).
+/// [`VectorOps::window_sums`] from transposed records: one transpose per slot and row (the
+/// default; the AVX2 copy uses it for a single row, where it takes fewer instructions than
+/// per-lane sums).
 ///
 /// # Safety
 /// As [`VectorOps::window_sums`].

@@ -11,7 +11,7 @@ PLATFORM ?= linux-x64
 STAMPS := .stamps
 RUST_SOURCES := $(shell find rust bench -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: setup build addon platforms test test-rust test-python test-blender test-blenders test-windows demo bench clean
+.PHONY: setup build addon platforms test test-rust test-clippy test-python test-blender test-blenders test-windows test-arm demo bench clean
 
 setup: $(STAMPS)/deps $(STAMPS)/module $(STAMPS)/addon
 
@@ -53,12 +53,18 @@ platforms: setup
 
 build: setup
 
-test: setup test-rust test-python test-blender
+test: setup test-rust test-clippy test-python test-blender
 
 # Property tests use a fixed seed here so that CI is deterministic; plain `cargo test` draws new
 # random cases every run (and replays rust/core/proptest-regressions/ first).
 test-rust:
 	PROPTEST_RNG_SEED=20261122 cargo test --workspace --release
+
+# Lints with warnings as errors, among them that every `unsafe` block says why it is sound
+# (clippy::undocumented_unsafe_blocks, Cargo.toml); test-arm lints the aarch64 code too.
+test-clippy:
+	rustup component list --installed | grep -q '^clippy' || rustup component add clippy
+	cargo clippy --workspace --release -- -D warnings
 
 # The module's tests (on the editable module of .venv), then the Blender tests in their own
 # process, on the module of the installed extension zip (tests/blender/conftest.py).
@@ -91,6 +97,26 @@ test-windows: $(STAMPS)/deps $(STAMPS)/wine $(WINE_PRNG)
 	CARGO_TARGET_X86_64_PC_WINDOWS_GNU_LINKER=$(abspath addon/zig/windows-gnu-cc) \
 	CARGO_TARGET_X86_64_PC_WINDOWS_GNU_RUNNER=$(WINE) \
 	$(WINE_ENV) PROPTEST_RNG_SEED=20261122 nice -n 10 cargo test -p dqskin-core --release --target x86_64-pc-windows-gnu
+
+# The core's tests on aarch64 (every kernel test runs the NEON copy there): cross-built for
+# aarch64-unknown-linux-gnu, linked by zig from the pinned ziglang wheel (rust/cross/), run under
+# qemu's user-mode emulation against Debian's aarch64 C library. Installs what is missing (the
+# Rust target; qemu-user-static and libc6-arm64-cross through apt-get, as root on CI's fresh
+# Debian). Measures nothing: ARM speed needs an ARM machine (README, Performance).
+ARM_TARGET := aarch64-unknown-linux-gnu
+ARM_SYSROOT := /usr/aarch64-linux-gnu
+test-arm: $(STAMPS)/deps
+	@if ! command -v qemu-aarch64-static >/dev/null || [ ! -e $(ARM_SYSROOT)/lib/ld-linux-aarch64.so.1 ]; then \
+	  sudo=$$([ "$$(id -u)" = 0 ] || echo sudo); \
+	  $$sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$sudo apt-get install -y -qq --no-install-recommends qemu-user-static libc6-arm64-cross; \
+	fi
+	rustup target list --installed | grep -qx $(ARM_TARGET) || rustup target add $(ARM_TARGET)
+	rustup component list --installed | grep -q '^clippy' || rustup component add clippy
+	cargo clippy -p dqskin-core --release --target $(ARM_TARGET) -- -D warnings
+	DQSKIN_ZIG_PYTHON=$(abspath $(PY)) \
+	CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=$(abspath rust/cross/aarch64-linux-gnu-cc) \
+	CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="qemu-aarch64-static -L $(ARM_SYSROOT)" \
+	PROPTEST_RNG_SEED=20261122 cargo test -p dqskin-core --release --target $(ARM_TARGET) --lib --tests
 
 # The Blender tests on the other Blender releases, each from its own bpy wheel and CPython in
 # .venvs/ (see tests/run_blenders.py); `make test` covers the pinned one.

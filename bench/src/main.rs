@@ -6,7 +6,11 @@
 //! Also times the precompute of the centers of rotation on the procedural creature
 //! (`rigs::Creature`, 40 bones, 4 smooth influences per vertex) at about 50k and 250k vertices.
 //!
-//! Usage: `dqskin-bench [--quick] [--json FILE] [--only LBS-rigid|DQS-rigid|DQS-scaled|Blend-rigid|CoR-rigid|CoR-scaled|precompute]`.
+//! Usage: `dqskin-bench [--quick] [--json FILE] [--only LBS-rigid|DQS-rigid|DQS-scaled|Blend-rigid|CoR-rigid|CoR-scaled|precompute]
+//! [--vertices N] [--influences K] [--threads T] [--rounds R]`. The last four narrow the grid to one
+//! size, influence count or thread count and set the number of timed rounds (for profiling: under
+//! `valgrind --tool=callgrind`, `--rounds 1` skins each case twice, the warm-up and one round);
+//! with any of them the precompute runs only if `--only precompute` asks for it.
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -136,22 +140,31 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let quick = args.iter().any(|a| a == "--quick");
     let json = args.iter().position(|a| a == "--json").and_then(|i| args.get(i + 1).cloned());
-    let only = args.iter().position(|a| a == "--only").and_then(|i| args.get(i + 1).cloned());
+    let value = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1).cloned());
+    let number = |name: &str| value(name).map(|v| v.parse::<usize>().unwrap_or_else(|_| panic!("{name} needs a number, got {v}")));
+    let only = value("--only");
     let all = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let sizes: &[usize] = if quick { &[100_000] } else { &[100_000, 1_000_000] };
+    let sizes: Vec<usize> = match number("--vertices") {
+        Some(n) => vec![n],
+        None if quick => vec![100_000],
+        None => vec![100_000, 1_000_000],
+    };
+    let influence_counts: Vec<usize> = number("--influences").map_or(vec![4, 8], |k| vec![k]);
+    let thread_counts: Vec<usize> = number("--threads").map_or(vec![1, all], |t| vec![t]);
+    let rounds = number("--rounds");
     let mut rows = Vec::new();
     println!(
         "{:>9} {:>3} {:>3} {:<6} {:<6} {:>9} {:>10} {:>8} {:>10} {:>7}",
         "vertices", "inf", "thr", "method", "pose", "ms", "Mverts/s", "GB/s", "ref Mv/s", "of ref"
     );
-    for &vertices in sizes {
-        for per_vertex in [4usize, 8] {
+    for &vertices in &sizes {
+        for &per_vertex in &influence_counts {
             let s = scene(vertices, per_vertex);
             let mut out = vec![[0.0f32; 3]; vertices];
             let bytes = vertices * 12 * 2 + s.influences.byte_size();
-            for threads in [1, all] {
+            for &threads in &thread_counts {
                 pool::set_num_threads(threads).expect("threads");
-                let runs = if quick { 5 } else if vertices >= 1_000_000 { 25 } else { 60 };
+                let runs = rounds.unwrap_or(if quick { 5 } else if vertices >= 1_000_000 { 25 } else { 60 });
                 let cases: Vec<(&str, Method, &str, &Pose)> = [
                     ("LBS", Method::Linear, "rigid", &s.rigid),
                     ("DQS", Method::DualQuaternion, "rigid", &s.rigid),
@@ -210,7 +223,12 @@ fn main() {
             }
         }
     }
-    let precompute = if only.as_ref().is_none_or(|o| o == "precompute") { precompute_rows(quick, all) } else { Vec::new() };
+    let narrowed = ["--vertices", "--influences", "--threads", "--rounds"].iter().any(|f| value(f).is_some());
+    let precompute = match only.as_deref() {
+        Some("precompute") => precompute_rows(quick, all),
+        None if !narrowed => precompute_rows(quick, all),
+        _ => Vec::new(),
+    };
     if let Some(path) = json {
         let body: Vec<String> = rows
             .iter()

@@ -129,8 +129,8 @@ pub unsafe fn read_deform_verts(
     if mesh == 0 {
         return Err(ReadError::Null);
     }
-    // SAFETY (all reads below): offsets come from the SDNA of this Blender, the mesh pointer is
-    // live (caller), and the layer and vertex pointers are read from that mesh after their
+    // SAFETY: for all reads below, offsets come from the SDNA of this Blender, the mesh pointer
+    // is live (caller), and the layer and vertex pointers are read from that mesh after their
     // counts passed the checks.
     unsafe {
         let verts: i32 = read(mesh + layout.verts_num);
@@ -319,6 +319,7 @@ mod tests {
         let layout = MeshLayout::new(&mesh_sdna(false)).unwrap();
         let lists = vec![vec![(2, 0.5), (0, 0.25)], vec![], vec![(1, 1.0)], vec![(0, 0.0), (3, 0.75), (1, 0.125)]];
         let (mesh, _l, _d, _w) = fake(&lists, true);
+        // SAFETY: `fake` built a live mesh of this layout; its layers and vertices outlive the read.
         let got = unsafe { read_deform_verts(&layout, &mesh as *const _ as usize, 4) }.unwrap().unwrap();
         assert_eq!(got.offsets, vec![0, 2, 2, 3, 6]);
         assert_eq!(got.groups, vec![2, 0, 1, 0, 3, 1]);
@@ -330,11 +331,17 @@ mod tests {
         let layout = MeshLayout::new(&mesh_sdna(true)).unwrap();
         let (mesh, _l, _d, _w) = fake(&[vec![(0, 1.0)]], false);
         let p = &mesh as *const _ as usize;
+        // SAFETY: a live mesh of this layout from `fake` (here and in the next two reads, the
+        // third with a null pointer, which is refused).
         assert_eq!(unsafe { read_deform_verts(&layout, p, 1) }, Ok(None));
+        // SAFETY: as above.
         assert_eq!(unsafe { read_deform_verts(&layout, p, 2) }, Err(ReadError::VertexCount { expected: 2, found: 1 }));
+        // SAFETY: as above.
         assert_eq!(unsafe { read_deform_verts(&layout, 0, 2) }, Err(ReadError::Null));
         let (mut bad, _l, _d, _w) = fake(&[vec![(0, 1.0)]], true);
         bad.vdata.totlayer = -3;
+        // SAFETY: a live mesh of this layout; the bad count is refused before anything is read
+        // through it.
         assert_eq!(unsafe { read_deform_verts(&layout, &bad as *const _ as usize, 1) }, Err(ReadError::Implausible("layer count")));
     }
 
@@ -349,6 +356,8 @@ mod tests {
         let mut m = mesh2;
         m.vdata.layers = layers.as_ptr();
         m.vdata.totlayer = 1;
+        // SAFETY: a live mesh of this layout whose one layer points at live vertices; the bad
+        // count is refused before their weights are read.
         assert_eq!(unsafe { read_deform_verts(&layout, &m as *const _ as usize, 2) }, Err(ReadError::Implausible("weights per vertex")));
     }
 }

@@ -6,10 +6,11 @@
 
 use core::arch::x86_64::*;
 
+use super::batch::BatchJob;
 use super::influences::{Slot, LANES};
 use super::kernels::{DqSum, Points};
 use super::kernels::{DUAL_QUATERNION, LINEAR};
-use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
+use super::pose::{CorBone, DqBone, LinearBone, PivotBone};
 
 const _: () = assert!(LANES == 16);
 
@@ -128,6 +129,7 @@ type Sums = ([__m512; 4], [__m512; 4], __m512);
 /// The CPU must support AVX-512F, AVX2 and FMA, and every bone index in `slots` must index `dq`.
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub(super) unsafe fn accumulate_rigid(slots: &[Slot], dq: &[DqBone]) -> DqSum {
+    // SAFETY: this function's own contract.
     let (real, dual, contrib) = unsafe { rigid_sums(slots, dq) };
     store(real, dual, contrib)
 }
@@ -143,6 +145,7 @@ unsafe fn rigid_sums(slots: &[Slot], dq: &[DqBone]) -> Sums {
     for slot in slots {
         // SAFETY: indices are in range (validated); a DqBone is 8 floats.
         let c = unsafe { load_columns(dq, &slot.bones, 0) };
+        // SAFETY: a slot has 16 weights.
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
         add_signed(&mut real, &mut dual, &c[0..4], &c[4..8], w);
         contrib = _mm512_add_ps(contrib, w);
@@ -159,6 +162,7 @@ unsafe fn rigid_sums(slots: &[Slot], dq: &[DqBone]) -> Sums {
 pub(super) unsafe fn accumulate_scaled(co: &Points, slots: &[Slot], pivot: &[PivotBone]) -> DqSum {
     // SAFETY: each coordinate array has 16 floats.
     let p = unsafe { [_mm512_loadu_ps(co.x.as_ptr()), _mm512_loadu_ps(co.y.as_ptr()), _mm512_loadu_ps(co.z.as_ptr())] };
+    // SAFETY: this function's own contract.
     let (real, dual, contrib) = unsafe { scaled_sums(p, slots, pivot) };
     store(real, dual, contrib)
 }
@@ -176,6 +180,7 @@ unsafe fn scaled_sums([x, y, z]: [__m512; 3], slots: &[Slot], pivot: &[PivotBone
         // SAFETY: indices are in range (validated); a PivotBone is 16 floats: rows 0–1, then
         // row 2 and the rotation.
         let a = unsafe { load_columns(pivot, &slot.bones, 0) };
+        // SAFETY: as above.
         let b = unsafe { load_columns(pivot, &slot.bones, 8) };
         let row = |m0: __m512, m1: __m512, m2: __m512, t: __m512| {
             _mm512_fmadd_ps(m0, x, _mm512_fmadd_ps(m1, y, _mm512_fmadd_ps(m2, z, t)))
@@ -197,6 +202,7 @@ unsafe fn scaled_sums([x, y, z]: [__m512; 3], slots: &[Slot], pivot: &[PivotBone
                 _mm512_fmadd_ps(tx, q[0], _mm512_fmadd_ps(ty, q[1], _mm512_mul_ps(tz, q[2]))),
             ),
         ];
+        // SAFETY: a slot has 16 weights.
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
         add_signed(&mut real, &mut dual, &q, &d, w);
         contrib = _mm512_add_ps(contrib, w);
@@ -322,7 +328,9 @@ unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], _
     for slot in slots {
         // SAFETY: indices are in range (validated); a LinearBone is 16 floats (rows, padding).
         let a = unsafe { load_columns(linear, &slot.bones, 0) };
+        // SAFETY: as above.
         let b = unsafe { load_columns(linear, &slot.bones, 8) };
+        // SAFETY: a slot has 16 weights.
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
         for k in 0..8 {
             acc[k] = _mm512_fmadd_ps(a[k], w, acc[k]);
@@ -333,19 +341,6 @@ unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], _
         contrib = _mm512_add_ps(contrib, w);
     }
     (acc, contrib)
-}
-
-/// Inputs of [`batch`] that are the same for every batch of a call.
-pub(super) struct BatchJob<'a> {
-    pub linear: &'a [LinearBone],
-    pub dq: &'a [DqBone],
-    pub pivot: &'a [PivotBone],
-    pub cor: &'a [CorBone],
-    pub cor_rigid: &'a [CorRigidBone],
-    pub scaled: bool,
-    pub premat: Option<&'a glam::Affine3A>,
-    pub postmat: Option<&'a glam::Affine3A>,
-    pub blend_factor: f32,
 }
 
 /// Everything skinning does to one full batch of 16 vertices, in registers: load, `premat`,
@@ -364,8 +359,9 @@ pub(super) unsafe fn batch<const KIND: u8>(
     strength: Option<&[f32; LANES]>,
     blend_amount: Option<&[f32; LANES]>,
 ) {
-    // SAFETY (all unaligned loads and stores below): the arrays have exactly 16 lanes.
+    // SAFETY: 16 points (and below: every array loaded or stored has exactly 16 lanes).
     let original = unsafe { load_points(positions) };
+    // SAFETY: each coordinate array has 16 floats.
     let o = unsafe {
         [_mm512_loadu_ps(original.x.as_ptr()), _mm512_loadu_ps(original.y.as_ptr()), _mm512_loadu_ps(original.z.as_ptr())]
     };
@@ -376,6 +372,7 @@ pub(super) unsafe fn batch<const KIND: u8>(
     let zero = _mm512_setzero_ps();
     let one = _mm512_set1_ps(1.0);
     let a = match strength {
+        // SAFETY: the mask has 16 lanes.
         Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
         None => one,
     };
@@ -432,6 +429,7 @@ pub(super) unsafe fn batch<const KIND: u8>(
         (Some(l), Some(d)) => {
             let mut alpha = _mm512_set1_ps(job.blend_factor);
             if let Some(amount) = blend_amount {
+                // SAFETY: the blend amounts have 16 lanes.
                 alpha = _mm512_mul_ps(alpha, unsafe { _mm512_loadu_ps(amount.as_ptr()) });
             }
             core::array::from_fn(|k| _mm512_fmadd_ps(alpha, _mm512_sub_ps(d[k], l[k]), l[k]))
@@ -551,9 +549,11 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     slots: &[Slot],
     strength: Option<&[f32; LANES]>,
 ) {
+    // SAFETY: each coordinate array has 16 floats.
     let lanes = |p: &Points| unsafe { [_mm512_loadu_ps(p.x.as_ptr()), _mm512_loadu_ps(p.y.as_ptr()), _mm512_loadu_ps(p.z.as_ptr())] };
-    // SAFETY (all unaligned loads and stores below): the arrays have exactly 16 lanes.
+    // SAFETY: 16 points.
     let o = lanes(&unsafe { load_points(positions) });
+    // SAFETY: 16 centers.
     let c = lanes(&unsafe { load_points(centers) });
     let (p, c) = match job.premat {
         Some(m) => {
@@ -569,11 +569,13 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     let (mut q_prev, mut ws_prev) = ([_mm512_setzero_ps(); 4], _mm512_setzero_ps());
     let mut contrib = _mm512_setzero_ps();
     for slot in slots {
+        // SAFETY: a slot has 16 weights.
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
         let q = if SCALED {
             // SAFETY: indices are in range (validated); a CorBone's first 24 floats are matrix
             // rows 0–1, row 2 and the rotation, and the first 8 entries of its scale/shear part.
             let a = unsafe { load_columns_scalar(job.cor, &slot.bones, 0) };
+            // SAFETY: as above.
             let b = unsafe { load_columns_scalar(job.cor, &slot.bones, 8) };
             let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
             for r in 0..3 {
@@ -581,6 +583,7 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
                 let moved = _mm512_fmadd_ps(m[0], c[0], _mm512_fmadd_ps(m[1], c[1], _mm512_fmadd_ps(m[2], c[2], m[3])));
                 anchor[r] = _mm512_fmadd_ps(w, moved, anchor[r]);
             }
+            // SAFETY: as above.
             let s = unsafe { load_columns_scalar(job.cor, &slot.bones, 16) };
             // SAFETY: as above; fewer than 2²⁶ bones (the pose holds 128 bytes per bone).
             let s22 = unsafe { load_s22(job.cor, &slot.bones) };
@@ -629,6 +632,7 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     let one = _mm512_set1_ps(1.0);
     let two = _mm512_set1_ps(2.0);
     let a = match strength {
+        // SAFETY: the mask has 16 lanes.
         Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
         None => one,
     };

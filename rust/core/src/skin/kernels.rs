@@ -3,13 +3,16 @@
 //!
 //! Vertices are processed [`LANES`] at a time from the lane-ordered influence slots: every lane
 //! is an independent vertex, so the serial chain of DQS's running-sum sign choice runs in all
-//! lanes at once (SIMD where the compiler vectorizes the lane loops, instruction-level
-//! parallelism where it does not). On x86-64, copies compiled for AVX2+FMA and for AVX-512 are
-//! chosen at run time by what the CPU has (see [`Simd::detect`]).
+//! lanes at once. Compiled copies for AVX2+FMA and for AVX-512 (x86-64) and for NEON (aarch64)
+//! are chosen at run time by what the CPU has (see [`Simd::detect`]); full batches run their
+//! SIMD kernels (`batch.rs` for AVX2 and NEON, `avx512.rs`), the last partial batch of a call
+//! and the baseline copy run the portable code below (which the compiler vectorizes where it
+//! can).
 
 use glam::{Affine3A, Mat4, Vec4};
 use rayon::prelude::*;
 
+use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{Slot, LANES};
 use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
 use super::{Influences, Pose, MIN_TOTAL_WEIGHT};
@@ -22,11 +25,18 @@ pub(crate) enum Kind {
     CentersOfRotation,
 }
 
+/// One skinning call's inputs, as the kernels read them.
+///
+/// The kernels read bone records without bounds checks (see [`bone`]); what makes that sound
+/// is carried by this type: [`Job::new`] checks that the influences and the pose fit together
+/// (every bone index of the influences, validated against their bone count when they were
+/// built, indexes every table of the pose the method reads), and those fields are private.
+/// The other inputs are read through checked slices.
 pub(crate) struct Job<'a> {
-    pub kind: Kind,
+    kind: Kind,
+    influences: &'a Influences,
+    pose: &'a Pose,
     pub positions: &'a [[f32; 3]],
-    pub influences: &'a Influences,
-    pub pose: &'a Pose,
     pub premat: Option<Mat4>,
     pub postmat: Option<Mat4>,
     pub mask: Option<&'a [f32]>,
@@ -36,12 +46,40 @@ pub(crate) struct Job<'a> {
     pub centers: Option<&'a [[f32; 3]]>,
 }
 
+impl<'a> Job<'a> {
+    /// A job without options (set the public fields for them).
+    ///
+    /// # Panics
+    /// If the pose does not have one bone per bone index of the influences, or a method other
+    /// than LBS is asked for without the pose's rest data, or `positions` does not have one
+    /// point per vertex. [`super::skin`] checks these first and reports what is wrong.
+    pub(crate) fn new(kind: Kind, positions: &'a [[f32; 3]], influences: &'a Influences, pose: &'a Pose) -> Self {
+        assert_eq!(pose.bone_count(), influences.bone_count(), "the pose must have one bone per bone index");
+        assert!(kind == Kind::Linear || pose.has_dual_quaternions(), "this method needs the rest matrices");
+        assert_eq!(positions.len(), influences.vertex_count(), "one position per vertex");
+        Job {
+            kind,
+            influences,
+            pose,
+            positions,
+            premat: None,
+            postmat: None,
+            mask: None,
+            blend_amount: None,
+            blend_factor: 0.0,
+            centers: None,
+        }
+    }
+}
+
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
 /// A multiple of [`LANES`], so tasks start on batch boundaries.
 pub(crate) const CHUNK: usize = 4096;
 const _: () = assert!(CHUNK.is_multiple_of(LANES));
 
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
+    assert_eq!(out.len(), job.positions.len(), "one output point per vertex");
+    assert!(job.kind != Kind::CentersOfRotation || job.centers.is_some(), "centers of rotation need the centers");
     let task = |(i, chunk): (usize, &mut [[f32; 3]])| simd.chunk(job, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
@@ -52,76 +90,117 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
 
 /// Instruction sets the kernels are compiled for; the best one the CPU has is chosen at run time.
 const ISA_BASELINE: u8 = 0;
+#[cfg(target_arch = "x86_64")]
 const ISA_AVX2: u8 = 1;
+#[cfg(target_arch = "x86_64")]
 const ISA_AVX512: u8 = 2;
+#[cfg(target_arch = "aarch64")]
+const ISA_NEON: u8 = 3;
 
-/// Which compiled copy of the kernels to run.
+/// The compiled copies of the kernels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Simd {
+pub(crate) enum InstructionSet {
+    /// Portable code, compiled for the target's baseline.
     Baseline,
     #[cfg(target_arch = "x86_64")]
     Avx2Fma,
     #[cfg(target_arch = "x86_64")]
     Avx512,
+    /// Part of every aarch64 target, so always there.
+    #[cfg(target_arch = "aarch64")]
+    Neon,
+}
+
+/// Which compiled copy of the kernels to run. A value is proof that the CPU has the copy's
+/// instruction sets: it is only made by [`Simd::available`] (and so [`Simd::detect`]) after
+/// detecting them, so code holding one may run that copy's `#[target_feature]` functions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Simd {
+    set: InstructionSet,
 }
 
 impl Simd {
     /// The copies this CPU can run, best last.
     pub(crate) fn available() -> Vec<Simd> {
-        let mut all = vec![Simd::Baseline];
+        let mut all = vec![Simd { set: InstructionSet::Baseline }];
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::is_x86_feature_detected as has;
             if has!("avx2") && has!("fma") {
-                all.push(Simd::Avx2Fma);
+                all.push(Simd { set: InstructionSet::Avx2Fma });
                 if has!("avx512f") {
-                    all.push(Simd::Avx512);
+                    all.push(Simd { set: InstructionSet::Avx512 });
                 }
             }
         }
+        #[cfg(target_arch = "aarch64")]
+        all.push(Simd { set: InstructionSet::Neon });
         all
     }
 
-    /// The best available copy, or the one `DQSKIN_SIMD` (`baseline`, `avx2`, `avx512`) asks for
-    /// if the CPU has it (for debugging and comparisons).
+    /// The best available copy, or the one `DQSKIN_SIMD` (`baseline`, `avx2`, `avx512`, `neon`)
+    /// asks for if the CPU has it (for debugging and comparisons).
     pub(crate) fn detect() -> Self {
         let available = Self::available();
         let requested = std::env::var("DQSKIN_SIMD").ok().and_then(|v| match v.trim() {
-            "baseline" => Some(Simd::Baseline),
+            "baseline" => Some(InstructionSet::Baseline),
             #[cfg(target_arch = "x86_64")]
-            "avx2" => Some(Simd::Avx2Fma),
+            "avx2" => Some(InstructionSet::Avx2Fma),
             #[cfg(target_arch = "x86_64")]
-            "avx512" => Some(Simd::Avx512),
+            "avx512" => Some(InstructionSet::Avx512),
+            #[cfg(target_arch = "aarch64")]
+            "neon" => Some(InstructionSet::Neon),
             _ => None,
         });
-        match requested {
-            Some(r) if available.contains(&r) => r,
-            _ => *available.last().expect("baseline is always available"),
+        match available.iter().find(|s| Some(s.set) == requested) {
+            Some(s) => *s,
+            None => *available.last().expect("baseline is always available"),
         }
     }
 
+    /// The instruction set of this copy (a value of it proves the CPU has it).
+    pub(crate) fn instruction_set(self) -> InstructionSet {
+        self.set
+    }
+
     fn chunk(self, job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
-        match self {
-            Simd::Baseline => chunk::<ISA_BASELINE>(job, start, out),
-            // SAFETY: `detect` checked that the CPU has these instruction sets.
+        match self.set {
+            InstructionSet::Baseline => chunk::<ISA_BASELINE>(job, start, out),
+            // SAFETY: a `Simd` of this set exists only where AVX2 and FMA were detected.
             #[cfg(target_arch = "x86_64")]
-            Simd::Avx2Fma => unsafe { chunk_avx2(job, start, out) },
+            InstructionSet::Avx2Fma => unsafe { chunk_avx2(job, start, out) },
+            // SAFETY: a `Simd` of this set exists only where AVX-512F, AVX2 and FMA were detected.
             #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { chunk_avx512(job, start, out) },
+            InstructionSet::Avx512 => unsafe { chunk_avx512(job, start, out) },
+            // SAFETY: every aarch64 CPU has NEON.
+            #[cfg(target_arch = "aarch64")]
+            InstructionSet::Neon => unsafe { chunk_neon(job, start, out) },
         }
     }
 }
 
+/// # Safety
+/// The CPU must support AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn chunk_avx2(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
     chunk::<ISA_AVX2>(job, start, out)
 }
 
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn chunk_avx512(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
     chunk::<ISA_AVX512>(job, start, out)
+}
+
+/// # Safety
+/// The CPU must support NEON (every aarch64 CPU does; the attribute lets the intrinsics inline).
+#[cfg(target_arch = "aarch64")]
+#[target_feature(enable = "neon")]
+unsafe fn chunk_neon(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<ISA_NEON>(job, start, out)
 }
 
 #[inline(always)]
@@ -145,11 +224,11 @@ pub(super) const CENTERS: u8 = 3;
 type Lanes = [f32; LANES];
 const ZERO: Lanes = [0.0; LANES];
 
-/// `a·b + c`, fused in the copy compiled for AVX2+FMA (where `mul_add` is one instruction; in
-/// the baseline copy it would be a slow library call).
+/// `a·b + c`, fused in the SIMD copies (where `mul_add` is one instruction; in the x86-64
+/// baseline copy it would be a slow library call).
 #[inline(always)]
 fn madd<const ISA: u8>(a: f32, b: f32, c: f32) -> f32 {
-    if ISA >= ISA_AVX2 {
+    if ISA != ISA_BASELINE {
         a.mul_add(b, c)
     } else {
         a * b + c
@@ -191,64 +270,34 @@ struct Batch<'a> {
 
 /// Skins vertices `start..start + out.len()` batch by batch.
 #[inline(always)]
-fn batches<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
-    job: &Job<'a>,
-    start: usize,
-    out: &mut [[f32; 3]],
-) {
+fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
     let premat = job.premat.map(Affine3A::from_mat4);
     let postmat = job.postmat.map(Affine3A::from_mat4);
     let pose = job.pose;
-    #[cfg(target_arch = "x86_64")]
-    let simd_job = (ISA == ISA_AVX512).then(|| super::avx512::BatchJob {
+    let simd_job = BatchJob {
         linear: &pose.linear,
         dq: &pose.dq,
         pivot: &pose.pivot,
+        pivot_dual: &pose.pivot_dual,
         cor: &pose.cor,
+        #[cfg(target_arch = "x86_64")]
         cor_rigid: &pose.cor_rigid,
+        #[cfg(target_arch = "x86_64")]
         scaled: SCALED,
         premat: premat.as_ref(),
         postmat: postmat.as_ref(),
         blend_factor: job.blend_factor,
-    });
+    };
+    let mut scratch = Scratch::new(job.influences.max_per_vertex());
     for (k, out) in out.chunks_mut(LANES).enumerate() {
         let first = start + k * LANES;
         let n = out.len();
-        #[cfg(target_arch = "x86_64")]
-        if let (ISA_AVX512, Some(simd_job)) = (ISA, &simd_job) {
-            if n == LANES {
-                let full = |a: &'a [f32]| -> &'a [f32; LANES] { a[first..first + LANES].try_into().expect("a full batch") };
-                let positions = job.positions[first..first + LANES].try_into().expect("a full batch");
-                let slots = job.influences.batch(first / LANES);
-                if let (CENTERS, Some(centers)) = (KIND, job.centers) {
-                    let centers = centers[first..first + LANES].try_into().expect("a full batch");
-                    // SAFETY: as below.
-                    unsafe {
-                        super::avx512::batch_centers::<SCALED>(
-                            simd_job,
-                            positions,
-                            centers,
-                            out.try_into().expect("a full batch"),
-                            slots,
-                            job.mask.map(full),
-                        )
-                    };
-                    continue;
-                }
-                // SAFETY: this copy only runs where AVX-512F, AVX2 and FMA were detected; bone
-                // indices were validated against the pose's bone count.
-                unsafe {
-                    super::avx512::batch::<KIND>(
-                        simd_job,
-                        positions,
-                        out.try_into().expect("a full batch"),
-                        slots,
-                        job.mask.map(full),
-                        job.blend_amount.map(full),
-                    )
-                };
-                continue;
-            }
+        if ISA != ISA_BASELINE && n == LANES {
+            // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction sets
+            // were detected; the job's influences and pose fit together (`Job::new`), so every
+            // bone index of the batch's slots indexes every table the method reads.
+            unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, job, first, out.try_into().expect("a full batch"), &mut scratch) };
+            continue;
         }
         let original = load_points::<ISA>(&job.positions[first..first + n]);
         let mut strength: Lanes = [1.0; LANES];
@@ -260,27 +309,79 @@ fn batches<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
             None => original,
         };
         let batch = Batch { first, n, original, co, strength, slots: job.influences.batch(first / LANES) };
+        // The sums' contract: the job's influences and pose fit together (`Job::new`), so every
+        // bone index of the batch's slots indexes every table the method reads.
         if let (CENTERS, Some(centers)) = (KIND, job.centers) {
             let center = load_points::<ISA>(&centers[first..first + n]);
             let center = match &premat {
                 Some(m) => center.transform::<ISA>(m),
                 None => center,
             };
-            let sum = accumulate_centers::<ISA, SCALED>(&batch.co, &center, batch.slots, &pose.cor, &pose.cor_rigid);
+            // SAFETY: see above.
+            let sum = unsafe { accumulate_centers::<ISA, SCALED>(&batch.co, &center, batch.slots, &pose.cor, &pose.cor_rigid) };
             let moved = finish_centers::<ISA, SCALED>(&batch.co, &center, &sum, &batch.strength);
             finish_points::<ISA>(&batch, moved, postmat.as_ref(), out);
             continue;
         }
-        let sum = (KIND != LINEAR)
-            .then(|| accumulate_dual_quaternion::<ISA, SCALED>(&batch.co, batch.slots, &pose.dq, &pose.pivot));
-        finish_batch::<ISA, KIND>(job, &batch, sum.as_ref(), postmat.as_ref(), out);
+        let sum = (KIND != LINEAR).then(|| {
+            // SAFETY: see above.
+            unsafe { accumulate_dual_quaternion::<ISA, SCALED>(&batch.co, batch.slots, &pose.dq, &pose.pivot) }
+        });
+        // SAFETY: see above.
+        unsafe { finish_batch::<ISA, KIND>(job, &batch, sum.as_ref(), postmat.as_ref(), out) };
+    }
+}
+
+/// One full batch with the SIMD kernels of the copy `ISA`.
+///
+/// # Safety
+/// The CPU has the instruction sets of `ISA` (not the baseline); every bone index of the batch's
+/// slots indexes every table of `simd_job` that the method reads.
+#[inline(always)]
+unsafe fn full_batch<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
+    simd_job: &BatchJob<'_>,
+    job: &Job<'a>,
+    first: usize,
+    out: &mut [[f32; 3]; LANES],
+    scratch: &mut Scratch,
+) {
+    let slots = job.influences.batch(first / LANES);
+    let full = |a: &'a [f32]| -> &'a [f32; LANES] { a[first..first + LANES].try_into().expect("a full batch") };
+    let positions = job.positions[first..first + LANES].try_into().expect("a full batch");
+    let centers = job.centers.map(|c| c[first..first + LANES].try_into().expect("a full batch"));
+    match ISA {
+        #[cfg(target_arch = "x86_64")]
+        ISA_AVX512 => {
+            if let (CENTERS, Some(centers)) = (KIND, centers) {
+                // SAFETY: the caller's contract.
+                unsafe { super::avx512::batch_centers::<SCALED>(simd_job, positions, centers, out, slots, job.mask.map(full)) };
+            } else {
+                // SAFETY: the caller's contract.
+                unsafe { super::avx512::batch::<KIND>(simd_job, positions, out, slots, job.mask.map(full), job.blend_amount.map(full)) };
+            }
+        }
+        _ => {
+            let batch = FullBatch { positions, out, slots, strength: job.mask.map(full), blend_amount: job.blend_amount.map(full), centers };
+            match ISA {
+                // SAFETY: the caller's contract.
+                #[cfg(target_arch = "x86_64")]
+                ISA_AVX2 => unsafe { skin_batch::<_, KIND, SCALED>(super::avx2::Avx2::new(), simd_job, batch, scratch) },
+                // SAFETY: the caller's contract.
+                #[cfg(target_arch = "aarch64")]
+                ISA_NEON => unsafe { skin_batch::<_, KIND, SCALED>(super::neon::Neon::new(), simd_job, batch, scratch) },
+                _ => unreachable!("no SIMD kernels for copy {ISA}"),
+            }
+        }
     }
 }
 
 /// Finishes a loaded batch (LBS, DQS from its sums, or their blend), applies `postmat` and the
 /// mask, and writes it.
+///
+/// # Safety
+/// Every bone index of the batch's slots indexes the pose's `linear` table.
 #[inline(always)]
-fn finish_batch<const ISA: u8, const KIND: u8>(
+unsafe fn finish_batch<const ISA: u8, const KIND: u8>(
     job: &Job<'_>,
     batch: &Batch<'_>,
     sum: Option<&DqSum>,
@@ -292,7 +393,8 @@ fn finish_batch<const ISA: u8, const KIND: u8>(
     let moved = match (KIND, sum) {
         (DUAL_QUATERNION, Some(sum)) => finish_dual_quaternion::<ISA>(co, sum, strength),
         (BLEND, Some(sum)) => {
-            let lbs = linear::<ISA>(co, batch.slots, &pose.linear, strength);
+            // SAFETY: the caller's contract.
+            let lbs = unsafe { linear::<ISA>(co, batch.slots, &pose.linear, strength) };
             let dqs = finish_dual_quaternion::<ISA>(co, sum, strength);
             let mut alpha: Lanes = [job.blend_factor; LANES];
             if let Some(amount) = job.blend_amount {
@@ -308,7 +410,8 @@ fn finish_batch<const ISA: u8, const KIND: u8>(
             }
             r
         }
-        _ => linear::<ISA>(co, batch.slots, &pose.linear, strength),
+        // SAFETY: the caller's contract.
+        _ => unsafe { linear::<ISA>(co, batch.slots, &pose.linear, strength) },
     };
     finish_points::<ISA>(batch, moved, postmat, out);
 }
@@ -364,31 +467,39 @@ fn store_points<const ISA: u8>(p: &Points, out: &mut [[f32; 3]]) {
     }
 }
 
-/// Bone data for the lanes of one slot. Bone indices were validated against the bone count when
-/// the influences were built, and [`super::skin`] checked that the pose has that many bones;
-/// padding lanes use bone 0, which exists whenever there is a slot at all.
+/// Bone data for one lane of a slot, without a bounds check (the kernels' innermost loads).
+///
+/// # Safety
+/// `index < table.len()`. For a slot of a [`Job`]'s influences and a table of its pose this
+/// holds: bone indices were validated against the bone count when the influences were built,
+/// `Job::new` checked that the pose has that many bones (and the rest tables the method reads),
+/// and padding lanes use bone 0, which exists whenever there is a slot at all.
 #[inline(always)]
-fn bone<T>(table: &[T], index: u32) -> &T {
+unsafe fn bone<T>(table: &[T], index: u32) -> &T {
     debug_assert!((index as usize) < table.len());
-    // SAFETY: see above; the index is in range.
+    // SAFETY: the caller's contract.
     unsafe { table.get_unchecked(index as usize) }
 }
 
 /// LBS: `co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)`; `co` where `contrib ≤ 0.0001`.
 /// Lane by lane with 4-wide rows: LBS has no serial dependency between influences, so this keeps
 /// the accumulators in registers.
+///
+/// # Safety
+/// Every bone index of `slots` indexes `linear` (see [`bone`]).
 #[inline(always)]
-fn linear<const ISA: u8>(co: &Points, slots: &[Slot], linear: &[LinearBone], strength: &Lanes) -> Points {
+unsafe fn linear<const ISA: u8>(co: &Points, slots: &[Slot], linear: &[LinearBone], strength: &Lanes) -> Points {
     let mut r = *co;
     for l in 0..LANES {
         let mut acc = [Vec4::ZERO; 3];
         let mut contrib = 0.0f32;
         for slot in slots {
-            let m = bone(linear, slot.bones[l]);
+            // SAFETY: the caller's contract.
+            let m = unsafe { bone(linear, slot.bones[l]) };
             let w = slot.weights[l];
             let ws = Vec4::splat(w);
             for (a, row) in acc.iter_mut().zip(&m.matrix.rows) {
-                *a = if ISA >= ISA_AVX2 { row.mul_add(ws, *a) } else { *row * ws + *a };
+                *a = if ISA != ISA_BASELINE { row.mul_add(ws, *a) } else { *row * ws + *a };
             }
             contrib += w;
         }
@@ -411,28 +522,31 @@ pub(super) struct DqSum {
 /// Sums `±wᵢ·q̂ᵢ` with each sign chosen against the running sum (Blender's
 /// `add_weighted_dq_dq`); for bones with scale the dual part moves `co` exactly where the bone's
 /// matrix puts it (`add_weighted_dq_dq_pivot`).
+///
+/// # Safety
+/// Every bone index of `slots` indexes `dq` and `pivot` (see [`bone`]); with `ISA` AVX-512, the
+/// CPU has it.
 #[inline(always)]
-fn accumulate_dual_quaternion<const ISA: u8, const SCALED: bool>(
+unsafe fn accumulate_dual_quaternion<const ISA: u8, const SCALED: bool>(
     co: &Points,
     slots: &[Slot],
     dq: &[DqBone],
     pivot: &[PivotBone],
 ) -> DqSum {
-    // SAFETY: `ISA` names the instruction set the running copy was chosen for after detecting
-    // it; bone indices were validated against the pose's bone count.
     #[cfg(target_arch = "x86_64")]
     match (ISA, SCALED) {
+        // SAFETY: the caller's contract.
         (ISA_AVX512, false) => return unsafe { super::avx512::accumulate_rigid(slots, dq) },
+        // SAFETY: the caller's contract.
         (ISA_AVX512, true) => return unsafe { super::avx512::accumulate_scaled(co, slots, pivot) },
-        (ISA_AVX2, false) => return unsafe { super::avx2::accumulate_rigid(slots, dq) },
-        (ISA_AVX2, true) => return unsafe { super::avx2::accumulate_scaled(co, slots, pivot) },
         _ => {}
     }
     let mut s = DqSum { real: [ZERO; 4], dual: [ZERO; 4], contrib: ZERO };
     for slot in slots {
         for l in 0..LANES {
             let (q, d) = if SCALED {
-                let p = bone(pivot, slot.bones[l]);
+                // SAFETY: the caller's contract.
+                let p = unsafe { bone(pivot, slot.bones[l]) };
                 let q = [p.real.x, p.real.y, p.real.z, p.real.w];
                 let (x, y, z) = (co.x[l], co.y[l], co.z[l]);
                 let t = |r: usize| {
@@ -449,7 +563,8 @@ fn accumulate_dual_quaternion<const ISA: u8, const SCALED: bool>(
                 ];
                 (q, d)
             } else {
-                let b = bone(dq, slot.bones[l]);
+                // SAFETY: the caller's contract.
+                let b = unsafe { bone(dq, slot.bones[l]) };
                 ([b.real.x, b.real.y, b.real.z, b.real.w], [b.dual.x, b.dual.y, b.dual.z, b.dual.w])
             };
             let dot = q[0] * s.real[0][l] + q[1] * s.real[1][l] + q[2] * s.real[2][l] + q[3] * s.real[3][l];
@@ -507,27 +622,25 @@ pub(super) struct CorSum {
 
 /// Sums for centers of rotation; the quaternion signs are chosen against the running sum as in
 /// [`accumulate_dual_quaternion`].
+///
+/// # Safety
+/// Every bone index of `slots` indexes `cor` and `cor_rigid` (see [`bone`]).
 #[inline(always)]
-fn accumulate_centers<const ISA: u8, const SCALED: bool>(
+unsafe fn accumulate_centers<const ISA: u8, const SCALED: bool>(
     co: &Points,
     center: &Points,
     slots: &[Slot],
     cor: &[CorBone],
     cor_rigid: &[CorRigidBone],
 ) -> CorSum {
-    // SAFETY: `ISA` names the instruction set the running copy was chosen for after detecting
-    // it; bone indices were validated against the pose's bone count.
-    #[cfg(target_arch = "x86_64")]
-    if ISA >= ISA_AVX2 {
-        return unsafe { super::avx2::accumulate_centers(co, center, slots, cor, cor_rigid, SCALED) };
-    }
     let mut s = CorSum { anchor: [ZERO; 3], real: [ZERO; 4], offset: [ZERO; 3], contrib: ZERO };
     for slot in slots {
         for l in 0..LANES {
             let w = slot.weights[l];
             let (cx, cy, cz) = (center.x[l], center.y[l], center.z[l]);
             let q = if SCALED {
-                let b = bone(cor, slot.bones[l]);
+                // SAFETY: the caller's contract.
+                let b = unsafe { bone(cor, slot.bones[l]) };
                 for r in 0..3 {
                     let row = b.matrix.rows[r];
                     let moved = madd::<ISA>(row.x, cx, madd::<ISA>(row.y, cy, madd::<ISA>(row.z, cz, row.w)));
@@ -541,7 +654,8 @@ fn accumulate_centers<const ISA: u8, const SCALED: bool>(
                 }
                 b.real
             } else {
-                let r = bone(cor_rigid, slot.bones[l]);
+                // SAFETY: the caller's contract.
+                let r = unsafe { bone(cor_rigid, slot.bones[l]) };
                 let moved = rotation_offset::<ISA>(r.real, r.half_translation, [cx, cy, cz]);
                 let w2 = w + w;
                 for k in 0..3 {

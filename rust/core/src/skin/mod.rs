@@ -22,11 +22,14 @@
 mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod batch;
 mod centers;
 mod envelope;
 mod groups;
 mod influences;
 mod kernels;
+#[cfg(target_arch = "aarch64")]
+mod neon;
 mod pose;
 
 pub use centers::{centers_of_rotation, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA};
@@ -218,18 +221,13 @@ fn skin_with(
             (kind, amount, factor)
         }
     };
-    let job = kernels::Job {
-        kind,
-        positions,
-        influences,
-        pose,
-        premat: options.premat,
-        postmat: options.postmat,
-        mask: options.mask,
-        blend_amount,
-        blend_factor,
-        centers,
-    };
+    let mut job = kernels::Job::new(kind, positions, influences, pose);
+    job.premat = options.premat;
+    job.postmat = options.postmat;
+    job.mask = options.mask;
+    job.blend_amount = blend_amount;
+    job.blend_factor = blend_factor;
+    job.centers = centers;
     if n <= kernels::CHUNK {
         // One task's worth: run it here. Handing it to the pool would cost more than the work
         // (a thread wake-up), which matters for scenes with many small meshes.

@@ -54,6 +54,26 @@ pub(crate) struct PivotBone {
     pub real: Vec4,
 }
 
+/// The dual part [`PivotBone`] gives a vertex, as one linear map of it: `½·(0, t(co))·q` with
+/// `t(co) = T·(co, 1)` is `P·(co, 1)` for the 4×4 matrix `P = ½·Q·T`, `Q` the 3-to-4 map
+/// `t ↦ (w·t + t × v, −t·v)` of `q = (v, w)`. Rows: the dual part's x, y, z, w. Summed with the
+/// signed weights per vertex and applied once, it replaces one transform of `co` per influence
+/// (the SIMD kernels of `batch.rs`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct PivotDualBone {
+    pub rows: [Vec4; 4],
+}
+
+impl PivotDualBone {
+    fn new(pivot: &PivotBone) -> Self {
+        let [vx, vy, vz, w] = pivot.real.to_array();
+        let [t0, t1, t2] = pivot.translation.rows;
+        let row = |a: f32, b: f32, c: f32| 0.5 * (a * t0 + b * t1 + c * t2);
+        PivotDualBone { rows: [row(w, vz, -vy), row(-vz, w, vx), row(vy, -vx, w), row(-vx, -vy, -vz)] }
+    }
+}
+
 /// A bone for skinning with centers of rotation: its full deform matrix (which moves the
 /// center, as LBS would), its rotation (the one DQS uses), and its scale/shear part `S = Rᵀ·M₃`
 /// row by row (exactly the identity for bones that do not take the scale path). The first
@@ -103,6 +123,7 @@ pub struct Pose {
     pub(crate) linear: Vec<LinearBone>,
     pub(crate) dq: Vec<DqBone>,
     pub(crate) pivot: Vec<PivotBone>,
+    pub(crate) pivot_dual: Vec<PivotDualBone>,
     pub(crate) cor: Vec<CorBone>,
     pub(crate) cor_rigid: Vec<CorRigidBone>,
     scaled: Vec<bool>,
@@ -125,7 +146,8 @@ impl Pose {
             check_affine("deform", bone, m)?;
         }
         let linear = deform.iter().map(|m| LinearBone { matrix: AffineRows::from_mat4(m) }).collect();
-        let (mut dq, mut pivot, mut cor, mut cor_rigid, mut scaled) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut dq, mut pivot, mut pivot_dual, mut cor, mut cor_rigid, mut scaled) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         if let Some(rest) = rest {
             if rest.len() != deform.len() {
                 return Err(SkinError::LengthMismatch {
@@ -155,7 +177,9 @@ impl Pose {
                     delta.z_axis.extend(0.0),
                     m.w_axis,
                 );
-                pivot.push(PivotBone { translation: AffineRows::from_mat4(&p), real: Vec4::from(q) });
+                let pivot_bone = PivotBone { translation: AffineRows::from_mat4(&p), real: Vec4::from(q) };
+                pivot_dual.push(PivotDualBone::new(&pivot_bone));
+                pivot.push(pivot_bone);
                 let stretch = if is_scaled { Mat3::from_quat(q).transpose() * Mat3::from_mat4(*m) } else { Mat3::IDENTITY };
                 let (s0, s1, s2) = (stretch.row(0), stretch.row(1), stretch.row(2));
                 cor.push(CorBone {
@@ -169,7 +193,7 @@ impl Pose {
                 scaled.push(is_scaled);
             }
         }
-        Ok(Self { linear, dq, pivot, cor, cor_rigid, scaled })
+        Ok(Self { linear, dq, pivot, pivot_dual, cor, cor_rigid, scaled })
     }
 
     /// Number of bones.
@@ -305,6 +329,12 @@ mod tests {
             let t = pose.pivot[0].translation.transform_point(co.extend(1.0));
             let moved = q * co + t;
             assert!(moved.abs_diff_eq(deform.transform_point3(co), 1e-5));
+            // The same dual part as one linear map of the vertex.
+            let h = co.extend(1.0);
+            let dual = Quat::from_xyzw(0.5 * t.x, 0.5 * t.y, 0.5 * t.z, 0.0) * q;
+            let rows = pose.pivot_dual[0].rows;
+            let got = Vec4::new(rows[0].dot(h), rows[1].dot(h), rows[2].dot(h), rows[3].dot(h));
+            assert!(got.abs_diff_eq(Vec4::from(dual), 1e-5), "{got} vs {dual}");
         }
     }
 

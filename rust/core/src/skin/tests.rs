@@ -98,7 +98,7 @@ mod reference {
             sum.trans[k] += w * dq.trans[k];
         }
         if dq.scale_weight != 0.0 {
-            sum.scale = sum.scale + dq.scale * weight;
+            sum.scale += dq.scale * weight;
             sum.scale_weight += weight;
         }
     }
@@ -253,14 +253,14 @@ fn rig(bones: std::ops::Range<usize>) -> impl Strategy<Value = Rig> {
                 };
                 let mut posed = Mat4::from_rotation_translation(posed_rot, pt);
                 match kind {
-                    BoneKind::Scaled => posed = posed * Mat4::from_scale(Vec3::ONE + extra.abs() * 2.0),
+                    BoneKind::Scaled => posed *= Mat4::from_scale(Vec3::ONE + extra.abs() * 2.0),
                     BoneKind::Sheared => {
                         let mut shear = Mat4::IDENTITY;
                         shear.y_axis.x = extra.x;
                         shear.z_axis.y = extra.y;
-                        posed = posed * shear;
+                        posed *= shear;
                     }
-                    BoneKind::Mirrored => posed = posed * Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0 + extra.z.abs())),
+                    BoneKind::Mirrored => posed *= Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0 + extra.z.abs())),
                     _ => {}
                 }
                 // Blender's matrix_channel: posed (armature space) times inverse rest.
@@ -278,7 +278,10 @@ fn lists(vertices: usize, bones: usize) -> impl Strategy<Value = Vec<Vec<(u32, f
     proptest::collection::vec(proptest::collection::vec(entry, 0..=8), vertices)
 }
 
-fn case() -> impl Strategy<Value = (Rig, Vec<[f32; 3]>, Vec<Vec<(u32, f32)>>, Vec<f32>, Mat4)> {
+/// A rig, 40 positions, their influence lists and mask weights, and `premat`.
+type Case = (Rig, Vec<[f32; 3]>, Vec<Vec<(u32, f32)>>, Vec<f32>, Mat4);
+
+fn case() -> impl Strategy<Value = Case> {
     rig(1..9).prop_flat_map(|rig| {
         let b = rig.rest.len();
         (
@@ -320,9 +323,17 @@ pub(in crate::skin) fn skin_all(method: Method<'_>, positions: &[[f32; 3]], infl
 
 #[test]
 fn every_compiled_copy_is_exercised_here() {
-    // On x86-64 CI machines the SIMD copies exist; say which ones the reference tests cover.
-    let available = kernels::Simd::available();
-    assert_eq!(available[0], kernels::Simd::Baseline);
+    // Say which copies the reference tests cover; the SIMD copy every CI machine has (AVX2 on
+    // x86-64, NEON on aarch64) must be among them.
+    use kernels::InstructionSet;
+    let available: Vec<InstructionSet> = kernels::Simd::available().iter().map(|s| s.instruction_set()).collect();
+    assert_eq!(available[0], InstructionSet::Baseline);
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        assert!(available.contains(&InstructionSet::Avx2Fma));
+    }
+    #[cfg(target_arch = "aarch64")]
+    assert!(available.contains(&InstructionSet::Neon));
     eprintln!("kernel copies tested: {available:?}");
 }
 

@@ -3,9 +3,10 @@
 //!
 //! Written so that the compiler vectorizes it: [`WIDTH`] independent accumulators per sum (f64
 //! addition is not associative, so it would not reorder one accumulator) and a branch-free
-//! `exp`. Copies for AVX2+FMA and AVX-512 are chosen at run time like the skinning kernels'.
+//! `exp`. Copies for AVX2+FMA, AVX-512 and NEON are chosen at run time like the skinning
+//! kernels'.
 
-use super::super::kernels::Simd;
+use super::super::kernels::{InstructionSet, Simd};
 
 /// Entries per step, and the padding of every pair's list.
 pub(super) const WIDTH: usize = 8;
@@ -25,13 +26,17 @@ pub(super) struct PairList<'a> {
 /// `e = exp(shift − (aj·bₖ − ak·bⱼ)²·inv_sigma2)`. `shift` is a common factor `exp(shift)` that
 /// cancels in the centre (it keeps `e` from underflowing for tiny σ).
 pub(super) fn pair_sums(simd: Simd, list: &PairList<'_>, aj: f64, ak: f64, inv_sigma2: f64, shift: f64) -> [f64; 4] {
-    match simd {
-        Simd::Baseline => sums(list, aj, ak, inv_sigma2, shift),
-        // SAFETY: `Simd::detect` only returns copies the CPU supports.
+    match simd.instruction_set() {
+        InstructionSet::Baseline => sums(list, aj, ak, inv_sigma2, shift),
+        // SAFETY: a `Simd` of this set exists only where AVX2 and FMA were detected.
         #[cfg(target_arch = "x86_64")]
-        Simd::Avx2Fma => unsafe { sums_avx2(list, aj, ak, inv_sigma2, shift) },
+        InstructionSet::Avx2Fma => unsafe { sums_avx2(list, aj, ak, inv_sigma2, shift) },
+        // SAFETY: a `Simd` of this set exists only where AVX-512F, AVX2 and FMA were detected.
         #[cfg(target_arch = "x86_64")]
-        Simd::Avx512 => unsafe { sums_avx512(list, aj, ak, inv_sigma2, shift) },
+        InstructionSet::Avx512 => unsafe { sums_avx512(list, aj, ak, inv_sigma2, shift) },
+        // SAFETY: every aarch64 CPU has NEON.
+        #[cfg(target_arch = "aarch64")]
+        InstructionSet::Neon => unsafe { sums_neon(list, aj, ak, inv_sigma2, shift) },
     }
 }
 
@@ -152,6 +157,54 @@ unsafe fn sums_avx512(list: &PairList<'_>, aj: f64, ak: f64, inv_sigma2: f64, sh
         let mut lanes = [0.0f64; 8];
         // SAFETY: 8 doubles.
         unsafe { _mm512_storeu_pd(lanes.as_mut_ptr(), a) };
+        lanes.iter().sum()
+    })
+}
+
+/// [`sums`] with NEON: four 2-wide vectors per step, the same arithmetic.
+#[cfg(target_arch = "aarch64")]
+#[target_feature(enable = "neon")]
+unsafe fn sums_neon(list: &PairList<'_>, aj: f64, ak: f64, inv_sigma2: f64, shift: f64) -> [f64; 4] {
+    use core::arch::aarch64::*;
+    let (vaj, vak, vinv, vshift) = (vdupq_n_f64(aj), vdupq_n_f64(ak), vdupq_n_f64(inv_sigma2), vdupq_n_f64(shift));
+    let exp = |x: float64x2_t| -> float64x2_t {
+        let x = vminq_f64(vmaxq_f64(x, vdupq_n_f64(MIN_EXPONENT)), vdupq_n_f64(0.0));
+        let t = vfmaq_f64(vdupq_n_f64(ROUND), x, vdupq_n_f64(LOG2_E));
+        let kf = vsubq_f64(t, vdupq_n_f64(ROUND));
+        let r = vfmsq_f64(vfmsq_f64(x, kf, vdupq_n_f64(LN2_HI)), kf, vdupq_n_f64(LN2_LO));
+        let mut poly = vdupq_n_f64(EXP_POLY[0]);
+        for c in &EXP_POLY[1..] {
+            poly = vfmaq_f64(vdupq_n_f64(*c), poly, r);
+        }
+        // t's low mantissa bits hold k; adding the bias there and shifting gives 2ᵏ.
+        let biased = vaddq_s64(vreinterpretq_s64_f64(t), vdupq_n_s64(EXPONENT_BIAS));
+        vmulq_f64(poly, vreinterpretq_f64_s64(vshlq_n_s64::<52>(biased)))
+    };
+    let zero = vdupq_n_f64(0.0);
+    let mut acc = [[zero; 4]; 4];
+    let n = list.p.len();
+    assert!(list.bj.len() == n && list.bk.len() == n && list.pc.iter().all(|c| c.len() == n) && n.is_multiple_of(WIDTH));
+    let mut i = 0;
+    while i < n {
+        for h in 0..4 {
+            let at = i + 2 * h;
+            // SAFETY: every array has `n` entries (checked), a multiple of WIDTH = 8, and at + 2 ≤ n.
+            let ld = |a: &[f64]| unsafe { vld1q_f64(a.as_ptr().add(at)) };
+            let u = vfmaq_f64(vnegq_f64(vmulq_f64(vak, ld(list.bj))), vaj, ld(list.bk));
+            let e = exp(vfmsq_f64(vshift, vmulq_f64(u, u), vinv));
+            acc[0][h] = vfmaq_f64(acc[0][h], e, ld(list.p));
+            acc[1][h] = vfmaq_f64(acc[1][h], e, ld(list.pc[0]));
+            acc[2][h] = vfmaq_f64(acc[2][h], e, ld(list.pc[1]));
+            acc[3][h] = vfmaq_f64(acc[3][h], e, ld(list.pc[2]));
+        }
+        i += WIDTH;
+    }
+    acc.map(|a| {
+        let mut lanes = [0.0f64; 8];
+        for (h, v) in a.iter().enumerate() {
+            // SAFETY: two doubles at 2·h < 8.
+            unsafe { vst1q_f64(lanes.as_mut_ptr().add(2 * h), *v) };
+        }
         lanes.iter().sum()
     })
 }

@@ -175,9 +175,12 @@ fn the_fast_path_is_within_its_certified_bound_where_it_is_used() {
     }
 }
 
+/// Positions, triangles, influence lists, bone count, σ.
+type SmallMesh = (Vec<[f32; 3]>, Vec<[u32; 3]>, Vec<Vec<(u32, f32)>>, usize, f32);
+
 /// A small random mesh: positions, triangles over them, and 0..=5 influences per vertex (zero,
 /// repeated and unnormalized weights included).
-fn small_mesh() -> impl Strategy<Value = (Vec<[f32; 3]>, Vec<[u32; 3]>, Vec<Vec<(u32, f32)>>, usize, f32)> {
+fn small_mesh() -> impl Strategy<Value = SmallMesh> {
     (3usize..30, 1usize..6).prop_flat_map(|(n, bones)| {
         let entry = (0..bones as u32, prop_oneof![6 => 0.0f32..1.0, 1 => Just(0.0f32), 1 => 1.0f32..3.0]);
         (
@@ -265,6 +268,7 @@ fn bad_precompute_inputs_are_rejected_naming_them() {
 
 /// The per-frame formula in f64: `v' = Σ wⱼ·Mⱼ·c + R·Σ wⱼ·Sⱼ·(v − c)` in armature space, with
 /// `R` from the sign-aligned quaternion sum and `Sⱼ = Rⱼᵀ·M₃ⱼ` (identity for rigid bones).
+#[allow(clippy::too_many_arguments)] // the kernel's inputs, one by one
 fn reference(positions: &[[f32; 3]], centers: &[[f32; 3]], lists: &[Vec<(u32, f32)>], deform: &[Mat4], pose: &Pose, premat: Mat4, postmat: Mat4, mask: Option<&[f32]>) -> Vec<DVec3> {
     let (pre, post) = (premat.as_dmat4(), postmat.as_dmat4());
     positions
@@ -288,7 +292,7 @@ fn reference(positions: &[[f32; 3]], centers: &[[f32; 3]], lists: &[Vec<(u32, f3
                 anchor += w * m.transform_point3(c);
                 offset += w * (stretch * (co - c));
                 let sign = if qb.dot(q) < 0.0 { -1.0 } else { 1.0 };
-                q = q + qb * (sign * w);
+                q += qb * (sign * w);
                 contrib += w;
             }
             if contrib <= f64::from(MIN_TOTAL_WEIGHT) || q.length_squared() == 0.0 {
@@ -322,14 +326,14 @@ fn rig(bones: std::ops::Range<usize>, scaled: bool) -> impl Strategy<Value = (Ve
             let b = Mat4::from_rotation_translation(rq, rt);
             let mut posed = Mat4::from_rotation_translation(pq, pt);
             match kind {
-                1 => posed = posed * Mat4::from_scale(Vec3::ONE + extra.abs() * 2.0),
+                1 => posed *= Mat4::from_scale(Vec3::ONE + extra.abs() * 2.0),
                 2 => {
                     let mut shear = Mat4::IDENTITY;
                     shear.y_axis.x = extra.x;
                     shear.z_axis.y = extra.y;
-                    posed = posed * shear;
+                    posed *= shear;
                 }
-                3 => posed = posed * Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0 + extra.z.abs())),
+                3 => posed *= Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0 + extra.z.abs())),
                 _ => {}
             }
             deform.push(posed * b.inverse());

@@ -14,12 +14,21 @@
 //!   sizes the SDNA states.
 //! - [`read_deform_verts`]: copies the weights of a `Mesh` out of memory into CSR arrays, with
 //!   every count checked for sanity before it is used.
+//! - [`PoseLayout`] and [`read_pose`]: an armature object's pose channels as the Armature
+//!   modifier deforms with them (channel matrices, bones' rest data and envelopes, and the
+//!   runtime B-Bone cache), into `dqskin-core`'s [`PoseChannel`](dqskin_core::skin::PoseChannel)s.
 //!
 //! No Python and no Blender headers: the only unsafe code is the raw reads in
-//! [`read_deform_verts`], whose caller guarantees the pointer.
+//! [`read_deform_verts`] and [`read_pose`], whose callers guarantee the pointer.
 
+mod memory;
 mod mesh;
+mod pose;
 mod sdna;
+#[cfg(test)]
+mod test_dna;
 
-pub use mesh::{read_deform_verts, DeformVerts, MeshLayout, ReadError};
+pub use memory::ReadError;
+pub use mesh::{read_deform_verts, DeformVerts, MeshLayout};
+pub use pose::{read_pose, PoseLayout, MAX_CHANNELS};
 pub use sdna::{DnaError, Field, Sdna};

@@ -18,10 +18,12 @@
 //!    parts (identity for rigid bones); then `co += a·(co' − co)`;
 //! 5. `p' = postmat·co`.
 
+mod armature;
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod bbone;
 mod centers;
 mod envelope;
 mod groups;
@@ -29,8 +31,10 @@ mod influences;
 mod kernels;
 mod pose;
 
+pub use armature::{ArmaturePose, BBoneCache, PoseChannel};
+pub use bbone::{bbone_joint_starts, bbone_segment_matrices, bbones_from_rest, curved_segment, BBone, Mapping, SegmentBoundary, MAX_BBONE_SEGMENTS};
 pub use centers::{centers_of_rotation, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA};
-pub use envelope::{bbone_segment_matrices, distance_factor, BBone, Effective, Envelope};
+pub use envelope::{distance_factor, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
 pub use influences::{Influence, Influences, MAX_INFLUENCES_PER_VERTEX};
 pub use pose::{affine_problem, Pose};

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import centers, companion, compat, dqskin, meshdata, nodes, results, rig
+from . import centers, companion, compat, dqskin, meshdata, nodes, pose, results, rig
 
 
 class SkinError(Exception):
@@ -371,7 +371,7 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
 
     # What does not change between frames.
     if st.check_armature or st.armature_signature is None:
-        st.armature_signature = _armature_signature(arm)
+        st.armature_signature = pose.armature_signature(arm_eval)
         st.check_armature = False
     key = (data.uid, data.version, arm.session_uid, st.armature_signature, s.mask_group, s.invert_mask, s.blend_group, s.use_vertex_groups)
     if st.binding is None or st.binding_key != key:
@@ -393,17 +393,22 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
             f"An earlier modifier changed the vertex count ({binding.vertex_count} → {len(positions)}); "
             "put DQ Skin before modifiers that add or remove vertices"
         )
-    deform = ctx.poses.get(arm.session_uid)
-    if deform is None:
-        deform = ctx.poses[arm.session_uid] = rig.pose_matrices(arm_eval)
-    if len(binding.bone_indices) != len(deform):
-        deform = deform[binding.bone_indices]
+    if st.needs_effective:
+        bones = pose.frame(arm_eval, binding, st.segments)  # with every B-Bone's joints
+        pose_key = bones.key
+    else:
+        deform = ctx.poses.get(arm.session_uid)
+        if deform is None:
+            deform = ctx.poses[arm.session_uid] = rig.pose_matrices(arm_eval)
+        if len(binding.bone_indices) != len(deform):
+            deform = deform[binding.bone_indices]
+        pose_key = deform.tobytes()
     if st.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
         st.spaces = rig.spaces(obj_eval, arm_eval)
     premat, postmat = st.spaces
     mode = nodes.RESULT_POSITIONS if source == "capture" else nodes.RESULT_REPLACE
     result = st.result if st.result is not None and _still(st.result, mod, ctx.claimed) else _own_result(obj, mod, ctx.claimed)
-    signature = (s.key(), input_key, deform.tobytes(), premat.tobytes(), result.session_uid, data.version)
+    signature = (s.key(), input_key, pose_key, premat.tobytes(), result.session_uid, data.version)
     current = results.mode_of(result)
     if not force and signature == st.signature and st.live and current == mode:
         return None  # the result is already this
@@ -413,20 +418,10 @@ def _prepare(obj, obj_eval, mod, st: State, s: Settings, ctx: Context, source, p
     if st.needs_effective:
         # Envelopes and B-Bone segments depend on where the vertices are: this frame's
         # influences, over the bones followed by the B-Bones' segment joints.
-        matrices = rig.Frame(np.ascontiguousarray(deform), binding.rest, premat, postmat)
-        influences = binding.influences.effective(
-            positions,
-            premat,
-            envelopes=st.envelopes,
-            use_vertex_groups=s.use_vertex_groups,
-            use_envelopes=s.use_envelopes,
-            bbone_segments=st.segments,
-            rest=binding.rest,
-            lengths=rig.bone_lengths(arm_eval, binding),
-            bbone_mapping=rig.curved_bbone_mapping(arm_eval, binding, positions, premat, s.use_envelopes),
+        influences = pose.influences(
+            bones, binding, arm_eval, positions, input_key, premat, s.use_vertex_groups, s.use_envelopes, st.envelopes, st.segments
         )
-        matrices = rig.with_bbone_joints(matrices, arm_eval, binding, st.segments)
-        deform, rest = matrices.deform, matrices.rest
+        deform, rest = bones.deform, bones.rest
     job = _job(st, s, positions, influences, deform, rest, premat, postmat)
     return Plan(obj, mod, st, s, result, mode, signature, job, start)
 
@@ -604,27 +599,6 @@ def _captured(obj, obj_eval, mod, data):
     attribute.data.foreach_get("vector", positions)
     positions = positions.reshape(-1, 3)
     return positions, ("capture", positions.tobytes())
-
-
-def _armature_signature(arm) -> tuple:
-    """What of the armature's bones the binding depends on (names, deform flags, rest pose,
-    envelopes); read when Blender says the armature changed."""
-    bones = arm.data.bones
-    n = len(bones)
-    deform = np.empty(n, bool)
-    bones.foreach_get("use_deform", deform)
-    rest = np.empty(n * 16, np.float32)
-    bones.foreach_get("matrix_local", rest)
-    envelope = np.empty(n * 4, np.float32)
-    for i, attr in enumerate(("head_radius", "tail_radius", "envelope_distance", "envelope_weight")):
-        col = np.empty(n, np.float32)
-        bones.foreach_get(attr, col)
-        envelope[i::4] = col
-    multiply = np.empty(n, bool)
-    bones.foreach_get("use_envelope_multiply", multiply)
-    segments = np.empty(n, np.int32)
-    bones.foreach_get("bbone_segments", segments)
-    return (tuple(b.name for b in bones), deform.tobytes(), rest.tobytes(), envelope.tobytes(), multiply.tobytes(), segments.tobytes())
 
 
 def _still(result, mod, claimed: dict) -> bool:

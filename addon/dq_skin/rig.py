@@ -32,6 +32,10 @@ class Binding:
     vertex_count: int
     rest: np.ndarray | None = None
     """`(B, 4, 4)` rest matrices of the bound bones (`Bone.matrix_local`)."""
+    effective: tuple | None = None
+    """`(key, influences)`: the last effective influences from Blender's memory (see `pose`)."""
+    pose_signature: int | None = None
+    """The binding signature of the last pose from memory whose bones matched these."""
 
 
 def deforming_bones(armature) -> list:
@@ -156,6 +160,28 @@ def frame(binding: Binding, mesh_object, armature) -> Frame:
     deform, rest = bone_matrices(armature, binding)
     premat, postmat = spaces(mesh_object, armature)
     return Frame(deform, rest, premat, postmat)
+
+
+def armature_signature(arm) -> tuple:
+    """What of the armature's bones a binding depends on (names, deform flags, rest pose,
+    envelopes, B-Bone segments), through the Python API (`pose.armature_signature` reads it
+    from memory)."""
+    bones = arm.data.bones
+    n = len(bones)
+    deform = np.empty(n, bool)
+    bones.foreach_get("use_deform", deform)
+    rest = np.empty(n * 16, np.float32)
+    bones.foreach_get("matrix_local", rest)
+    envelope = np.empty(n * 4, np.float32)
+    for i, attr in enumerate(("head_radius", "tail_radius", "envelope_distance", "envelope_weight")):
+        col = np.empty(n, np.float32)
+        bones.foreach_get(attr, col)
+        envelope[i::4] = col
+    multiply = np.empty(n, bool)
+    bones.foreach_get("use_envelope_multiply", multiply)
+    segments = np.empty(n, np.int32)
+    bones.foreach_get("bbone_segments", segments)
+    return (tuple(b.name for b in bones), deform.tobytes(), rest.tobytes(), envelope.tobytes(), multiply.tobytes(), segments.tobytes())
 
 
 def curved_bbone_mapping(armature, binding: Binding, positions: np.ndarray, premat: np.ndarray, use_envelopes: bool):

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from mathutils import Quaternion, Vector
 
+from characters import rigify_character
 from scenes import armature_chain, armature_modifier, chain_weights, link, tube
 from test_exactness import REL_TOL, evaluated_positions
 from test_modifier import add_dq_skin, reference_copy, relative_deviation
@@ -380,3 +381,26 @@ def test_many_segments_and_many_bones_per_frame_read_once(memory_only):
     assert st.binding.effective[1] is not kept
     assert relative_deviation(evaluated_positions(obj), evaluated_positions(reference)) <= REL_TOL
     assert math.isfinite(st.seconds)
+
+
+def test_a_generated_rigify_character_matches_the_armature_modifier(memory_only):
+    """Rigify's human rig (160 deforming bones, 52 B-Bones with custom handles, ease and scale)
+    on a body with automatic weights, playing an animation that bends, twists and scales."""
+    body, rig = rigify_character()
+    bbones = [b for b in rig.data.bones if b.use_deform and b.bbone_segments > 1]
+    assert len(bbones) >= 40
+    other = body.copy()
+    bpy.context.scene.collection.objects.link(other)
+    pairs = []
+    for obj, method in ((body, "LINEAR"), (other, "DUAL_QUATERNION")):
+        reference = reference_copy(obj, method == "DUAL_QUATERNION")
+        pairs.append((obj, add_dq_skin(obj, method), reference))
+    rest = evaluated_positions(pairs[0][2])
+    for frame in (1, 12, 20, 33):
+        bpy.context.scene.frame_set(frame)
+        for obj, mod, reference in pairs:
+            assert memory_only.modifier.state(obj, mod).error == ""
+            theirs = evaluated_positions(reference)
+            dev = relative_deviation(evaluated_positions(obj), theirs)
+            assert dev <= REL_TOL, (obj.name, frame, dev)
+    assert np.abs(theirs - rest).max() > 0.05, "the animation moves the body"

@@ -12,7 +12,7 @@
 //! many segments (`armature_deform.cc`); then the cache is read too.
 
 use dqskin_core::glam::{Mat4, Vec3};
-use dqskin_core::skin::{BBoneCache, Envelope, PoseChannel, SegmentBoundary, MAX_BBONE_SEGMENTS};
+use dqskin_core::skin::{bsp_depth, BBoneCache, Envelope, PoseChannel, SegmentBoundary, MAX_BBONE_SEGMENTS};
 
 use crate::memory::{read, ReadError};
 use crate::sdna::{DnaError, Sdna};
@@ -163,7 +163,8 @@ pub unsafe fn read_pose(layout: &PoseLayout, object: usize, expected_channels: u
     }
 }
 
-/// One `bPoseChannel` and its `Bone`.
+/// One `bPoseChannel` and its `Bone` (for a bone that does not deform, only its name and flag:
+/// nothing deforms with it).
 ///
 /// # Safety
 /// As [`read_pose`], for the channel at `chan`.
@@ -174,11 +175,15 @@ unsafe fn read_channel(layout: &PoseLayout, chan: usize) -> Result<PoseChannel, 
         if bone == 0 {
             return Err(ReadError::Implausible("pose channel without a bone"));
         }
-        let name = read_name(chan + layout.chan_name, layout.name_size);
-        if name != read_name(bone + layout.bone_name, layout.bone_name_size) {
+        let name = name_bytes(chan + layout.chan_name, layout.name_size);
+        if name != name_bytes(bone + layout.bone_name, layout.bone_name_size) {
             return Err(ReadError::Implausible("pose channel named unlike its bone"));
         }
+        let name = String::from_utf8_lossy(name).into_owned();
         let flag: i32 = read(bone + layout.bone_flag);
+        if flag & BONE_NO_DEFORM != 0 {
+            return Ok(PoseChannel::not_deforming(name));
+        }
         let segments: i16 = read(bone + layout.bone_segments);
         let cache_segments: i32 = read(chan + layout.runtime_segments);
         if !(0..=MAX_BBONE_SEGMENTS as i16).contains(&segments) || !(0..=MAX_BBONE_SEGMENTS as i32).contains(&cache_segments) {
@@ -192,7 +197,7 @@ unsafe fn read_channel(layout: &PoseLayout, chan: usize) -> Result<PoseChannel, 
         };
         Ok(PoseChannel {
             name,
-            deform: flag & BONE_NO_DEFORM == 0,
+            deform: true,
             channel: read_mat4(chan + layout.chan_mat),
             rest: read_mat4(bone + layout.bone_arm_mat),
             length: read(bone + layout.bone_length),
@@ -230,6 +235,9 @@ unsafe fn read_bbone_cache(layout: &PoseLayout, chan: usize, segments: usize) ->
         let boundaries = if boundaries == 0 {
             Vec::new()
         } else {
+            // Blender sets `depth_scale` only down to the search depth; the rest is whatever the
+            // allocation held, so it is not read (and cannot change a signature).
+            let depth = bsp_depth(segments as u32);
             (0..=segments)
                 .map(|i| {
                     let b = boundaries + i * layout.boundary_size;
@@ -237,7 +245,7 @@ unsafe fn read_bbone_cache(layout: &PoseLayout, chan: usize, segments: usize) ->
                         point: read_vec3(b + layout.boundary_point),
                         normal: read_vec3(b + layout.boundary_normal),
                         offset: read(b + layout.boundary_offset),
-                        depth_scale: read(b + layout.boundary_depth_scale),
+                        depth_scale: if i < depth { read(b + layout.boundary_depth_scale) } else { 0.0 },
                     }
                 })
                 .collect()
@@ -263,13 +271,15 @@ unsafe fn read_vec3(address: usize) -> Vec3 {
     Vec3::from_array(unsafe { read::<[f32; 3]>(address) })
 }
 
-/// A NUL-terminated name in a `char[size]` field (lossy for invalid UTF-8, which Blender does not
-/// write).
-unsafe fn read_name(address: usize, size: usize) -> String {
-    // SAFETY: the caller's: the field is `size` bytes inside a live struct.
+/// The bytes of a NUL-terminated name in a `char[size]` field.
+///
+/// # Safety
+/// The field is `size` bytes inside a live struct.
+unsafe fn name_bytes<'a>(address: usize, size: usize) -> &'a [u8] {
+    // SAFETY: the caller's.
     let bytes = unsafe { core::slice::from_raw_parts(address as *const u8, size) };
     let end = bytes.iter().position(|&b| b == 0).unwrap_or(size);
-    String::from_utf8_lossy(&bytes[..end]).into_owned()
+    &bytes[..end]
 }
 
 #[cfg(test)]

@@ -137,7 +137,8 @@ fn fixture() -> Box<Fixture> {
         bones: vec![bone("Root", BONE_NO_DEFORM | BONE_MULT_VG_ENV, 1, 0), bone("Spine", 0, 3, BBONE_MAPPING_CURVED)],
         rest: (0..4).map(|i| matrix(10.0 * i as f32)).collect(),
         deform: (0..5).map(|i| matrix(-10.0 * i as f32)).collect(),
-        boundaries: (0..4).map(|i| FakeBoundary { point: [0.0, i as f32, 0.0], normal: [0.0, 1.0, 0.0], offset: i as f32, depth_scale: 0.5 }).collect(),
+        // Blender initializes depth_scale down to the search depth only (3 for 3 segments).
+        boundaries: (0..4).map(|i| FakeBoundary { point: [0.0, i as f32, 0.0], normal: [0.0, 1.0, 0.0], offset: i as f32, depth_scale: if i < 3 { 0.5 } else { f32::NAN } }).collect(),
     });
     f.channels = vec![channel("Root", &f.bones[0], 1.0), channel("Spine", &f.bones[1], 2.0)];
     let next: *const FakeChannel = &f.channels[1];
@@ -179,16 +180,23 @@ fn reads_channels_bones_and_the_b_bone_cache() {
     let got = read_fixture(&f, 2).unwrap();
     let (root, spine) = (&got[0], &got[1]);
     assert_eq!((root.name.as_str(), spine.name.as_str()), ("Root", "Spine"));
-    assert!(!root.deform && spine.deform);
-    assert!(root.envelope.multiply_groups && !spine.envelope.multiply_groups);
-    assert_eq!(root.channel, Mat4::from_cols_array(&matrix(1.0)));
-    assert_eq!(root.rest, Mat4::from_cols_array(&matrix(100.0)));
-    assert_eq!(root.rest.w_axis.x, 112.0, "Blender's mat[3] is the translation column");
-    let e = &root.envelope;
+    // A bone that does not deform: its name and flag only.
+    assert_eq!(root, &PoseChannel::not_deforming("Root".into()));
+    assert!(spine.deform && !spine.envelope.multiply_groups);
+    assert_eq!(spine.channel, Mat4::from_cols_array(&matrix(2.0)));
+    assert_eq!(spine.rest, Mat4::from_cols_array(&matrix(100.0)));
+    assert_eq!(spine.rest.w_axis.x, 112.0, "Blender's mat[3] is the translation column");
+    let e = &spine.envelope;
     assert_eq!((e.head, e.tail), (Vec3::new(1.0, 2.0, 3.0), Vec3::new(1.0, 4.0, 3.0)));
-    assert_eq!((e.head_radius, e.tail_radius, e.distance, e.weight, root.length), (0.1, 0.05, 0.25, 0.75, 2.0));
-    assert_eq!((root.segments, root.curved, root.bbone.is_none()), (1, false, true));
+    assert_eq!((e.head_radius, e.tail_radius, e.distance, e.weight, spine.length), (0.1, 0.05, 0.25, 0.75, 2.0));
     assert_eq!((spine.segments, spine.curved), (3, true));
+    // Multiply Vertex Group by Envelope on a deforming bone.
+    let mut f = fixture();
+    f.bones[0].flag = BONE_MULT_VG_ENV;
+    let root = read_fixture(&f, 2).unwrap().remove(0);
+    assert!(root.deform && root.envelope.multiply_groups);
+    assert_eq!(root.channel, Mat4::from_cols_array(&matrix(1.0)));
+    assert_eq!((root.segments, root.curved, root.bbone.is_none()), (1, false, true));
     let cache = spine.bbone.as_ref().unwrap();
     assert_eq!(cache.inverse_rest, Mat4::from_cols_array(&matrix(0.0)));
     assert_eq!(cache.deform.len(), 4);
@@ -197,7 +205,8 @@ fn reads_channels_bones_and_the_b_bone_cache() {
     assert_eq!(cache.rest_joints[2], Mat4::from_cols_array(&matrix(20.0)));
     assert_eq!(cache.boundaries.len(), 4);
     assert_eq!(cache.boundaries[3].point, Vec3::new(0.0, 3.0, 0.0));
-    assert_eq!((cache.boundaries[3].offset, cache.boundaries[3].depth_scale), (3.0, 0.5));
+    assert_eq!((cache.boundaries[2].offset, cache.boundaries[2].depth_scale), (2.0, 0.5));
+    assert_eq!((cache.boundaries[3].offset, cache.boundaries[3].depth_scale), (3.0, 0.0), "uninitialized padding is not read");
     assert_eq!(cache.arc_length_reciprocal, 1.0 / 3.0);
 }
 

@@ -26,7 +26,8 @@ pub struct BBoneCache {
     pub arc_length_reciprocal: f32,
 }
 
-/// One pose channel with its bone.
+/// One pose channel with its bone. For a bone that does not deform only `name` and `deform`
+/// matter (nothing deforms with it); [`PoseChannel::not_deforming`] leaves the rest at rest.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseChannel {
     pub name: String,
@@ -47,6 +48,23 @@ pub struct PoseChannel {
     pub bbone: Option<BBoneCache>,
 }
 
+impl PoseChannel {
+    /// A channel whose bone does not deform: identity matrices, no envelope, no B-Bone.
+    pub fn not_deforming(name: String) -> Self {
+        Self {
+            name,
+            deform: false,
+            channel: Mat4::IDENTITY,
+            rest: Mat4::IDENTITY,
+            length: 0.0,
+            envelope: Envelope { head: glam::Vec3::ZERO, tail: glam::Vec3::ZERO, head_radius: 0.0, tail_radius: 0.0, distance: 0.0, weight: 0.0, multiply_groups: false },
+            segments: 1,
+            curved: false,
+            bbone: None,
+        }
+    }
+}
+
 /// The pose of an armature's channels, in `pose.bones` order; its *bones* are the deforming
 /// channels, in that order.
 #[derive(Clone, Debug)]
@@ -56,6 +74,8 @@ pub struct ArmaturePose {
     /// First joint of each bone's B-Bone in the expanded bone list.
     starts: Vec<Option<u32>>,
     expanded: usize,
+    binding_signature: u64,
+    pose_signature: u64,
 }
 
 impl ArmaturePose {
@@ -93,7 +113,10 @@ impl ArmaturePose {
         let bones: Vec<usize> = channels.iter().enumerate().filter(|(_, c)| c.deform).map(|(i, _)| i).collect();
         let segments: Vec<u32> = bones.iter().map(|&i| channels[i].bbone.as_ref().map_or(1, |_| channels[i].segments)).collect();
         let (starts, expanded) = bbone_joint_starts(&segments);
-        Ok(Self { channels, bones, starts, expanded })
+        let mut pose = Self { channels, bones, starts, expanded, binding_signature: 0, pose_signature: 0 };
+        pose.binding_signature = pose.binding_digest();
+        pose.pose_signature = pose.pose_digest();
+        Ok(pose)
     }
 
     pub fn channels(&self) -> &[PoseChannel] {
@@ -200,6 +223,16 @@ impl ArmaturePose {
     /// envelopes, B-Bone settings and rest shapes (cache included). Equal digests: the same
     /// influences.
     pub fn binding_signature(&self) -> u64 {
+        self.binding_signature
+    }
+
+    /// A 64-bit digest of the pose: the expanded deform matrices (equal digests: the same
+    /// deformation for the same binding).
+    pub fn pose_signature(&self) -> u64 {
+        self.pose_signature
+    }
+
+    fn binding_digest(&self) -> u64 {
         let mut h = Digest::default();
         h.word(self.channels.len() as u64);
         for c in &self.channels {
@@ -233,9 +266,7 @@ impl ArmaturePose {
         h.finish()
     }
 
-    /// A 64-bit digest of the pose: the expanded deform matrices (equal digests: the same
-    /// deformation for the same binding).
-    pub fn pose_signature(&self) -> u64 {
+    fn pose_digest(&self) -> u64 {
         let mut h = Digest::default();
         for c in self.bones() {
             h.matrix(&c.channel);

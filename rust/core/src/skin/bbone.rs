@@ -19,14 +19,25 @@ pub struct SegmentBoundary {
     /// `point · normal`.
     pub offset: f32,
     /// The smoothing band's inverse width at BSP depth `i` for the boundary at index `i` (Blender
-    /// keeps this per-depth value in the boundaries' padding).
+    /// keeps this per-depth value in the boundaries' padding); only the first
+    /// [`bsp_depth`]`(segments)` boundaries have one (Blender leaves the others uninitialized).
     pub depth_scale: f32,
 }
 
-impl SegmentBoundary {
-    fn is_finite(&self) -> bool {
-        self.point.is_finite() && self.normal.is_finite() && self.offset.is_finite() && self.depth_scale.is_finite()
-    }
+/// How deep the Curved mapping's binary search goes for `segments` segments: Blender's
+/// `ceil(log2(segments + 2))` (two virtual end segments), in integers.
+pub fn bsp_depth(segments: u32) -> usize {
+    let n = segments + 2;
+    ((n - 1).ilog2() + 1) as usize
+}
+
+/// Whether the boundaries of a B-Bone (one per joint) are usable: finite, with a finite
+/// `depth_scale` where the search reads one.
+fn boundaries_finite(boundaries: &[SegmentBoundary]) -> bool {
+    let depth = bsp_depth(boundaries.len().saturating_sub(1) as u32);
+    boundaries.iter().enumerate().all(|(i, b)| {
+        b.point.is_finite() && b.normal.is_finite() && b.offset.is_finite() && (i >= depth || b.depth_scale.is_finite())
+    })
 }
 
 /// How a B-Bone maps vertices to segments.
@@ -95,7 +106,7 @@ impl BBone<'_> {
             Mapping::Curved { boundaries, arc_length_reciprocal } => {
                 let ok = self.segments <= MAX_BBONE_SEGMENTS
                     && boundaries.len() == self.segments as usize + 1
-                    && boundaries.iter().all(SegmentBoundary::is_finite)
+                    && boundaries_finite(boundaries)
                     && arc_length_reciprocal.is_finite();
                 (!ok).then(|| {
                     format!(

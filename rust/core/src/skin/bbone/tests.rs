@@ -97,6 +97,7 @@ fn boundaries_of(joints: &[(DVec3, DVec3)]) -> (Vec<SegmentBoundary>, f32) {
     let segments = joints.len() - 1;
     let arc: f64 = joints.windows(2).map(|w| w[0].0.distance(w[1].0)).sum();
     let bsp_depth = ((segments + 2) as f64).log2().ceil() as usize;
+    assert_eq!(bsp_depth, super::bsp_depth(segments as u32));
     let straight_length = joints[0].0.distance(joints[segments].0);
     let max_depth_scale = segments as f64 * (straight_length / arc) * 0.222;
     let scale_factor = max_depth_scale.max(1.0).powf(1.0 / (bsp_depth as f64 - 1.0));
@@ -211,7 +212,7 @@ fn curved_mapping_runs_along_the_curve() {
     // little), the ends past them to 0 and 1.
     for (i, (p, _)) in joints.iter().enumerate() {
         let got = head_tail_of(curved_segment(&boundaries, reciprocal, p.as_vec3()), segments as u32);
-        assert!((got - i as f64 / segments as f64).abs() < 2e-3, "joint {i}: {got}");
+        assert!((got - i as f64 / segments as f64).abs() < 0.1 / segments as f64, "joint {i}: {got}");
     }
     let before = joints[0].0 - joints[0].1;
     let after = joints[segments].0 + joints[segments].1;
@@ -221,11 +222,12 @@ fn curved_mapping_runs_along_the_curve() {
     let curve = bezier_joints(curved_bone(1.2), 200);
     let mapped: Vec<f64> = curve.iter().map(|(p, _)| head_tail_of(curved_segment(&boundaries, reciprocal, p.as_vec3()), segments as u32)).collect();
     assert!(mapped.windows(2).all(|w| w[1] >= w[0] - 1e-6), "{mapped:?}");
-    // It differs from the straight mapping on a curved bone.
+    // Off the curve it differs from the straight mapping: the planes follow the curve.
     let straight_bone = straight(0, segments as u32, 2.0);
     let differs = curve.iter().any(|(p, _)| {
-        let c = head_tail_of(curved_segment(&boundaries, reciprocal, p.as_vec3()), segments as u32);
-        (c - head_tail_of(straight_bone.straight_segment(p.as_vec3()), segments as u32)).abs() > 0.02
+        let off = (*p + DVec3::new(0.4, 0.0, 0.0)).as_vec3();
+        let c = head_tail_of(curved_segment(&boundaries, reciprocal, off), segments as u32);
+        (c - head_tail_of(straight_bone.straight_segment(off), segments as u32)).abs() > 0.02
     });
     assert!(differs);
 }
@@ -237,6 +239,14 @@ fn bad_b_bones_are_refused_with_a_reason() {
     assert_eq!(good.problem(3, 6), None);
     let short = BBone { mapping: Mapping::Curved { boundaries: &boundaries[..4], arc_length_reciprocal: reciprocal }, ..good };
     assert!(short.problem(3, 6).unwrap().contains("one finite boundary per joint"));
+    // Blender leaves the depth scales past the search depth uninitialized: they are not read.
+    let mut padding = boundaries.clone();
+    assert_eq!(bsp_depth(4), 3);
+    padding[3].depth_scale = f32::NAN;
+    padding[4].depth_scale = f32::INFINITY;
+    assert_eq!(BBone { mapping: Mapping::Curved { boundaries: &padding, arc_length_reciprocal: reciprocal }, ..good }.problem(3, 6), None);
+    padding[2].depth_scale = f32::NAN;
+    assert!(BBone { mapping: Mapping::Curved { boundaries: &padding, arc_length_reciprocal: reciprocal }, ..good }.problem(3, 6).is_some());
     let mut nan = boundaries.clone();
     nan[2].normal.x = f32::NAN;
     let nan = BBone { mapping: Mapping::Curved { boundaries: &nan, arc_length_reciprocal: reciprocal }, ..good };

@@ -119,17 +119,23 @@ def animate(rig, frames=(1, 20, 40)) -> None:
 def rigify_character():
     """A generated Rigify character in the current (empty) scene: `(body, rig)`; the body has an
     Armature modifier with automatic weights on the rig, and the rig is animated (`animate`).
-    The metarig is removed. Takes 15-40 s (Rigify generation)."""
-    addon_utils.enable("rigify", default_set=True)
-    bpy.ops.object.armature_human_metarig_add()
-    metarig = bpy.context.active_object
-    body = body_mesh(metarig)
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
-    bpy.context.view_layer.objects.active = metarig
-    metarig.select_set(True)
-    assert bpy.ops.pose.rigify_generate() == {"FINISHED"}
-    rig = bpy.context.active_object
+    The metarig is removed, and Rigify is left enabled only if it was (the generated rig needs
+    nothing of it). Takes 15-40 s (Rigify generation)."""
+    was_enabled = addon_utils.check("rigify")[1]
+    addon_utils.enable("rigify", default_set=True)  # Rigify reads its preferences
+    try:
+        bpy.ops.object.armature_human_metarig_add()
+        metarig = bpy.context.active_object
+        body = body_mesh(metarig)
+        for o in bpy.context.view_layer.objects:
+            o.select_set(False)
+        bpy.context.view_layer.objects.active = metarig
+        metarig.select_set(True)
+        assert bpy.ops.pose.rigify_generate() == {"FINISHED"}
+        rig = bpy.context.active_object
+    finally:
+        if not was_enabled:
+            addon_utils.disable("rigify", default_set=True)
     bpy.ops.object.mode_set(mode="OBJECT")
     for o in bpy.context.view_layer.objects:
         o.select_set(False)

@@ -72,7 +72,7 @@ impl Dna {
     pub fn bytes(&self) -> Vec<u8> {
         let mut d = Vec::new();
         let pad = |d: &mut Vec<u8>| {
-            while d.len() % 4 != 0 {
+            while !d.len().is_multiple_of(4) {
                 d.push(0)
             }
         };

@@ -241,7 +241,8 @@ fn wrong_objects_and_counts_are_refused() {
 
 #[test]
 fn implausible_memory_is_refused() {
-    let cases: [(&str, fn(&mut Fixture)); 6] = [
+    type Spoil = fn(&mut Fixture);
+    let cases: [(&str, Spoil); 6] = [
         ("pose channel without a bone", |f| f.channels[0].bone = core::ptr::null()),
         ("pose channel named unlike its bone", |f| f.bones[0].name = name("Other")),
         ("B-Bone segment count", |f| f.bones[1].segments = 33),

@@ -125,8 +125,8 @@ fn signatures_follow_what_they_cover() {
     // The binding: names, order, flags and the rest data.
     assert_eq!(with(&|c| c[0].name = "Root.001".into()), (true, false));
     assert_eq!(with(&|c| c[1].name = "Other".into()), (true, false));
-    assert_eq!(with(&|c| c.swap(0, 2)).0, true);
-    assert_eq!(with(&|c| c[1].deform = true).0, true);
+    assert!(with(&|c| c.swap(0, 2)).0);
+    assert!(with(&|c| c[1].deform = true).0);
     assert_eq!(with(&|c| c[0].rest.w_axis.z = 0.5), (true, false));
     assert_eq!(with(&|c| c[0].length = 2.0), (true, false));
     assert_eq!(with(&|c| c[0].envelope.tail_radius = 0.5), (true, false));
@@ -140,7 +140,7 @@ fn signatures_follow_what_they_cover() {
         c[2].segments = 5;
         c[2].bbone = None;
     });
-    assert_eq!(lagging.0, true);
+    assert!(lagging.0);
 }
 
 #[test]

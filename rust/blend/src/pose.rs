@@ -2,8 +2,10 @@
 //! deforms with.
 //!
 //! `Object.pose` points to a `bPose` whose `chanbase` lists the `bPoseChannel`s in `pose.bones`
-//! order. Each channel has its `name`, `chan_mat` (posed times inverse rest) and `bone`, the
-//! `Bone` with the rest data (`arm_mat`, `length`, `flag`, the envelope's `arm_head`,
+//! order. Each channel has its `name`, `chan_mat` (posed times inverse rest) and its `Bone` (up to
+//! Blender 5.1 the channel's `bone` pointer; from 5.2 the channel keeps an index into the
+//! armature's runtime bone array instead, so the bone of the same name is found in the tree of
+//! `Object.data`'s `bArmature.bonebase`), with the rest data (`arm_mat`, `length`, `flag`, the envelope's `arm_head`,
 //! `arm_tail`, `rad_head`, `rad_tail`, `dist`, `weight`, and `segments`,
 //! `bbone_mapping_mode`), and embeds a `bPoseChannel_Runtime` with Blender's B-Bone cache:
 //! `bbone_segments`, `bbone_rest_mats` (`1 + N` `Mat4`), `bbone_deform_mats` (`2 + N`),
@@ -13,6 +15,8 @@
 
 use dqskin_core::glam::{Mat4, Vec3};
 use dqskin_core::skin::{bsp_depth, BBoneCache, Envelope, PoseChannel, SegmentBoundary, MAX_BBONE_SEGMENTS};
+
+use std::collections::HashMap;
 
 use crate::memory::{read, ReadError};
 use crate::sdna::{DnaError, Sdna};
@@ -29,6 +33,16 @@ const MAT4_SIZE: usize = 64;
 /// Sanity bound on the channel count the caller may ask for.
 pub const MAX_CHANNELS: usize = 1 << 20;
 
+/// How a pose channel leads to its bone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum BoneLink {
+    /// `bPoseChannel.bone` (Blender 4.2-5.1).
+    Pointer { chan_bone: usize },
+    /// The bone of the channel's name in the armature's bone tree: `Object.data` →
+    /// `bArmature.bonebase`, each bone's `next` and `childbase` (Blender 5.2+).
+    ByName { object_data: usize, bonebase_first: usize, bone_next: usize, childbase_first: usize },
+}
+
 /// Byte offsets of everything [`read_pose`] touches, from an [`Sdna`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PoseLayout {
@@ -38,7 +52,7 @@ pub struct PoseLayout {
     chan_next: usize,
     chan_name: usize,
     name_size: usize,
-    chan_bone: usize,
+    bone_link: BoneLink,
     chan_mat: usize,
     runtime_segments: usize,
     runtime_arc_length_reciprocal: usize,
@@ -83,14 +97,25 @@ impl PoseLayout {
         let rt = |name: &str| sdna.pointer("bPoseChannel_Runtime", &[name]).map(|o| runtime + o);
         let (chan_name, name_size) = name_of("bPoseChannel")?;
         let (bone_name, bone_name_size) = name_of("Bone")?;
+        let first = sdna.pointer("ListBase", &["first"])?;
+        let bone_link = match sdna.pointer("bPoseChannel", &["bone"]) {
+            Ok(chan_bone) => BoneLink::Pointer { chan_bone },
+            Err(DnaError::NoField { .. }) => BoneLink::ByName {
+                object_data: sdna.pointer("Object", &["data"])?,
+                bonebase_first: sdna.embedded("bArmature", &["bonebase"], "ListBase")? + first,
+                bone_next: sdna.pointer("Bone", &["next"])?,
+                childbase_first: sdna.embedded("Bone", &["childbase"], "ListBase")? + first,
+            },
+            Err(e) => return Err(e),
+        };
         Ok(Self {
             object_type: sdna.number("Object", &["type"], 2)?,
             object_pose: sdna.pointer("Object", &["pose"])?,
-            chanbase_first: chanbase + sdna.pointer("ListBase", &["first"])?,
+            chanbase_first: chanbase + first,
             chan_next: sdna.pointer("bPoseChannel", &["next"])?,
             chan_name,
             name_size,
-            chan_bone: sdna.pointer("bPoseChannel", &["bone"])?,
+            bone_link,
             chan_mat: mat4("bPoseChannel", "chan_mat")?,
             runtime_segments: runtime + sdna.number("bPoseChannel_Runtime", &["bbone_segments"], 4)?,
             runtime_arc_length_reciprocal: runtime + float("bPoseChannel_Runtime", "bbone_arc_length_reciprocal")?,
@@ -147,13 +172,22 @@ pub unsafe fn read_pose(layout: &PoseLayout, object: usize, expected_channels: u
         if pose == 0 {
             return Err(ReadError::NotAnArmature("the object has no pose"));
         }
+        let bones_by_name = match layout.bone_link {
+            BoneLink::Pointer { .. } => None,
+            BoneLink::ByName { object_data, .. } => Some(bones_by_name(layout, read(object + object_data), expected_channels)?),
+        };
         let mut channels = Vec::with_capacity(expected_channels);
         let mut chan: usize = read(pose + layout.chanbase_first);
         while chan != 0 {
             if channels.len() == expected_channels {
                 return Err(ReadError::ChannelCount { expected: expected_channels, found: expected_channels + 1 });
             }
-            channels.push(read_channel(layout, chan)?);
+            let bone = match (&bones_by_name, layout.bone_link) {
+                (None, BoneLink::Pointer { chan_bone }) => read(chan + chan_bone),
+                (Some(map), _) => map.get(name_bytes(chan + layout.chan_name, layout.name_size)).copied().unwrap_or(0),
+                (None, BoneLink::ByName { .. }) => unreachable!("the map is built for this link"),
+            };
+            channels.push(read_channel(layout, chan, bone)?);
             chan = read(chan + layout.chan_next);
         }
         if channels.len() != expected_channels {
@@ -163,15 +197,45 @@ pub unsafe fn read_pose(layout: &PoseLayout, object: usize, expected_channels: u
     }
 }
 
-/// One `bPoseChannel` and its `Bone` (for a bone that does not deform, only its name and flag:
-/// nothing deforms with it).
+/// The bones of the armature at `armature` (a `bArmature`) by name: its bone tree walked depth
+/// first, at most `limit` bones (a pose has one channel per bone).
 ///
 /// # Safety
-/// As [`read_pose`], for the channel at `chan`.
-unsafe fn read_channel(layout: &PoseLayout, chan: usize) -> Result<PoseChannel, ReadError> {
+/// As [`read_pose`]; `armature` is read from the live object.
+unsafe fn bones_by_name<'a>(layout: &PoseLayout, armature: usize, limit: usize) -> Result<HashMap<&'a [u8], usize>, ReadError> {
+    let BoneLink::ByName { bonebase_first, bone_next, childbase_first, .. } = layout.bone_link else {
+        unreachable!("only for the by-name link")
+    };
+    if armature == 0 {
+        return Err(ReadError::NotAnArmature("the object has no armature data"));
+    }
+    let mut map = HashMap::with_capacity(limit);
+    // SAFETY: see `read_pose`; the walk stops after `limit` bones, so a corrupt tree is refused
+    // rather than followed forever.
+    unsafe {
+        let mut pending: Vec<usize> = vec![read(armature + bonebase_first)];
+        while let Some(mut bone) = pending.pop() {
+            while bone != 0 {
+                if map.len() == limit {
+                    return Err(ReadError::Implausible("bone count"));
+                }
+                map.insert(name_bytes(bone + layout.bone_name, layout.bone_name_size), bone);
+                pending.push(read(bone + childbase_first));
+                bone = read(bone + bone_next);
+            }
+        }
+    }
+    Ok(map)
+}
+
+/// One `bPoseChannel` and its `Bone` at `bone` (for a bone that does not deform, only its name
+/// and flag: nothing deforms with it).
+///
+/// # Safety
+/// As [`read_pose`], for the channel at `chan`; `bone` is its bone's address or 0.
+unsafe fn read_channel(layout: &PoseLayout, chan: usize, bone: usize) -> Result<PoseChannel, ReadError> {
     // SAFETY: see `read_pose`.
     unsafe {
-        let bone: usize = read(chan + layout.chan_bone);
         if bone == 0 {
             return Err(ReadError::Implausible("pose channel without a bone"));
         }

@@ -2,21 +2,23 @@ use super::*;
 use crate::test_dna::Dna;
 
 /// An SDNA with the structs the reader needs, in the shape Blender's have (other fields left
-/// out or folded into padding).
-fn pose_sdna() -> Sdna {
+/// out or folded into padding); `by_name`: as from Blender 5.2, without `bPoseChannel.bone`.
+fn pose_sdna(by_name: bool) -> Sdna {
     let mut dna = Dna::new();
     dna.opaque("Mat4", 0);
     dna.strukt("ListBase", &[("void", "*first"), ("void", "*last")]);
-    dna.strukt("Object", &[("char", "_pad0[8]"), ("short", "type"), ("char", "_pad1[6]"), ("bPose", "*pose")]);
+    dna.strukt("Object", &[("char", "_pad0[8]"), ("short", "type"), ("char", "_pad1[6]"), ("bPose", "*pose"), ("ID", "*data")]);
+    dna.strukt("bArmature", &[("char", "_pad[8]"), ("ListBase", "bonebase")]);
     dna.strukt("bPoseChannel_BBoneSegmentBoundary", &[("float", "point[3]"), ("float", "plane_normal[3]"), ("float", "plane_offset"), ("float", "depth_scale")]);
     dna.strukt(
         "bPoseChannel_Runtime",
         &[("int", "bbone_segments"), ("float", "bbone_arc_length_reciprocal"), ("Mat4", "*bbone_rest_mats"), ("Mat4", "*bbone_pose_mats"), ("Mat4", "*bbone_deform_mats"), ("bPoseChannel_BBoneSegmentBoundary", "*bbone_segment_boundaries")],
     );
-    dna.strukt("bPoseChannel", &[("void", "*next"), ("void", "*prev"), ("char", "name[64]"), ("Bone", "*bone"), ("float", "chan_mat[4][4]"), ("bPoseChannel_Runtime", "runtime")]);
+    let bone = if by_name { "*_bone_index_elsewhere" } else { "*bone" };
+    dna.strukt("bPoseChannel", &[("void", "*next"), ("void", "*prev"), ("char", "name[64]"), ("Bone", bone), ("float", "chan_mat[4][4]"), ("bPoseChannel_Runtime", "runtime")]);
     dna.strukt(
         "Bone",
-        &[("char", "name[64]"), ("int", "flag"), ("float", "arm_head[3]"), ("float", "arm_tail[3]"), ("float", "arm_mat[4][4]"), ("float", "dist"), ("float", "weight"), ("float", "length"), ("float", "rad_head"), ("float", "rad_tail"), ("short", "segments"), ("char", "bbone_mapping_mode"), ("char", "_pad[1]")],
+        &[("Bone", "*next"), ("ListBase", "childbase"), ("char", "name[64]"), ("int", "flag"), ("float", "arm_head[3]"), ("float", "arm_tail[3]"), ("float", "arm_mat[4][4]"), ("float", "dist"), ("float", "weight"), ("float", "length"), ("float", "rad_head"), ("float", "rad_tail"), ("short", "segments"), ("char", "bbone_mapping_mode"), ("char", "_pad[1]"), ("char", "_pad2[4]")],
     );
     dna.strukt("bPose", &[("char", "_pad[8]"), ("ListBase", "chanbase")]);
     Sdna::parse(&dna.bytes()).unwrap()
@@ -28,6 +30,13 @@ struct FakeObject {
     ty: i16,
     pad1: [u8; 6],
     pose: *const FakePose,
+    data: *const FakeArmature,
+}
+#[repr(C)]
+struct FakeArmature {
+    pad: [u8; 8],
+    first: *const FakeBone,
+    last: *const FakeBone,
 }
 #[repr(C)]
 struct FakePose {
@@ -63,6 +72,9 @@ struct FakeChannel {
 }
 #[repr(C)]
 struct FakeBone {
+    next: *const FakeBone,
+    child_first: *const FakeBone,
+    child_last: *const FakeBone,
     name: [u8; 64],
     flag: i32,
     head: [f32; 3],
@@ -75,7 +87,7 @@ struct FakeBone {
     rad_tail: f32,
     segments: i16,
     mapping: u8,
-    pad: u8,
+    pad: [u8; 5],
 }
 
 fn name(s: &str) -> [u8; 64] {
@@ -90,6 +102,9 @@ fn matrix(seed: f32) -> [f32; 16] {
 
 fn bone(n: &str, flag: i32, segments: i16, mapping: u8) -> FakeBone {
     FakeBone {
+        next: core::ptr::null(),
+        child_first: core::ptr::null(),
+        child_last: core::ptr::null(),
         name: name(n),
         flag,
         head: [1.0, 2.0, 3.0],
@@ -102,7 +117,7 @@ fn bone(n: &str, flag: i32, segments: i16, mapping: u8) -> FakeBone {
         rad_tail: 0.05,
         segments,
         mapping,
-        pad: 0,
+        pad: [0; 5],
     }
 }
 
@@ -117,11 +132,12 @@ fn channel(n: &str, bone: &FakeBone, seed: f32) -> FakeChannel {
     }
 }
 
-/// A two-channel pose: `Root` (plain, no deform, multiplies its groups) and `Spine` (a 3-segment
-/// Curved B-Bone with its cache). Everything the pointers lead to is in the returned box.
+/// A two-channel pose: `Root` (plain, no deform, multiplies its groups) and `Spine` (its child, a
+/// 3-segment Curved B-Bone with its cache). Everything the pointers lead to is in the returned box.
 struct Fixture {
     object: FakeObject,
     _pose: Box<FakePose>,
+    armature: Box<FakeArmature>,
     channels: Vec<FakeChannel>,
     bones: Vec<FakeBone>,
     rest: Vec<[f32; 16]>,
@@ -131,8 +147,9 @@ struct Fixture {
 
 fn fixture() -> Box<Fixture> {
     let mut f = Box::new(Fixture {
-        object: FakeObject { pad0: [0; 8], ty: OB_ARMATURE, pad1: [0; 6], pose: core::ptr::null() },
+        object: FakeObject { pad0: [0; 8], ty: OB_ARMATURE, pad1: [0; 6], pose: core::ptr::null(), data: core::ptr::null() },
         _pose: Box::new(FakePose { pad: [0; 8], first: core::ptr::null(), last: core::ptr::null() }),
+        armature: Box::new(FakeArmature { pad: [0; 8], first: core::ptr::null(), last: core::ptr::null() }),
         channels: Vec::new(),
         bones: vec![bone("Root", BONE_NO_DEFORM | BONE_MULT_VG_ENV, 1, 0), bone("Spine", 0, 3, BBONE_MAPPING_CURVED)],
         rest: (0..4).map(|i| matrix(10.0 * i as f32)).collect(),
@@ -152,25 +169,45 @@ fn fixture() -> Box<Fixture> {
     f._pose.first = &f.channels[0];
     f._pose.last = &f.channels[1];
     f.object.pose = &*f._pose;
+    // The bone tree: Root with its child Spine.
+    let spine: *const FakeBone = &f.bones[1];
+    f.bones[0].child_first = spine;
+    f.bones[0].child_last = spine;
+    f.armature.first = &f.bones[0];
+    f.armature.last = &f.bones[0];
+    f.object.data = &*f.armature;
     f
 }
 
-fn read_fixture(f: &Fixture, expected: usize) -> Result<Vec<PoseChannel>, ReadError> {
-    let layout = PoseLayout::new(&pose_sdna()).unwrap();
+fn read_with(f: &Fixture, expected: usize, by_name: bool) -> Result<Vec<PoseChannel>, ReadError> {
+    let layout = PoseLayout::new(&pose_sdna(by_name)).unwrap();
     unsafe { read_pose(&layout, &f.object as *const _ as usize, expected) }
+}
+
+/// Reads through both links (the bone pointer and the bone of the same name), which must agree.
+fn read_fixture(f: &Fixture, expected: usize) -> Result<Vec<PoseChannel>, ReadError> {
+    let by_pointer = read_with(f, expected, false);
+    let by_name = read_with(f, expected, true);
+    if by_pointer.is_ok() || by_name.is_ok() {
+        assert_eq!(by_pointer, by_name);
+    }
+    by_pointer
 }
 
 #[test]
 fn layout_matches_the_c_structs() {
     assert_eq!(core::mem::size_of::<FakeChannel>(), 192);
-    assert_eq!(core::mem::size_of::<FakeBone>(), 180);
-    let layout = PoseLayout::new(&pose_sdna()).unwrap();
+    assert_eq!(core::mem::size_of::<FakeBone>(), 208);
+    let layout = PoseLayout::new(&pose_sdna(false)).unwrap();
+    assert_eq!(layout.bone_link, BoneLink::Pointer { chan_bone: 80 });
+    let by_name = PoseLayout::new(&pose_sdna(true)).unwrap();
+    assert_eq!(by_name.bone_link, BoneLink::ByName { object_data: 24, bonebase_first: 8, bone_next: 0, childbase_first: 8 });
     assert_eq!(layout.object_pose, 16);
     assert_eq!(layout.chanbase_first, 8);
     assert_eq!(layout.chan_mat, 88);
     assert_eq!(layout.runtime_segments, 152);
     assert_eq!(layout.runtime_boundaries, 152 + 32);
-    assert_eq!(layout.bone_segments, 176);
+    assert_eq!(layout.bone_segments, 200);
     assert_eq!(layout.boundary_size, 32);
 }
 
@@ -229,7 +266,7 @@ fn wrong_objects_and_counts_are_refused() {
     assert_eq!(read_fixture(&f, 1), Err(ReadError::ChannelCount { expected: 1, found: 2 }));
     assert_eq!(read_fixture(&f, 3), Err(ReadError::ChannelCount { expected: 3, found: 2 }));
     assert_eq!(read_fixture(&f, MAX_CHANNELS + 1), Err(ReadError::Implausible("channel count")));
-    let layout = PoseLayout::new(&pose_sdna()).unwrap();
+    let layout = PoseLayout::new(&pose_sdna(false)).unwrap();
     assert_eq!(unsafe { read_pose(&layout, 0, 2) }, Err(ReadError::Null));
     let mut f = fixture();
     f.object.ty = 1;
@@ -242,9 +279,7 @@ fn wrong_objects_and_counts_are_refused() {
 #[test]
 fn implausible_memory_is_refused() {
     type Spoil = fn(&mut Fixture);
-    let cases: [(&str, Spoil); 6] = [
-        ("pose channel without a bone", |f| f.channels[0].bone = core::ptr::null()),
-        ("pose channel named unlike its bone", |f| f.bones[0].name = name("Other")),
+    let cases: [(&str, Spoil); 4] = [
         ("B-Bone segment count", |f| f.bones[1].segments = 33),
         ("B-Bone segment count", |f| f.channels[1].runtime.segments = -1),
         ("B-Bone cache without matrices", |f| f.channels[1].runtime.rest = core::ptr::null()),
@@ -255,6 +290,22 @@ fn implausible_memory_is_refused() {
         spoil(&mut f);
         assert_eq!(read_fixture(&f, 2), Err(ReadError::Implausible(what)));
     }
+    // A bone pointer that is null, or leads to a bone of another name.
+    let mut f = fixture();
+    f.channels[0].bone = core::ptr::null();
+    assert_eq!(read_with(&f, 2, false), Err(ReadError::Implausible("pose channel without a bone")));
+    let mut f = fixture();
+    f.channels[0].bone = &f.bones[1];
+    assert_eq!(read_with(&f, 2, false), Err(ReadError::Implausible("pose channel named unlike its bone")));
+    // No bone of the channel's name, more bones than channels, or no armature data.
+    let mut f = fixture();
+    f.bones[1].name = name("Other");
+    assert_eq!(read_with(&f, 2, true), Err(ReadError::Implausible("pose channel without a bone")));
+    let f = fixture();
+    assert_eq!(read_with(&f, 1, true), Err(ReadError::Implausible("bone count")));
+    let mut f = fixture();
+    f.object.data = core::ptr::null();
+    assert!(matches!(read_with(&f, 2, true), Err(ReadError::NotAnArmature(_))));
 }
 
 #[test]
@@ -262,6 +313,16 @@ fn layouts_without_a_field_are_refused() {
     let mut dna = Dna::new();
     dna.strukt("ListBase", &[("void", "*first"), ("void", "*last")]);
     dna.strukt("Object", &[("char", "_pad0[8]"), ("short", "type"), ("char", "_pad1[6]")]);
+    let e = PoseLayout::new(&Sdna::parse(&dna.bytes()).unwrap()).unwrap_err();
+    assert!(matches!(e, DnaError::NoStruct(_) | DnaError::NoField { .. }), "{e}");
+    // Without the bone pointer, the by-name link needs Object.data and the bone tree.
+    let mut dna = Dna::new();
+    dna.strukt("ListBase", &[("void", "*first"), ("void", "*last")]);
+    dna.strukt("Object", &[("char", "_pad0[8]"), ("short", "type"), ("char", "_pad1[6]"), ("bPose", "*pose")]);
+    dna.strukt("bPose", &[("char", "_pad[8]"), ("ListBase", "chanbase")]);
+    dna.strukt("bPoseChannel_Runtime", &[("int", "bbone_segments")]);
+    dna.strukt("bPoseChannel", &[("void", "*next"), ("char", "name[64]"), ("bPoseChannel_Runtime", "runtime")]);
+    dna.strukt("Bone", &[("char", "name[64]")]);
     let e = PoseLayout::new(&Sdna::parse(&dna.bytes()).unwrap()).unwrap_err();
     assert!(matches!(e, DnaError::NoStruct(_) | DnaError::NoField { .. }), "{e}");
 }

@@ -10,9 +10,12 @@ Cases (as in the issues): a grid with 64 bones and 4 influences per vertex at 25
 vertices, plain stack and with Smooth (5 iterations) or Subdivision Surface (level 2) after the
 skinning modifier, Linear and Dual Quaternion; `dq_skin_add` to the first skinned frame; a
 weight change; 200 characters of 3,273 vertices (CesiumMan) and an edit elsewhere in that scene;
-a 3k-vertex mesh. For DQ Skin it also reports where the time of a frame goes: Blender's first
-evaluation (animation, pose), DQ Skin's frame handler, and Blender's second evaluation (DQ Skin
-result, modifiers after it).
+a 3k-vertex mesh; a 100k grid on 16 B-Bones of 8 segments (Straight and Curved mapping); a
+generated Rigify character (`tests/blender/characters.py`), where the skinning share of a frame
+is the frame minus the rig alone. For DQ Skin it also reports where the time of a frame goes:
+Blender's first evaluation (animation, pose), DQ Skin's frame handler (for B-Bones split into
+reading the pose, the influences, the kernel and writing the result), and Blender's second
+evaluation (DQ Skin result, modifiers after it).
 
 Usage: python bench/blender_bench.py [--out FILE] [--quick] [--only NAME...]
 """
@@ -34,6 +37,9 @@ os.environ.setdefault("BLENDER_USER_RESOURCES", str(ROOT / ".blender_user"))
 
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
 import addon_utils  # noqa: E402  (importable once bpy is)
+
+sys.path.insert(0, str(ROOT / "tests" / "blender"))
+import characters  # noqa: E402  (the Rigify character the tests use too)
 
 ADDON = "bl_ext.user_default.dq_skin"
 
@@ -205,7 +211,7 @@ def alternate(variants: dict, frames, rounds: int, per_round: int, phases: Phase
             show_only(*objs)
             bpy.context.scene.frame_set(frames[0])  # warm up after the switch
             bpy.context.scene.frame_set(frames[1])
-            ms, p = frames_ms(objs, frames, per_round, phases if name == "dq_skin" else None)
+            ms, p = frames_ms(objs, frames, per_round, phases if name.startswith("dq_skin") else None)
             all_times[name].append(ms)
             if p:
                 parts.setdefault(name, []).append(p)
@@ -214,6 +220,42 @@ def alternate(variants: dict, frames, rounds: int, per_round: int, phases: Phase
         for key in ps[0]:
             out[f"{name}_{key}"] = float(np.median([p[key] for p in ps]))
     return out
+
+
+class HandlerParts:
+    """Time inside DQ Skin's frame handler on the envelope/B-Bone path: reading the pose
+    (`pose.frame`), this frame's influences (`pose.influences`), the kernel (`skin_many`) and
+    writing the result (`results.write_positions`), summed per frame."""
+
+    PARTS = {"read_pose": ("pose", "frame"), "influences": ("pose", "influences"), "kernel": ("dqskin", "skin_many"), "write": ("results", "write_positions")}
+
+    def __init__(self):
+        self.addon = sys.modules[ADDON]
+        self.saved = []
+        self.totals = {k: [] for k in self.PARTS}
+
+    def install(self):
+        for key, (module, name) in self.PARTS.items():
+            owner = getattr(self.addon, module)
+            original = getattr(owner, name)
+            self.saved.append((owner, name, original))
+
+            def timed(*a, _original=original, _key=key, **k):
+                t = time.perf_counter()
+                try:
+                    return _original(*a, **k)
+                finally:
+                    self.totals[_key].append(time.perf_counter() - t)
+
+            setattr(owner, name, timed)
+
+    def remove(self):
+        for owner, name, original in self.saved:
+            setattr(owner, name, original)
+        self.saved.clear()
+
+    def medians(self, prefix: str) -> dict:
+        return {f"{prefix}_handler_{k}_ms": 1e3 * float(np.median(v)) for k, v in self.totals.items() if v}
 
 
 def kernel_ms(obj, runs: int) -> dict:
@@ -258,6 +300,94 @@ def case_grid(vertices: int, later: str, method: str, quick: bool) -> dict:
         first_frame_s=bind_s,
         speedup=row["armature_ms"] / row["dq_skin_ms"],
     )
+    return row
+
+
+def bbone_grid(vertices: int, mapping: str):
+    """`grid_rig` with 16 bones (4×4), all B-Bones of 8 segments with a curved rest shape and
+    their curves and eases keyed along with the rotations (frames 1-40)."""
+    grid, arm = grid_rig(vertices, bones_per_side=4)
+    for b in arm.data.bones:
+        b.bbone_segments = 8
+        b.bbone_mapping_mode = mapping
+        b.bbone_curveinx, b.bbone_curveoutz = 0.15, -0.1
+    for i, pb in enumerate(arm.pose.bones):
+        for frame, amount in ((1, 0.0), (20, 1.0), (40, 0.5)):
+            pb.bbone_curveinx = 0.4 * amount * math.cos(i)
+            pb.bbone_curveoutx = -0.3 * amount * math.sin(i)
+            pb.bbone_easein = 1.0 + 0.8 * amount
+            for prop in ("bbone_curveinx", "bbone_curveoutx", "bbone_easein"):
+                pb.keyframe_insert(prop, frame=frame)
+    return grid, arm
+
+
+def case_bbone_grid(vertices: int, mapping: str, method: str, quick: bool) -> dict:
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    grid, arm = bbone_grid(vertices, mapping)
+    variants, bind_s = three_ways(grid, method)
+    phases, parts = Phases(), HandlerParts()
+    phases.install()
+    parts.install()
+    try:
+        row = alternate({k: [v] for k, v in variants.items()}, (5, 12, 19, 26, 33), 2 if quick else 5, 5 if quick else 9, phases)
+    finally:
+        phases.remove()
+        parts.remove()
+    row.update(parts.medians("dq_skin"))
+    row.update(
+        case=f"B-Bone grid {len(grid.data.vertices) // 1000}k, 16 bones x 8 segments, {mapping.lower()} {method.lower()}",
+        vertices=len(grid.data.vertices),
+        mapping=mapping,
+        method=method,
+        first_frame_s=bind_s,
+        speedup=row["armature_ms"] / row["dq_skin_ms"],
+    )
+    return row
+
+
+def case_rigify(quick: bool) -> dict:
+    """The Rigify character: the Armature modifier (Preserve Volume off and on) and DQ Skin
+    (Linear and Dual Quaternion), each on its own copy of the mesh, and the rig alone (a copy
+    without skinning); the skinning share is each frame minus the rig alone's."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    t = time.perf_counter()
+    body, rig = characters.rigify_character()
+    build_s = time.perf_counter() - t
+
+    def copy(name):
+        c = body.copy()
+        c.data = body.data.copy()
+        c.name = f"Body {name}"
+        bpy.context.scene.collection.objects.link(c)
+        return c
+
+    variants = {"armature_linear": body, "armature_pv": copy("PV"), "dq_skin_linear": copy("DQ Linear"), "dq_skin_dqs": copy("DQ DQS"), "none": copy("none")}
+    variants["armature_pv"].modifiers["Armature"].use_deform_preserve_volume = True
+    variants["none"].modifiers.remove(variants["none"].modifiers["Armature"])
+    for name, method in (("dq_skin_linear", "LINEAR"), ("dq_skin_dqs", "DUAL_QUATERNION")):
+        show_only(variants[name])
+        add_dq_skin(variants[name], method)
+    phases, parts = Phases(), HandlerParts()
+    phases.install()
+    parts.install()
+    try:
+        row = alternate({k: [v] for k, v in variants.items()}, (5, 12, 19, 26, 33), 2 if quick else 6, 5 if quick else 9, phases)
+    finally:
+        phases.remove()
+        parts.remove()
+    row.update(parts.medians("dq_skin"))
+    deforming = [b for b in rig.data.bones if b.use_deform]
+    row.update(
+        case=f"Rigify character, {len(body.data.vertices)} vertices",
+        vertices=len(body.data.vertices),
+        deforming_bones=len(deforming),
+        bbones=sum(b.bbone_segments > 1 for b in deforming),
+        build_s=build_s,
+    )
+    for skin, reference in (("dq_skin_linear", "armature_linear"), ("dq_skin_dqs", "armature_pv")):
+        row[f"{reference}_share_ms"] = row[f"{reference}_ms"] - row["none_ms"]
+        row[f"{skin}_share_ms"] = row[f"{skin}_ms"] - row["none_ms"]
+        row[f"{skin}_share_speedup"] = row[f"{reference}_share_ms"] / max(row[f"{skin}_share_ms"], 1e-6)
     return row
 
 
@@ -438,11 +568,11 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "target" / "bench-blender.json")
     parser.add_argument("--quick", action="store_true", help="smaller meshes, fewer rounds")
-    parser.add_argument("--only", nargs="*", default=None, help="case groups: grid, later, binding, weights, crowd, small, centers")
+    parser.add_argument("--only", nargs="*", default=None, help="case groups: grid, later, binding, weights, crowd, small, centers, bbones, rigify")
     args = parser.parse_args()
     if addon_utils.enable(ADDON, default_set=True) is None:
         raise SystemExit("the DQ Skin extension is not installed: run make setup")
-    only = set(args.only) if args.only else {"grid", "later", "binding", "weights", "crowd", "small", "centers"}
+    only = set(args.only) if args.only else {"grid", "later", "binding", "weights", "crowd", "small", "centers", "bbones", "rigify"}
     q = args.quick
     big = [250_000] if q else [250_000, 1_000_000]
     rows = []
@@ -472,6 +602,12 @@ def main() -> int:
     if "centers" in only:
         for levels in ([2] if q else [2, 3]):
             report(case_centers(levels))
+    if "bbones" in only:
+        for mapping in ("STRAIGHT", "CURVED"):
+            for method in ("LINEAR", "DUAL_QUATERNION"):
+                report(case_bbone_grid(100_000, mapping, method, q))
+    if "rigify" in only:
+        report(case_rigify(q))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"blender": bpy.app.version_string, "threads": os.cpu_count(), "rows": rows}, indent=2))
     print(f"wrote {args.out}")

@@ -4,21 +4,18 @@
 Per mesh (shared by every object using it, e.g. a crowd of linked duplicates): the vertex
 positions, the vertex-group weights in stored order, the element counts, and the shape keys'
 coordinates. Weights are read straight from Blender's memory through `dqskin._MeshMemory`
-(the layout comes from the SDNA of a tiny .blend this Blender writes once per session), which
-takes milliseconds where `MeshVertex.groups` takes about a second per 250,000 vertices; if that
-reader cannot be built, the slow path is used and the panel says nothing is wrong.
+(see `memory`), which takes milliseconds where `MeshVertex.groups` takes about a second per
+250,000 vertices; if that reader cannot be built, the slow path is used and the panel says
+nothing is wrong.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 
-import bpy
 import numpy as np
 
-from . import dqskin
+from . import dqskin, memory
 
 
 @dataclass
@@ -75,8 +72,6 @@ _cache: dict[int, MeshData] = {}
 _stale: set[int] = set()
 _revisions: dict[int, int] = {}  # mesh uid -> how many times Blender said it changed
 _versions = iter(range(1, 1 << 62))
-_reader = None
-_reader_error = ""
 
 
 def forget() -> None:
@@ -98,23 +93,8 @@ def revision(mesh) -> int:
 
 
 def reader():
-    """The memory reader for this Blender, or None (then `reader_error` says why)."""
-    global _reader, _reader_error
-    if _reader is None and not _reader_error:
-        fd, path = tempfile.mkstemp(prefix="dq_skin_dna_", suffix=".blend")
-        os.close(fd)
-        try:
-            bpy.data.libraries.write(path, set(), compress=False)
-            with open(path, "rb") as f:
-                _reader = dqskin._MeshMemory(f.read())
-        except Exception as e:  # any failure: fall back to the slow, safe path
-            _reader_error = f"{type(e).__name__}: {e}"
-        finally:
-            try:
-                os.remove(path)
-            except OSError:
-                pass
-    return _reader
+    """The vertex-group memory reader for this Blender, or None (`memory.mesh_error` says why)."""
+    return memory.mesh_reader()
 
 
 def read_groups(mesh) -> Groups | None:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import centers, companion, compat, consumers, dqskin, exports, meshdata, nodes, results, rig, settings
+from . import centers, companion, compat, consumers, dqskin, exports, meshdata, nodes, pose, results, rig, settings
 from .state import STATES, BindingKey, FrameKey, Mode, ModifierState
 
 
@@ -396,17 +396,22 @@ def _prepare(obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: C
         _set_capture(mod, False)
         st.capture_on = False
 
-    binding = _binding(obj, arm, st, s, data, ctx)
+    binding = _binding(obj, arm, arm_eval, st, s, data, ctx)
     if len(positions) != binding.vertex_count:
         raise SkinError(
             f"An earlier modifier changed the vertex count ({binding.vertex_count} → {len(positions)}); "
             "put DQ Skin before modifiers that add or remove vertices"
         )
-    deform = ctx.poses.get(arm.session_uid)
-    if deform is None:
-        deform = ctx.poses[arm.session_uid] = rig.pose_matrices(arm_eval)
-    if len(binding.bone_indices) != len(deform):
-        deform = deform[binding.bone_indices]
+    if st.needs_effective:
+        bones = pose.frame(arm_eval, binding, st.binding.segments)  # with every B-Bone's joints
+        pose_key = bones.key
+    else:
+        deform = ctx.poses.get(arm.session_uid)
+        if deform is None:
+            deform = ctx.poses[arm.session_uid] = rig.pose_matrices(arm_eval)
+        if len(binding.bone_indices) != len(deform):
+            deform = deform[binding.bone_indices]
+        pose_key = deform.tobytes()
     out = st.output
     if out.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
         out.spaces = rig.spaces(obj_eval, arm_eval)
@@ -414,7 +419,7 @@ def _prepare(obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: C
     by_index = consumers.index_readers(obj, ctx.structure)
     kind = nodes.RESULT_POSITIONS if source == "capture" or by_index else nodes.RESULT_REPLACE
     result = _own_result(obj, mod, st)
-    key = FrameKey(s.key(), input_key, deform.tobytes(), premat.tobytes(), result.session_uid, (data.version, meshdata.revision(obj.data)))
+    key = FrameKey(s.key(), input_key, pose_key, premat.tobytes(), result.session_uid, (data.version, meshdata.revision(obj.data)))
     if not force and key == out.written and st.status.live and results.mode_of(result) == kind:
         return None  # the result is already this
     if out.buffer is None or len(out.buffer) != binding.vertex_count:
@@ -424,29 +429,20 @@ def _prepare(obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: C
         # Envelopes and B-Bone segments depend on where the vertices are: this frame's
         # influences, over the bones followed by the B-Bones' segment joints.
         cache = st.binding
-        matrices = rig.Frame(np.ascontiguousarray(deform), binding.rest, premat, postmat)
-        influences = binding.influences.effective(
-            positions,
-            premat,
-            envelopes=cache.envelopes,
-            use_vertex_groups=s.use_vertex_groups,
-            use_envelopes=s.use_envelopes,
-            bbone_segments=cache.segments,
-            rest=binding.rest,
-            lengths=rig.bone_lengths(arm_eval, binding),
-            bbone_mapping=rig.curved_bbone_mapping(arm_eval, binding, positions, premat, s.use_envelopes),
+        influences = pose.influences(
+            bones, binding, arm_eval, positions, input_key, premat, s.use_vertex_groups, s.use_envelopes, cache.envelopes, cache.segments
         )
-        matrices = rig.with_bbone_joints(matrices, arm_eval, binding, cache.segments)
-        deform, rest = matrices.deform, matrices.rest
+        deform, rest = bones.deform, bones.rest
     job = out.job = _job(st, s, positions, influences, deform, rest, premat, postmat)
     return Plan(obj, mod, st, s, result, kind, key, job, deforms, start, render=ctx.render)
 
 
-def _binding(obj, arm, st: ModifierState, s: settings.Settings, data, ctx: Context):
+def _binding(obj, arm, arm_eval, st: ModifierState, s: settings.Settings, data, ctx: Context):
     """The influences of this mesh on this armature, kept while what they depend on holds
-    (the armature's bones are compared on every full evaluation, whatever changed them)."""
+    (the armature's bones are compared on every full evaluation, whatever changed them: from
+    Blender's memory, see `pose.armature_signature`)."""
     cache = st.binding
-    key = BindingKey(data.uid, data.version, arm.session_uid, rig.armature_signature(arm), s.mask_group, s.invert_mask, s.blend_group, s.use_vertex_groups)
+    key = BindingKey(data.uid, data.version, arm.session_uid, pose.armature_signature(arm_eval), s.mask_group, s.invert_mask, s.blend_group, s.use_vertex_groups)
     if cache.binding is None or cache.key != key:
         cache.clear()
         binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups, data=data)

@@ -32,6 +32,10 @@ class Binding:
     vertex_count: int
     rest: np.ndarray | None = None
     """`(B, 4, 4)` rest matrices of the bound bones (`Bone.matrix_local`)."""
+    effective: tuple | None = None
+    """`(key, influences)`: the last effective influences from Blender's memory (see `pose`)."""
+    pose_signature: int | None = None
+    """The binding signature of the last pose from memory whose bones matched these."""
 
 
 def bind(
@@ -109,7 +113,8 @@ def spaces(mesh_object, armature) -> tuple[np.ndarray, np.ndarray]:
 
 def armature_signature(arm) -> tuple:
     """What of the armature's bones a binding depends on (names, deform flags, rest pose,
-    envelopes, B-Bone segments), whatever route changed them."""
+    envelopes, B-Bone segments), whatever route changed them, through the Python API
+    (`pose.armature_signature` reads it from memory)."""
     bones = arm.data.bones
     n = len(bones)
     deform = np.empty(n, bool)

@@ -60,6 +60,7 @@ from ._dqskin import (
 )
 from ._dqskin import _panic_for_tests  # noqa: F401  (tests check panics become RuntimeError)
 from ._dqskin import _MeshMemory  # noqa: F401  (the Blender extension's vertex-group reader)
+from ._dqskin import PoseData, _PoseMemory  # noqa: F401  (the Blender extension's pose reader)
 
 __all__ = [
     "MAX_INFLUENCES_PER_VERTEX",

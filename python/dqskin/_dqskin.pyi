@@ -137,6 +137,7 @@ class Influences:
         positions: F32Array,
         premat: ArrayLike | None = None,
         *,
+        pose: PoseData | None = None,
         envelopes: F32Array | None = None,
         use_vertex_groups: bool = True,
         use_envelopes: bool = False,
@@ -145,7 +146,10 @@ class Influences:
         lengths: ArrayLike | None = None,
         bbone_mapping: dict[int, tuple[npt.NDArray[np.int32], F32Array]] | None = None,
     ) -> Influences:
-        """This frame's influences with envelopes ``(B, 11)`` and B-Bones (expanded bone list)."""
+        """This frame's influences with envelopes and B-Bones over the expanded bone list: from
+        ``pose`` (envelopes, B-Bones, Straight and Curved mappings as Blender's), or from the
+        arrays ``envelopes`` ``(B, 11)``, ``bbone_segments``, ``rest``, ``lengths`` and
+        ``bbone_mapping``."""
     @property
     def vertex_count(self) -> int: ...
     @property
@@ -391,3 +395,40 @@ class _MeshMemory:
     def deform_verts(self, mesh: object) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], F32Array] | None:
         """The vertex-group weights of a ``bpy.types.Mesh`` in CSR form (None without any)."""
 
+class _PoseMemory:
+    """Internal to the Blender extension: reads armature poses from Blender's memory."""
+    def __init__(self, blend_file: bytes) -> None: ...
+    def read(self, armature: object) -> PoseData:
+        """The pose of a ``bpy.types.Object`` of type ``'ARMATURE'`` (evaluated for this frame)."""
+
+@final
+class PoseData:
+    """One frame of an armature's deforming bones (``pose.bones`` order) as the Armature
+    modifier deforms with them; the expanded bone list adds each B-Bone's joints after them."""
+    @property
+    def names(self) -> list[str]: ...
+    @property
+    def bone_indices(self) -> npt.NDArray[np.int64]:
+        """Each bone's index in ``pose.bones``."""
+    @property
+    def bone_count(self) -> int: ...
+    @property
+    def expanded_bone_count(self) -> int: ...
+    @property
+    def deform(self) -> F32Array:
+        """``(E, 4, 4)``: each bone's ``matrix_channel``, then the B-Bones' joints (Blender's cache)."""
+    @property
+    def rest(self) -> F32Array:
+        """``(E, 4, 4)``: each bone's ``matrix_local``, then each joint's orthonormal rest basis."""
+    @property
+    def envelopes(self) -> F32Array:
+        """``(B, 11)`` envelope rows (as ``Influences.effective`` takes them)."""
+    @property
+    def segments(self) -> npt.NDArray[np.int64]:
+        """Each bone's segment count as it deforms (1 for plain bones)."""
+    @property
+    def binding_signature(self) -> int:
+        """Digest of what influences depend on besides the vertices."""
+    @property
+    def pose_signature(self) -> int:
+        """Digest of the expanded deform matrices."""

@@ -1,10 +1,14 @@
 """A character with a generated Rigify rig, as artists make one: Blender's bundled `rigify`
-add-on, the human metarig, a body mesh fitted to it, Generate Rig, parented with automatic
-weights (160 deforming bones, 52 of them B-Bones on Blender 4.2-5.x), and an animation that
-bends, twists and scales. Used by the tests and by `bench/blender_bench.py`.
+add-on, the human metarig, a body mesh fitted to it, `pose.rigify_generate`, automatic weights
+and an animation that bends, twists and scales. Used by the tests and by `bench/blender_bench.py`.
+
+The body is a Skin modifier over the metarig's body bones (the face bones left out), applied and
+subdivided twice: one closed mesh of about 14,000 vertices. The generated rig has 160 deforming
+bones, 52 of them B-Bones with 8 or 10 segments (Rigify's limbs, spine and face, on Blender
+4.2-5.x); automatic weights bind the body to the ones near it.
 
 Generating takes tens of seconds: `rigify_file(folder)` builds it once into a .blend that
-callers open (and reuse within a session).
+tests open (and reuse within a session).
 """
 
 from __future__ import annotations
@@ -12,69 +16,108 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import addon_utils  # noqa: E402  (importable once bpy is)
 import bpy
+import numpy as np
 
-# Bones the body mesh does not cover (the face, hands' palms and the like get weights anyway).
-_SKIP = ("face", "eye", "ear", "lip", "brow", "lid", "nose", "cheek", "jaw", "teeth", "tongue", "chin", "forehead", "temple", "breast", "pelvis", "heel", "palm")
+# Controls animated on frames 1-40 (Rigify's names): (bone, rotation axis, angle, scale).
+MOTION = [
+    ("torso", (0, 0, 1), 0.5, None),
+    ("hips", (1, 0, 0), 0.3, None),
+    ("chest", (0, 1, 0), 0.4, (1.1, 0.95, 1.1)),
+    ("neck", (1, 0, 0), -0.4, None),
+    ("head", (0, 0, 1), 0.6, None),
+    ("upper_arm_fk.L", (1, 0, 0), 1.2, (1.0, 1.15, 1.0)),
+    ("forearm_fk.L", (0, 1, 0), 1.4, None),  # about the bone: a twist
+    ("hand_fk.L", (0, 0, 1), 0.7, None),
+    ("upper_arm_fk.R", (0, 0, 1), -1.0, None),
+    ("forearm_fk.R", (1, 0, 0), 1.6, (0.9, 1.0, 0.9)),
+    ("thigh_fk.L", (1, 0, 0), -0.9, None),
+    ("shin_fk.L", (1, 0, 0), 1.3, None),
+    ("thigh_fk.R", (0, 1, 0), 0.8, None),
+    ("shin_fk.R", (1, 0, 0), 0.6, None),
+]
+# The IK/FK switches of the four limbs, set to FK so that the FK controls above drive them.
+LIMBS = ("upper_arm_parent.L", "upper_arm_parent.R", "thigh_parent.L", "thigh_parent.R")
 
 
-def body_mesh(metarig, radius: float = 0.05, subdivisions: int = 2):
-    """A body around the metarig's bones: a Skin modifier over a skeleton of its bones, applied,
-    then subdivided (about 9,000 vertices with the defaults)."""
-    verts, edges, index = [], [], {}
+def _in_face(bone) -> bool:
+    while bone is not None:
+        if bone.name == "face":
+            return True
+        bone = bone.parent
+    return False
 
-    def vertex(p):
-        key = tuple(round(c, 4) for c in p)
+
+def _radius(bone) -> float:
+    if bone.name.startswith("spine"):
+        return 0.05 if bone.name in ("spine.004", "spine.005") else 0.13
+    return min(0.14, max(0.008, 0.3 * bone.length))
+
+
+def body_mesh(metarig):
+    """A closed body around the metarig's bones (face bones left out): a Skin modifier over the
+    bones (each split in three, unconnected bones joined to the nearest end of their parent),
+    applied, then two levels of subdivision."""
+    index: dict[tuple, int] = {}
+    verts, radii, edges = [], [], []
+
+    def vertex(p, r: float) -> int:
+        key = tuple(round(float(x), 4) for x in p)
         if key not in index:
             index[key] = len(verts)
-            verts.append(key)
+            verts.append(tuple(p))
+            radii.append(r)
+        else:
+            radii[index[key]] = max(radii[index[key]], r)
         return index[key]
 
     for b in metarig.data.bones:
-        if not any(s in b.name for s in _SKIP):
-            edges.append((vertex(b.head_local), vertex(b.tail_local)))
+        if _in_face(b):
+            continue
+        r = _radius(b)
+        head, tail = b.head_local, b.tail_local
+        ring = [vertex(head + (tail - head) * (k / 3), r * (1.0 - 0.05 * k)) for k in range(4)]
+        edges += list(zip(ring, ring[1:]))
+        h = ring[0]
+        if b.parent is not None and not b.use_connect and not _in_face(b.parent):
+            ph, pt = b.parent.head_local, b.parent.tail_local
+            near = vertex(ph if (ph - head).length < (pt - head).length else pt, r)
+            if near != h:
+                edges.append((near, h))
     mesh = bpy.data.meshes.new("Body")
     mesh.from_pydata(verts, edges, [])
-    body = bpy.data.objects.new("Body", mesh)
-    bpy.context.scene.collection.objects.link(body)
-    body.modifiers.new("Skin", "SKIN")
-    for v in body.data.skin_vertices[0].data:
-        v.radius = (radius, radius)
-    body.modifiers.new("Subdivision", "SUBSURF").levels = subdivisions
-    bpy.context.view_layer.objects.active = body
-    for m in list(body.modifiers):
-        with bpy.context.temp_override(object=body, active_object=body):
-            bpy.ops.object.modifier_apply(modifier=m.name)
-    return body
+    obj = bpy.data.objects.new("Body", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.modifiers.new("Skin", "SKIN")
+    for i, sv in enumerate(mesh.skin_vertices[0].data):
+        sv.radius = (radii[i], radii[i])
+    mesh.skin_vertices[0].data[0].use_root = True
+    sub = obj.modifiers.new("Subdivision", "SUBSURF")
+    sub.levels = 2
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        for name in ("Skin", "Subdivision"):
+            bpy.ops.object.modifier_apply(modifier=name)
+    return obj
 
 
-def animate_rig(rig, frames: int = 24) -> None:
-    """Keys on the rig's controls over `frames` frames: bends (arms, legs, spine), twists
-    (forearms) and scales (the torso), beyond 90 degrees where Linear and Dual Quaternion differ."""
-    pose = rig.pose.bones
-    moves = [
-        ("upper_arm_fk.L", "rotation", (1, 0, 0), 1.6),
-        ("upper_arm_fk.R", "rotation", (0, 0, 1), -1.2),
-        ("forearm_fk.L", "rotation", (0, 1, 0), 2.2),  # a twist along the bone
-        ("thigh_fk.L", "rotation", (1, 0, 0), -1.3),
-        ("shin_fk.R", "rotation", (1, 0, 0), 1.5),
-        ("chest", "rotation", (0, 0, 1), 0.7),
-        ("torso", "scale", (1.0, 1.25, 1.0), 1.0),
-    ]
-    for name, kind, axis, amount in moves:
-        pb = pose.get(name)
-        if pb is None:
-            continue
-        pb.rotation_mode = "QUATERNION"
-        for frame, t in ((1, 0.0), (frames // 2, 1.0), (frames, 0.4)):
-            if kind == "rotation":
-                half = 0.5 * amount * t
-                n = math.sqrt(sum(a * a for a in axis))
-                pb.rotation_quaternion = (math.cos(half), *(math.sin(half) * a / n for a in axis))
-                pb.keyframe_insert("rotation_quaternion", frame=frame)
-            else:
-                pb.scale = tuple(1.0 + (a - 1.0) * t for a in axis)
+def animate(rig, frames=(1, 20, 40)) -> None:
+    """Keys the controls of `MOTION` at `frames`: rest, full, then half way back."""
+    for name in LIMBS:
+        rig.pose.bones[name]["IK_FK"] = 1.0
+    for k, frame in enumerate(frames):
+        amount = (0.0, 1.0, 0.5)[k % 3]
+        for name, axis, angle, scale in MOTION:
+            pb = rig.pose.bones[name]
+            pb.rotation_mode = "QUATERNION"
+            a = np.array(axis, float) / np.linalg.norm(axis)
+            half = 0.5 * angle * amount
+            pb.rotation_quaternion = (math.cos(half), *(math.sin(half) * a))
+            pb.keyframe_insert("rotation_quaternion", frame=frame)
+            if scale is not None:
+                pb.scale = tuple(1.0 + (s - 1.0) * amount for s in scale)
                 pb.keyframe_insert("scale", frame=frame)
+    bpy.context.scene.frame_start, bpy.context.scene.frame_end = frames[0], frames[-1]
 
 
 def select_only_object(obj) -> None:
@@ -86,23 +129,33 @@ def select_only_object(obj) -> None:
 def build_rigify_character():
     """In the current (empty) scene: metarig, body, generated rig, automatic weights, animation.
     Returns `(body, rig, metarig)`."""
-    import addon_utils
-
-    addon_utils.enable("rigify", default_set=True)
-    bpy.ops.object.armature_human_metarig_add()
-    metarig = bpy.context.active_object
-    body = body_mesh(metarig)
-    select_only_object(metarig)
-    assert bpy.ops.pose.rigify_generate() == {"FINISHED"}  # (an override of the context would pin Rigify's)
+    was_enabled = addon_utils.check("rigify")[1]
+    addon_utils.enable("rigify", default_set=True)  # Rigify reads its preferences
+    try:
+        bpy.ops.object.armature_human_metarig_add()
+        metarig = bpy.context.active_object
+        body = body_mesh(metarig)
+        select_only_object(metarig)
+        assert bpy.ops.pose.rigify_generate() == {"FINISHED"}  # (an override of the context would pin Rigify's)
+    finally:
+        if not was_enabled:  # later tests and benchmark cases see the add-on state they had
+            addon_utils.disable("rigify", default_set=True)
     rig = next(o for o in bpy.data.objects if o.type == "ARMATURE" and o is not metarig and o.name.startswith("rig"))
+    bpy.ops.object.mode_set(mode="OBJECT")
     for o in bpy.context.view_layer.objects:
         o.select_set(o in (body, rig))
     bpy.context.view_layer.objects.active = rig
     with bpy.context.temp_override(active_object=rig, object=rig, selected_objects=[body, rig], selected_editable_objects=[body, rig]):
         assert bpy.ops.object.parent_set(type="ARMATURE_AUTO") == {"FINISHED"}
-    animate_rig(rig)
-    bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 24
+    animate(rig)
     return body, rig, metarig
+
+
+def rigify_character():
+    """The character of `build_rigify_character` without its metarig: `(body, rig)`."""
+    body, rig, metarig = build_rigify_character()
+    bpy.data.objects.remove(metarig)
+    return body, rig
 
 
 def rigify_file(folder: Path) -> Path:
@@ -117,8 +170,6 @@ def rigify_file(folder: Path) -> Path:
 
 def open_rigify_character(folder: Path):
     """Opens the Rigify character file (see `rigify_file`); returns `(body, rig, metarig)`."""
-    import addon_utils
-
     addon_utils.enable("rigify", default_set=True)
     bpy.ops.wm.open_mainfile(filepath=str(rigify_file(folder)))
     body = bpy.data.objects["Body"]

@@ -764,7 +764,7 @@ def test_weights_read_from_memory_equal_the_python_api(dq_skin, assets, asset):
     `MeshVertex.groups` gives, in stored order."""
     obj, _ = import_character(assets / asset)
     meshdata = dq_skin.meshdata
-    assert meshdata.reader() is not None, meshdata._reader_error
+    assert meshdata.reader() is not None, dq_skin.memory.mesh_error
     fast = meshdata.read_groups(obj.data)
     slow = meshdata._read_groups_slowly(obj.data)
     assert fast is not None and slow is not None

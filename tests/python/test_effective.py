@@ -147,3 +147,19 @@ def test_bad_effective_inputs_are_named():
         dqskin.transform_points(np.ones((4, 4), F32), pos)
     with pytest.raises(ValueError, match="pose_joints has 2 matrices but rest_joints has 3"):
         dqskin.bbone_segment_matrices(np.eye(4), np.eye(4), np.stack([np.eye(4)] * 2), np.stack([np.eye(4)] * 3))
+
+
+def test_bad_pose_inputs_are_named():
+    infl = dqskin.Influences(np.array([0, 1]), np.array([1]), F32([0.8]), 2)
+    pos = F32([[0.0, 0.0, 0.0]])
+    for wrong in (object(), np.eye(4, dtype=F32), "pose", 3):
+        with pytest.raises(TypeError, match="pose must be a dqskin.PoseData"):
+            infl.effective(pos, pose=wrong)
+    with pytest.raises(TypeError, match="PoseData"):
+        dqskin.PoseData()
+    with pytest.raises(TypeError, match="blend_file must be the bytes of a .blend file"):
+        dqskin._PoseMemory("file.blend")
+    with pytest.raises(ValueError, match="blend_file: not an uncompressed .blend file"):
+        dqskin._PoseMemory(b"\x1f\x8b" + b"\0" * 30)
+    with pytest.raises(ValueError, match="blend_file"):
+        dqskin._PoseMemory(b"BLENDER-v402" + b"\0" * 64)

@@ -6,7 +6,9 @@
 //! memory instead, in their stored order (dual quaternion skinning depends on it), using the
 //! struct layout that Blender itself describes in its SDNA: every `.blend` file carries the
 //! SDNA of the Blender that wrote it, so writing an empty file gives the layout of the structs
-//! in memory, whatever the version.
+//! in memory, whatever the version. Armature poses are read the same way: the channel matrices,
+//! the bones' rest data and Blender's runtime B-Bone cache, which its Python API gives only one
+//! joint or one vertex per call.
 //!
 //! - [`Sdna`]: parses the `DNA1` block of a `.blend` file (both the 4.x and the 5.x headers)
 //!   and answers field offsets and struct sizes.
@@ -14,12 +16,21 @@
 //!   sizes the SDNA states.
 //! - [`read_deform_verts`]: copies the weights of a `Mesh` out of memory into CSR arrays, with
 //!   every count checked for sanity before it is used.
+//! - [`PoseLayout`] and [`read_pose`]: an armature object's pose channels as the Armature
+//!   modifier deforms with them (channel matrices, bones' rest data and envelopes, and the
+//!   runtime B-Bone cache), into `dqskin-core`'s [`PoseChannel`](dqskin_core::skin::PoseChannel)s.
 //!
 //! No Python and no Blender headers: the only unsafe code is the raw reads in
-//! [`read_deform_verts`], whose caller guarantees the pointer.
+//! [`read_deform_verts`] and [`read_pose`], whose callers guarantee the pointer.
 
+mod memory;
 mod mesh;
+mod pose;
 mod sdna;
+#[cfg(test)]
+mod test_dna;
 
-pub use mesh::{read_deform_verts, DeformVerts, MeshLayout, ReadError};
+pub use memory::ReadError;
+pub use mesh::{read_deform_verts, DeformVerts, MeshLayout};
+pub use pose::{read_pose, PoseLayout, MAX_CHANNELS};
 pub use sdna::{DnaError, Field, Sdna};

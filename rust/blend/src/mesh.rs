@@ -6,6 +6,7 @@
 //! per vertex, and `dw` points to `totweight` pairs `MDeformWeight { int def_nr; float weight; }`
 //! in the order Blender stores (and deforms) them.
 
+use crate::memory::{read, ReadError};
 use crate::sdna::{DnaError, Sdna};
 
 /// `eCustomDataType::CD_MDEFORMVERT`, unchanged since Blender 2.5.
@@ -35,20 +36,8 @@ pub struct MeshLayout {
 impl MeshLayout {
     /// The layout of this Blender's meshes, checked for the field sizes the reader assumes.
     pub fn new(sdna: &Sdna) -> Result<Self, DnaError> {
-        let int = |s: &str, names: &[&str]| -> Result<usize, DnaError> {
-            let f = sdna.field(s, names)?;
-            if f.size != 4 || f.pointer {
-                return Err(DnaError::Inconsistent(format!("{s}.{} is not a 4-byte number", names[0])));
-            }
-            Ok(f.offset)
-        };
-        let ptr = |s: &str, names: &[&str]| -> Result<usize, DnaError> {
-            let f = sdna.field(s, names)?;
-            if f.size != 8 || !f.pointer {
-                return Err(DnaError::Inconsistent(format!("{s}.{} is not a pointer", names[0])));
-            }
-            Ok(f.offset)
-        };
+        let int = |s: &str, names: &[&str]| sdna.number(s, names, 4);
+        let ptr = |s: &str, names: &[&str]| sdna.pointer(s, names);
         let vert_data = sdna.field("Mesh", &["vert_data", "vdata"])?;
         if vert_data.pointer || vert_data.size != sdna.struct_size("CustomData")? {
             return Err(DnaError::Inconsistent("Mesh.vert_data is not a CustomData".into()));
@@ -78,38 +67,6 @@ pub struct DeformVerts {
     pub offsets: Vec<u32>,
     pub groups: Vec<u32>,
     pub weights: Vec<f32>,
-}
-
-/// Why the memory was not read.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum ReadError {
-    /// The pointer is null.
-    Null,
-    /// The mesh does not have the number of vertices the caller expects (stale pointer or a
-    /// mesh being edited).
-    VertexCount { expected: usize, found: i64 },
-    /// A count read from memory is out of any sane range: the layout does not fit this memory.
-    Implausible(&'static str),
-}
-
-impl core::fmt::Display for ReadError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            ReadError::Null => write!(f, "the mesh pointer is null"),
-            ReadError::VertexCount { expected, found } => {
-                write!(f, "the mesh in memory has {found} vertices, expected {expected}")
-            }
-            ReadError::Implausible(what) => write!(f, "implausible {what} in memory: the mesh layout does not match"),
-        }
-    }
-}
-
-impl std::error::Error for ReadError {}
-
-#[inline]
-unsafe fn read<T: Copy>(address: usize) -> T {
-    // SAFETY: the caller guarantees `address` is inside a live object of the layout.
-    unsafe { core::ptr::read_unaligned(address as *const T) }
 }
 
 /// Reads the vertex-group weights of the `Mesh` at `mesh` (`bpy.types.Mesh.as_pointer()`).
@@ -194,59 +151,21 @@ mod tests {
 
     /// An SDNA with the structs the reader needs, laid out as in Blender 4.2-5.0.
     fn mesh_sdna(renamed: bool) -> Sdna {
-        let mut names: Vec<&str> = vec!["*layers", "typemap[53]", "totlayer", "maxlayer", "totsize", "*pool", "*external"];
-        names.extend(["type", "offset", "flag", "active", "active_rnd", "active_clone", "active_mask", "uid", "name[68]", "_pad1[4]", "*data", "*sharing_info"]);
-        names.extend(["*dw", "totweight"]);
-        names.extend(["def_nr", "weight"]);
         let (verts, vdata) = if renamed { ("verts_num", "vert_data") } else { ("totvert", "vdata") };
-        names.extend(["_pad0[8]", verts, vdata]);
-        let types = ["char", "int", "float", "void", "CustomDataLayer", "CustomData", "MDeformWeight", "MDeformVert", "Mesh", "BLI_mempool", "CustomDataExternal", "ImplicitSharingInfoHandle"];
-        let tlen: [u16; 12] = [1, 4, 4, 0, 120, 248, 8, 16, 264, 0, 0, 0];
-        let idx = |n: &str| names.iter().position(|x| *x == n).unwrap() as u16;
-        let ty = |n: &str| types.iter().position(|x| *x == n).unwrap() as u16;
-        let structs: Vec<(u16, Vec<(u16, u16)>)> = vec![
-            (ty("CustomDataLayer"), vec![(ty("int"), idx("type")), (ty("int"), idx("offset")), (ty("int"), idx("flag")), (ty("int"), idx("active")), (ty("int"), idx("active_rnd")), (ty("int"), idx("active_clone")), (ty("int"), idx("active_mask")), (ty("int"), idx("uid")), (ty("char"), idx("name[68]")), (ty("char"), idx("_pad1[4]")), (ty("void"), idx("*data")), (ty("ImplicitSharingInfoHandle"), idx("*sharing_info"))]),
-            (ty("CustomData"), vec![(ty("CustomDataLayer"), idx("*layers")), (ty("int"), idx("typemap[53]")), (ty("int"), idx("totlayer")), (ty("int"), idx("maxlayer")), (ty("int"), idx("totsize")), (ty("BLI_mempool"), idx("*pool")), (ty("CustomDataExternal"), idx("*external"))]),
-            (ty("MDeformWeight"), vec![(ty("int"), idx("def_nr")), (ty("float"), idx("weight"))]),
-            (ty("MDeformVert"), vec![(ty("MDeformWeight"), idx("*dw")), (ty("int"), idx("totweight")), (ty("int"), idx("flag"))]),
-            (ty("Mesh"), vec![(ty("char"), idx("_pad0[8]")), (ty("int"), idx(verts)), (ty("int"), idx("flag")), (ty("CustomData"), idx(vdata))]),
-        ];
-        let mut d = Vec::new();
-        let pad = |d: &mut Vec<u8>| {
-            while d.len() % 4 != 0 {
-                d.push(0)
-            }
-        };
-        d.extend_from_slice(b"SDNANAME");
-        d.extend_from_slice(&(names.len() as i32).to_le_bytes());
-        for n in &names {
-            d.extend_from_slice(n.as_bytes());
-            d.push(0);
-        }
-        pad(&mut d);
-        d.extend_from_slice(b"TYPE");
-        d.extend_from_slice(&(types.len() as i32).to_le_bytes());
-        for t in types {
-            d.extend_from_slice(t.as_bytes());
-            d.push(0);
-        }
-        pad(&mut d);
-        d.extend_from_slice(b"TLEN");
-        for s in tlen {
-            d.extend_from_slice(&s.to_le_bytes());
-        }
-        pad(&mut d);
-        d.extend_from_slice(b"STRC");
-        d.extend_from_slice(&(structs.len() as i32).to_le_bytes());
-        for (t, fields) in structs {
-            d.extend_from_slice(&t.to_le_bytes());
-            d.extend_from_slice(&(fields.len() as u16).to_le_bytes());
-            for (a, b) in fields {
-                d.extend_from_slice(&a.to_le_bytes());
-                d.extend_from_slice(&b.to_le_bytes());
-            }
-        }
-        Sdna::parse(&d).unwrap()
+        let mut dna = crate::test_dna::Dna::new();
+        dna.opaque("BLI_mempool", 0).opaque("CustomDataExternal", 0).opaque("ImplicitSharingInfoHandle", 0);
+        dna.strukt(
+            "CustomDataLayer",
+            &[("int", "type"), ("int", "offset"), ("int", "flag"), ("int", "active"), ("int", "active_rnd"), ("int", "active_clone"), ("int", "active_mask"), ("int", "uid"), ("char", "name[68]"), ("char", "_pad1[4]"), ("void", "*data"), ("ImplicitSharingInfoHandle", "*sharing_info")],
+        );
+        dna.strukt(
+            "CustomData",
+            &[("CustomDataLayer", "*layers"), ("int", "typemap[53]"), ("int", "totlayer"), ("int", "maxlayer"), ("int", "totsize"), ("BLI_mempool", "*pool"), ("CustomDataExternal", "*external")],
+        );
+        dna.strukt("MDeformWeight", &[("int", "def_nr"), ("float", "weight")]);
+        dna.strukt("MDeformVert", &[("MDeformWeight", "*dw"), ("int", "totweight"), ("int", "flag")]);
+        dna.strukt("Mesh", &[("char", "_pad0[8]"), ("int", verts), ("int", "flag"), ("CustomData", vdata)]);
+        Sdna::parse(&dna.bytes()).unwrap()
     }
 
     #[repr(C)]

@@ -262,6 +262,34 @@ impl Sdna {
             names: names.iter().map(|n| n.to_string()).collect(),
         })
     }
+
+    /// Offset of the first of `names` in `strukt`, checked to be `size` bytes of plain data (a
+    /// number or an array of numbers, not a pointer).
+    pub fn number(&self, strukt: &str, names: &[&str], size: usize) -> Result<usize, DnaError> {
+        let f = self.field(strukt, names)?;
+        if f.size != size || f.pointer {
+            return Err(DnaError::Inconsistent(format!("{strukt}.{} is not a {size}-byte number", names[0])));
+        }
+        Ok(f.offset)
+    }
+
+    /// Offset of the first of `names` in `strukt`, checked to be one pointer.
+    pub fn pointer(&self, strukt: &str, names: &[&str]) -> Result<usize, DnaError> {
+        let f = self.field(strukt, names)?;
+        if f.size != POINTER_SIZE || !f.pointer {
+            return Err(DnaError::Inconsistent(format!("{strukt}.{} is not a pointer", names[0])));
+        }
+        Ok(f.offset)
+    }
+
+    /// Offset of the first of `names` in `strukt`, checked to be an embedded `inner` struct.
+    pub fn embedded(&self, strukt: &str, names: &[&str], inner: &str) -> Result<usize, DnaError> {
+        let f = self.field(strukt, names)?;
+        if f.pointer || f.size != self.struct_size(inner)? {
+            return Err(DnaError::Inconsistent(format!("{strukt}.{} is not a {inner}", names[0])));
+        }
+        Ok(f.offset)
+    }
 }
 
 #[cfg(test)]
@@ -357,6 +385,19 @@ mod tests {
             assert_eq!(sdna.field("Outer", &["in"]).unwrap().offset, 8);
             assert_eq!(sdna.field("Outer", &["renamed", "list"]).unwrap(), Field { offset: 24, size: 8, pointer: true });
         }
+    }
+
+    #[test]
+    fn typed_fields_are_checked() {
+        let sdna = Sdna::parse(&sample_dna()).unwrap();
+        assert_eq!(sdna.number("Inner", &["a"], 4), Ok(0));
+        assert_eq!(sdna.number("Outer", &["name"], 6), Ok(0));
+        assert!(matches!(sdna.number("Inner", &["a"], 2), Err(DnaError::Inconsistent(_))));
+        assert!(matches!(sdna.number("Inner", &["p"], 8), Err(DnaError::Inconsistent(_))));
+        assert_eq!(sdna.pointer("Outer", &["list"]), Ok(24));
+        assert!(matches!(sdna.pointer("Inner", &["a"]), Err(DnaError::Inconsistent(_))));
+        assert_eq!(sdna.embedded("Outer", &["in"], "Inner"), Ok(8));
+        assert!(matches!(sdna.embedded("Outer", &["list"], "Inner"), Err(DnaError::Inconsistent(_))));
     }
 
     #[test]

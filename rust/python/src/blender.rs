@@ -27,14 +27,7 @@ pub struct PyMeshMemory(MeshLayout);
 impl PyMeshMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| {
-            let blend_file = blend_file.cast::<PyBytes>().map_err(|_| {
-                let ty = blend_file.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-                PyTypeError::new_err(format!("blend_file must be the bytes of a .blend file, got {ty}"))
-            })?;
-            let sdna = Sdna::from_blend_file(blend_file.as_bytes()).map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))?;
-            MeshLayout::new(&sdna).map(Self).map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
-        })
+        guard(|| MeshLayout::new(&sdna_of(blend_file)?).map(Self).map_err(|e| PyValueError::new_err(format!("blend_file: {e}"))))
     }
 
     /// ``(offsets, groups, weights)`` (``uint32``, ``uint32``, ``float32``): the weights of
@@ -70,6 +63,15 @@ impl PyMeshMemory {
             }
         })
     }
+}
+
+/// The SDNA of `blend_file`, the bytes of a `.blend` file.
+pub(crate) fn sdna_of(blend_file: &Bound<'_, PyAny>) -> PyResult<Sdna> {
+    let bytes = blend_file.cast::<PyBytes>().map_err(|_| {
+        let ty = blend_file.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        PyTypeError::new_err(format!("blend_file must be the bytes of a .blend file, got {ty}"))
+    })?;
+    Sdna::from_blend_file(bytes.as_bytes()).map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
 }
 
 fn groups_arg<'py>(

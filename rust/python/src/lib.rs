@@ -9,6 +9,7 @@
 #![allow(clippy::wrong_self_convention)]
 
 mod args;
+mod armature;
 mod arrays;
 mod blender;
 mod blending;
@@ -72,6 +73,7 @@ fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     dual_quat::register(m)?;
     blending::register(m)?;
     blender::register(m)?;
+    armature::register(m)?;
     skinning::register(m)?;
     job::register(m)?;
     rigs::register(m)?;

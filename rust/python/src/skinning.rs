@@ -62,28 +62,31 @@ impl PyInfluences {
     ///
     /// ``self`` holds the vertex-group influences (every group mapped to a deforming bone, zero
     /// weights included, in stored order). ``positions`` ``(V, 3)`` float32 are the coordinates
-    /// reaching the modifier, taken to armature space by ``premat``.
+    /// reaching the modifier, taken to armature space by ``premat``. A vertex uses its groups
+    /// (with ``use_vertex_groups`` and at least one group), else every envelope that reaches it
+    /// (with ``use_envelopes``). The result's bone indices run over the expanded bone list: the
+    /// ``B`` bones, then for each B-Bone in order its ``segments + 1`` joints.
     ///
-    /// - ``envelopes``: ``(B, 11)`` float32, one row per bone in Blender's pose-bone order: head
-    ///   xyz, tail xyz (``Bone.head_local``, ``tail_local``), head radius, tail radius, envelope
-    ///   distance, envelope weight, and 1 where the bone multiplies its vertex group by the
-    ///   envelope. A vertex uses its groups (with ``use_vertex_groups`` and at least one group),
-    ///   else every envelope that reaches it (with ``use_envelopes``).
-    /// - ``bbone_segments``: ``(B,)`` integers, the segment count of each bone (0 or 1 for
-    ///   ordinary bones), with ``rest`` ``(B, 4, 4)`` rest matrices and ``lengths`` ``(B,)`` bone
-    ///   lengths. The result's bone indices then run over an expanded list: the ``B`` bones, then
-    ///   for each B-Bone in order its ``segments + 1`` joints (see ``bbone_segment_matrices``).
+    /// - ``pose``: a :class:`PoseData` of the same ``B`` bones (``_PoseMemory.read``): the
+    ///   envelopes, B-Bones and their mappings (Straight or Curved, as Blender's) from it.
+    /// - Or arrays: ``envelopes`` ``(B, 11)`` float32, one row per bone in Blender's pose-bone
+    ///   order: head xyz, tail xyz (``Bone.head_local``, ``tail_local``), head radius, tail
+    ///   radius, envelope distance, envelope weight, and 1 where the bone multiplies its vertex
+    ///   group by the envelope; ``bbone_segments`` ``(B,)`` integers, the segment count of each
+    ///   bone (0 or 1 for ordinary bones), with ``rest`` ``(B, 4, 4)`` rest matrices and
+    ///   ``lengths`` ``(B,)`` bone lengths (see ``bbone_segment_matrices`` for the joints).
     ///   Segments are found with Blender's Straight mapping, except for the bones in
     ///   ``bbone_mapping``: ``{bone index: (index (V,) int32, blend (V,) float32)}`` computed
-    ///   elsewhere (``PoseBone.bbone_segment_index`` for the Curved mapping); a negative index
-    ///   falls back to the Straight mapping for that vertex.
-    #[pyo3(signature = (positions, premat = None, *, envelopes = None, use_vertex_groups = None,
+    ///   elsewhere (``PoseBone.bbone_segment_index``); a negative index falls back to the
+    ///   Straight mapping for that vertex.
+    #[pyo3(signature = (positions, premat = None, *, pose = None, envelopes = None, use_vertex_groups = None,
         use_envelopes = None, bbone_segments = None, rest = None, lengths = None, bbone_mapping = None))]
     #[allow(clippy::too_many_arguments)]
     fn effective(
         &self,
         positions: &Bound<'_, PyAny>,
         premat: Option<&Bound<'_, PyAny>>,
+        pose: Option<&Bound<'_, PyAny>>,
         envelopes: Option<&Bound<'_, PyAny>>,
         use_vertex_groups: Option<&Bound<'_, PyAny>>,
         use_envelopes: Option<&Bound<'_, PyAny>>,
@@ -93,79 +96,8 @@ impl PyInfluences {
         bbone_mapping: Option<&Bound<'_, pyo3::types::PyDict>>,
     ) -> PyResult<Self> {
         guard(|| {
-            let py = positions.py();
-            let use_vertex_groups = args::or(use_vertex_groups, true, |o| args::boolean(o, "use_vertex_groups"))?;
-            let use_envelopes = args::or(use_envelopes, false, |o| args::boolean(o, "use_envelopes"))?;
-            let v = self.0.vertex_count();
-            let b = self.0.bone_count();
-            let mut mappings: Vec<(usize, Vec<i32>, Vec<f32>)> = Vec::new();
-            if let Some(d) = bbone_mapping {
-                for (key, value) in d.iter() {
-                    let bone = args::int(&key, "bbone_mapping key", 0, u32::MAX as i64)? as usize;
-                    let (idx, blend): (Bound<'_, PyAny>, Bound<'_, PyAny>) = value
-                        .extract()
-                        .map_err(|_| PyTypeError::new_err("bbone_mapping values must be (index, blend) pairs of arrays"))?;
-                    let idx = arrays::readonly::<i32>(&idx, "bbone_mapping index", &[Some(v)], &["V"])?.as_slice()?.to_vec();
-                    let blend = arrays::readonly::<f32>(&blend, "bbone_mapping blend", &[Some(v)], &["V"])?.as_slice()?.to_vec();
-                    if bone >= b {
-                        return Err(PyValueError::new_err(format!("bbone_mapping has bone {bone}, but there are {b} bones")));
-                    }
-                    mappings.push((bone, idx, blend));
-                }
-            }
-            let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
-            let envelopes = match envelopes {
-                Some(e) if !e.is_none() => {
-                    let env = arrays::readonly::<f32>(e, "envelopes", &[Some(b), Some(11)], &["B"])?;
-                    let data = env.as_slice()?;
-                    arrays::check_finite("envelopes", data)?;
-                    Some(data.chunks_exact(11).map(envelope_row).collect::<Vec<_>>())
-                }
-                _ => None,
-            };
-            let mut expanded = b;
-            let bbones: Vec<Option<dqskin_core::BBone>> = match bbone_segments {
-                Some(seg) if !seg.is_none() => {
-                    let segments = arrays::indices(seg, "bbone_segments")?;
-                    if segments.len() != b {
-                        return Err(PyValueError::new_err(format!("bbone_segments must have {b} entries, got {}", segments.len())));
-                    }
-                    let rest = rest.ok_or_else(|| PyValueError::new_err("rest is required with bbone_segments"))?;
-                    let rest = matrices(rest, "rest", Some(b))?;
-                    let lengths = lengths.ok_or_else(|| PyValueError::new_err("lengths is required with bbone_segments"))?;
-                    let (lengths, _) = arrays::small(lengths, "lengths", &[Some(b)], &["B"])?;
-                    let mut out = Vec::with_capacity(b);
-                    for (i, &n) in segments.iter().enumerate() {
-                        if n > 1 {
-                            out.push(Some(dqskin_core::BBone {
-                                first: expanded as u32,
-                                segments: n,
-                                inverse_rest: rest[i].inverse(),
-                                length: lengths[i],
-                                mapped: mappings
-                                    .iter()
-                                    .find(|m| m.0 == i)
-                                    .map(|m| (m.1.as_slice(), m.2.as_slice())),
-                            }));
-                            expanded += n as usize + 1;
-                        } else {
-                            out.push(None);
-                        }
-                    }
-                    out
-                }
-                _ => Vec::new(),
-            };
-            let premat = space(premat, "premat")?;
-            let what = dqskin_core::Effective {
-                envelopes: envelopes.as_deref(),
-                use_vertex_groups,
-                use_envelopes,
-                bbones: &bbones,
-                expanded_bone_count: expanded,
-            };
-            let points = as_points(pos.as_slice()?);
-            py.detach(|| self.0.effective(points, premat, &what)).map(Self).map_err(skin_error)
+            let a = crate::armature::EffectiveArgs { positions, premat, pose, envelopes, use_vertex_groups, use_envelopes, bbone_segments, rest, lengths, bbone_mapping };
+            crate::armature::effective(&self.0, a)
         })
     }
 
@@ -220,18 +152,6 @@ impl PyInfluences {
             self.0.len(),
             self.0.max_per_vertex()
         )
-    }
-}
-
-fn envelope_row(r: &[f32]) -> dqskin_core::Envelope {
-    dqskin_core::Envelope {
-        head: dqskin_core::glam::Vec3::new(r[0], r[1], r[2]),
-        tail: dqskin_core::glam::Vec3::new(r[3], r[4], r[5]),
-        head_radius: r[6],
-        tail_radius: r[7],
-        distance: r[8],
-        weight: r[9],
-        multiply_groups: r[10] != 0.0,
     }
 }
 

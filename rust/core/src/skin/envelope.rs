@@ -8,7 +8,7 @@
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
-use super::{Influences, SkinError};
+use super::{BBone, Influence, Influences, SkinError};
 
 /// One bone's envelope, in armature space at rest (`Bone.head_local`, `Bone.tail_local`,
 /// `head_radius`, `tail_radius`, `envelope_distance`, `envelope_weight`,
@@ -56,33 +56,6 @@ pub fn distance_factor(co: Vec3, head: Vec3, tail: Vec3, head_radius: f32, tail_
     1.0 - d * d / (distance * distance)
 }
 
-/// A B-Bone for [`Influences::effective`]: its segment joints are bones `first ..= first +
-/// segments` of the expanded bone list, and its rest matrix's inverse takes armature-space points
-/// into the bone's space, whose Y axis runs from head (0) to tail (`length`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BBone<'a> {
-    pub first: u32,
-    pub segments: u32,
-    pub inverse_rest: Mat4,
-    pub length: f32,
-    /// Per-vertex `(index, blend)` computed elsewhere (Blender's Curved mapping, which needs
-    /// its runtime data), used where the index is not negative; the straight mapping otherwise.
-    pub mapped: Option<(&'a [i32], &'a [f32])>,
-}
-
-impl BBone<'_> {
-    /// Blender's straight mapping (`find_bbone_segment_index_straight`): the first segment joint
-    /// affecting `co` (armature space) and the blend toward the next one.
-    pub fn segment(&self, co: Vec3) -> (u32, f32) {
-        let y = self.inverse_rest.transform_point3(co).y;
-        let head_tail = (y / self.length).clamp(0.0, 1.0);
-        let pre = head_tail * self.segments as f32;
-        let index = (pre.floor() as i64).clamp(0, i64::from(self.segments) - 1);
-        let blend = (pre - index as f32).clamp(0.0, 1.0);
-        (index as u32, blend)
-    }
-}
-
 /// What besides vertex groups decides this frame's influences.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Effective<'a> {
@@ -94,31 +67,6 @@ pub struct Effective<'a> {
     pub bbones: &'a [Option<BBone<'a>>],
     /// Size of the expanded bone list (bones, then every B-Bone's segment joints).
     pub expanded_bone_count: usize,
-}
-
-/// The deform and rest matrices of a B-Bone's `N + 1` segment joints for [`Pose::new`], from
-/// the bone's channel matrix (`matrix_channel`), rest matrix (`matrix_local`) and the joints'
-/// pose and rest matrices in bone space (`PoseBone.bbone_segment_matrix(i, rest=False/True)`),
-/// as Blender's `BKE_pchan_bbone_segments_cache_compute` builds them:
-/// `deform_a = channel·rest·P_a·R_a⁻¹·rest⁻¹`, basis `normalize(rest·R_a)`.
-///
-/// [`Pose::new`]: super::Pose::new
-pub fn bbone_segment_matrices(channel: Mat4, rest: Mat4, pose: &[Mat4], rest_joints: &[Mat4]) -> Vec<(Mat4, Mat4)> {
-    let rest_inverse = rest.inverse();
-    pose.iter()
-        .zip(rest_joints)
-        .map(|(p, r)| {
-            let deform = channel * rest * *p * r.inverse() * rest_inverse;
-            let mut basis = rest * *r;
-            for axis in [&mut basis.x_axis, &mut basis.y_axis, &mut basis.z_axis] {
-                let len = axis.truncate().length();
-                if len != 0.0 {
-                    *axis /= len;
-                }
-            }
-            (deform, basis)
-        })
-        .collect()
 }
 
 impl Influences {
@@ -158,97 +106,89 @@ impl Influences {
         if !what.bbones.is_empty() && what.bbones.len() != bones {
             return Err(SkinError::LengthMismatch { what: "B-Bones (one entry per bone)", expected: bones, got: what.bbones.len() });
         }
-        for (b, bb) in what.bbones.iter().enumerate() {
-            if let Some(bb) = bb {
-                let last = bb.first as usize + bb.segments as usize;
-                let mapped_ok = bb.mapped.is_none_or(|(i, f)| i.len() == n && f.len() == n);
-                if bb.segments < 2
-                    || last >= what.expanded_bone_count
-                    || !(bb.length > 0.0)
-                    || !bb.inverse_rest.is_finite()
-                    || !mapped_ok
-                {
-                    return Err(SkinError::InvalidInfluences(format!(
-                        "B-Bone {b}: needs at least 2 segments, a positive length, a finite rest matrix, joints inside the {} expanded bones and one mapped segment per vertex",
-                        what.expanded_bone_count
-                    )));
-                }
-            }
-        }
         if what.expanded_bone_count < bones {
             return Err(SkinError::InvalidInfluences("the expanded bone list is shorter than the bone list".into()));
+        }
+        for (b, bb) in what.bbones.iter().enumerate() {
+            if let Some(problem) = bb.as_ref().and_then(|bb| bb.problem(n, what.expanded_bone_count)) {
+                return Err(SkinError::InvalidInfluences(format!("B-Bone {b}: {problem}")));
+            }
         }
         if let Some(m) = premat {
             if let Some(problem) = super::pose::affine_problem(&m) {
                 return Err(SkinError::InvalidSpaceMatrix { what: "premat", problem });
             }
         }
-        let multiply = what.envelopes.is_some_and(|e| e.iter().any(|e| e.multiply_groups));
-        let lists: Vec<Vec<(u32, f32)>> = crate::pool::run(|| {
-            (0..n)
+        // Vertices in chunks, each writing its pairs into flat arrays (no list per vertex), then
+        // joined in order.
+        const CHUNK: usize = 2048;
+        let parts: Vec<(Vec<u32>, Vec<Influence>)> = crate::pool::run(|| {
+            (0..n.div_ceil(CHUNK))
                 .into_par_iter()
-                .map(|v| {
-                    let co = || {
-                        let p = Vec3::from_array(positions[v]);
-                        premat.map_or(p, |m| m.transform_point3(p))
-                    };
-                    let own = self.of_vertex(v);
-                    let mut list: Vec<(u32, f32)> = if what.use_vertex_groups && !own.is_empty() {
-                        match (multiply, what.envelopes) {
-                            (true, Some(envelopes)) => {
-                                let co = co();
-                                own.iter()
-                                    .map(|i| {
-                                        let e = &envelopes[i.bone as usize];
-                                        let f = if e.multiply_groups {
-                                            distance_factor(co, e.head, e.tail, e.head_radius, e.tail_radius, e.distance)
-                                        } else {
-                                            1.0
-                                        };
-                                        (i.bone, i.weight * f)
-                                    })
-                                    .collect()
-                            }
-                            _ => own.iter().map(|i| (i.bone, i.weight)).collect(),
-                        }
-                    } else if let (true, Some(envelopes)) = (what.use_envelopes, what.envelopes) {
-                        let co = co();
-                        envelopes
-                            .iter()
-                            .enumerate()
-                            .filter_map(|(b, e)| {
-                                let f = distance_factor(co, e.head, e.tail, e.head_radius, e.tail_radius, e.distance);
-                                let w = f * e.weight;
-                                (f > 0.0 && w > 0.0).then_some((b as u32, w))
-                            })
-                            .collect()
-                    } else {
-                        Vec::new()
-                    };
-                    if !what.bbones.is_empty() && list.iter().any(|(b, _)| what.bbones[*b as usize].is_some()) {
-                        let co = co();
-                        list = list
-                            .into_iter()
-                            .flat_map(|(b, w)| match what.bbones[b as usize] {
-                                Some(bb) => {
-                                    let (index, blend) = match bb.mapped {
-                                        Some((i, f)) if i[v] >= 0 => {
-                                            ((i[v] as u32).min(bb.segments - 1), f[v].clamp(0.0, 1.0))
-                                        }
-                                        _ => bb.segment(co),
-                                    };
-                                    let j = bb.first + index;
-                                    vec![(j, w * (1.0 - blend)), (j + 1, w * blend)]
-                                }
-                                None => vec![(b, w)],
-                            })
-                            .collect();
+                .map(|c| {
+                    let range = c * CHUNK..n.min((c + 1) * CHUNK);
+                    let mut counts = Vec::with_capacity(range.len());
+                    let mut pairs = Vec::with_capacity(range.len() * 2 * self.max_per_vertex().max(1));
+                    for v in range {
+                        let before = pairs.len();
+                        self.effective_vertex(v, positions[v], premat, what, &mut pairs);
+                        counts.push((pairs.len() - before) as u32);
                     }
-                    list
+                    (counts, pairs)
                 })
                 .collect()
         });
-        Influences::from_lists(&lists, what.expanded_bone_count)
+        let total: usize = parts.iter().map(|p| p.1.len()).sum();
+        if u32::try_from(total).is_err() {
+            return Err(SkinError::InvalidInfluences("more than 2^32-1 influences".into()));
+        }
+        let mut offsets = Vec::with_capacity(n + 1);
+        let (mut bones_out, mut weights) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        offsets.push(0u32);
+        for (counts, pairs) in &parts {
+            for &k in counts {
+                offsets.push(offsets.last().unwrap() + k);
+            }
+            bones_out.extend(pairs.iter().map(|p| p.bone));
+            weights.extend(pairs.iter().map(|p| p.weight));
+        }
+        Influences::from_csr(&offsets, &bones_out, &weights, what.expanded_bone_count)
+    }
+
+    /// Appends vertex `v`'s pairs for [`Self::effective`] (inputs already checked).
+    fn effective_vertex(&self, v: usize, position: [f32; 3], premat: Option<Mat4>, what: &Effective<'_>, out: &mut Vec<Influence>) {
+        let co = {
+            let p = Vec3::from_array(position);
+            premat.map_or(p, |m| m.transform_point3(p))
+        };
+        // Each influence of a B-Bone becomes two, on the joints around the vertex.
+        let mut push = |bone: u32, weight: f32| match what.bbones.get(bone as usize).copied().flatten() {
+            Some(bb) => {
+                let (index, blend) = bb.segment(v, co);
+                let j = bb.first + index;
+                out.push(Influence { bone: j, weight: weight * (1.0 - blend) });
+                out.push(Influence { bone: j + 1, weight: weight * blend });
+            }
+            None => out.push(Influence { bone, weight }),
+        };
+        let own = self.of_vertex(v);
+        if what.use_vertex_groups && !own.is_empty() {
+            for i in own {
+                let factor = match what.envelopes.map(|e| &e[i.bone as usize]) {
+                    Some(e) if e.multiply_groups => distance_factor(co, e.head, e.tail, e.head_radius, e.tail_radius, e.distance),
+                    _ => 1.0,
+                };
+                push(i.bone, i.weight * factor);
+            }
+        } else if let (true, Some(envelopes)) = (what.use_envelopes, what.envelopes) {
+            for (b, e) in envelopes.iter().enumerate() {
+                let f = distance_factor(co, e.head, e.tail, e.head_radius, e.tail_radius, e.distance);
+                let w = f * e.weight;
+                if f > 0.0 && w > 0.0 {
+                    push(b as u32, w);
+                }
+            }
+        }
     }
 
     /// [`Self::effective`] with envelopes and no B-Bones.
@@ -347,51 +287,5 @@ mod tests {
         let mut nan = e;
         nan[0].distance = f32::NAN;
         assert!(groups.with_envelopes(&[[0.0; 3]], None, &nan, true, true).is_err());
-    }
-}
-
-#[cfg(test)]
-mod bbone_tests {
-    use super::*;
-
-    #[test]
-    fn straight_mapping_follows_blender() {
-        let bb = BBone { first: 5, segments: 4, inverse_rest: Mat4::IDENTITY, length: 2.0, mapped: None };
-        assert_eq!(bb.segment(Vec3::new(0.0, -1.0, 0.0)), (0, 0.0));
-        assert_eq!(bb.segment(Vec3::new(0.0, 0.75, 0.0)), (1, 0.5));
-        assert_eq!(bb.segment(Vec3::new(0.3, 2.0, 9.0)), (3, 1.0));
-        assert_eq!(bb.segment(Vec3::new(0.0, 5.0, 0.0)), (3, 1.0));
-    }
-
-    #[test]
-    fn b_bone_influences_split_over_two_joints() {
-        let groups = Influences::from_lists(&[vec![(0, 0.6), (1, 0.4)]], 2).unwrap();
-        let bbones = [None, Some(BBone { first: 2, segments: 3, inverse_rest: Mat4::IDENTITY, length: 3.0, mapped: None })];
-        let what = Effective { envelopes: None, use_vertex_groups: true, use_envelopes: false, bbones: &bbones, expanded_bone_count: 6 };
-        let e = groups.effective(&[[0.0, 1.25, 0.0]], None, &what).unwrap();
-        let got: Vec<(u32, f32)> = e.of_vertex(0).iter().map(|i| (i.bone, i.weight)).collect();
-        assert_eq!(got, vec![(0, 0.6), (3, 0.4 * 0.75), (4, 0.4 * 0.25)]);
-        assert_eq!(e.bone_count(), 6);
-        let bad = [None, Some(BBone { first: 4, segments: 3, inverse_rest: Mat4::IDENTITY, length: 3.0, mapped: None })];
-        let what = Effective { bbones: &bad, ..what };
-        assert!(groups.effective(&[[0.0; 3]], None, &what).is_err());
-        // A mapping computed elsewhere wins where given.
-        let (index, blend) = ([2i32], [0.5f32]);
-        let mapped = [None, Some(BBone { first: 2, segments: 3, inverse_rest: Mat4::IDENTITY, length: 3.0, mapped: Some((&index, &blend)) })];
-        let what = Effective { bbones: &mapped, ..what };
-        let e = groups.effective(&[[0.0, 1.25, 0.0]], None, &what).unwrap();
-        let got: Vec<(u32, f32)> = e.of_vertex(0).iter().map(|i| (i.bone, i.weight)).collect();
-        assert_eq!(got, vec![(0, 0.6), (4, 0.4 * 0.5), (5, 0.4 * 0.5)]);
-    }
-
-    #[test]
-    fn segment_matrices_match_blenders_formula() {
-        let channel = Mat4::from_rotation_z(0.4);
-        let rest = Mat4::from_translation(Vec3::new(0.0, 1.0, 0.0)) * Mat4::from_rotation_x(0.3);
-        let pose = [Mat4::IDENTITY, Mat4::from_translation(Vec3::Y) * Mat4::from_rotation_z(0.2)];
-        let rest_joints = [Mat4::IDENTITY, Mat4::from_translation(Vec3::Y) * Mat4::from_scale(Vec3::splat(1.0))];
-        let m = bbone_segment_matrices(channel, rest, &pose, &rest_joints);
-        assert!(m[0].0.abs_diff_eq(channel, 1e-6));
-        assert!(m[1].1.abs_diff_eq(rest * rest_joints[1], 1e-6));
     }
 }

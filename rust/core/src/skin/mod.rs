@@ -18,11 +18,13 @@
 //!    parts (identity for rigid bones); then `co += a·(co' − co)`;
 //! 5. `p' = postmat·co`.
 
+mod armature;
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 mod batch;
+mod bbone;
 mod centers;
 mod envelope;
 mod groups;
@@ -32,8 +34,10 @@ mod kernels;
 mod neon;
 mod pose;
 
+pub use armature::{ArmaturePose, BBoneCache, PoseChannel};
+pub use bbone::{bbone_joint_starts, bbone_segment_matrices, bbones_from_rest, bsp_depth, curved_segment, BBone, Mapping, SegmentBoundary, MAX_BBONE_SEGMENTS};
 pub use centers::{centers_of_rotation, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA};
-pub use envelope::{bbone_segment_matrices, distance_factor, BBone, Effective, Envelope};
+pub use envelope::{distance_factor, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
 pub use influences::{Influence, Influences, MAX_INFLUENCES_PER_VERTEX};
 pub use pose::{affine_problem, Pose};

@@ -1,0 +1,325 @@
+//! An armature's pose as Blender's Armature modifier deforms with it: every pose channel's
+//! channel matrix, its bone's rest data (deform flag, envelope, B-Bone settings) and, for bones
+//! that deform as B-Bones, Blender's own runtime B-Bone cache. From that, everything skinning
+//! needs for a frame: the expanded deform and rest matrices (bones, then each B-Bone's joints),
+//! the envelopes, the B-Bones' segment mappings, and signatures that tell what changed.
+
+use glam::Mat4;
+
+use super::bbone::{bbone_joint_starts, joint_rest, BBone, Mapping, SegmentBoundary};
+use super::{Effective, Envelope, Influences, SkinError};
+
+/// Blender's runtime B-Bone cache of one pose channel (`bPoseChannel_Runtime`), for a bone of
+/// `N` segments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BBoneCache {
+    /// The inverse rest matrix (`bbone_deform_mats[0]`), which the Straight mapping uses.
+    pub inverse_rest: Mat4,
+    /// The joints' deform matrices in armature space (`bbone_deform_mats[1..]`, `N + 1`).
+    pub deform: Vec<Mat4>,
+    /// The joints' rest matrices in bone space (`bbone_rest_mats`, `N + 1`).
+    pub rest_joints: Vec<Mat4>,
+    /// The Curved mapping's boundary planes (`bbone_segment_boundaries`, `N + 1`); empty for
+    /// the Straight mapping (Blender keeps them only for the Curved one).
+    pub boundaries: Vec<SegmentBoundary>,
+    /// `bbone_arc_length_reciprocal` (used with `boundaries`).
+    pub arc_length_reciprocal: f32,
+}
+
+/// One pose channel with its bone. For a bone that does not deform only `name` and `deform`
+/// matter (nothing deforms with it); [`PoseChannel::not_deforming`] leaves the rest at rest.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseChannel {
+    pub name: String,
+    /// The bone deforms (`BONE_NO_DEFORM` unset).
+    pub deform: bool,
+    /// Posed times inverse rest, armature space (`chan_mat`, `PoseBone.matrix_channel`).
+    pub channel: Mat4,
+    /// Rest matrix in armature space (`arm_mat`, `Bone.matrix_local`).
+    pub rest: Mat4,
+    pub length: f32,
+    /// The bone's envelope (rest head and tail, radii, distance, weight, multiply flag).
+    pub envelope: Envelope,
+    /// `Bone.segments` and whether its mapping mode is Curved, as set (the cache may lag).
+    pub segments: u32,
+    pub curved: bool,
+    /// The B-Bone cache, exactly when Blender deforms with it: more than one segment and a cache
+    /// computed for that many.
+    pub bbone: Option<BBoneCache>,
+}
+
+impl PoseChannel {
+    /// A channel whose bone does not deform: identity matrices, no envelope, no B-Bone.
+    pub fn not_deforming(name: String) -> Self {
+        Self {
+            name,
+            deform: false,
+            channel: Mat4::IDENTITY,
+            rest: Mat4::IDENTITY,
+            length: 0.0,
+            envelope: Envelope { head: glam::Vec3::ZERO, tail: glam::Vec3::ZERO, head_radius: 0.0, tail_radius: 0.0, distance: 0.0, weight: 0.0, multiply_groups: false },
+            segments: 1,
+            curved: false,
+            bbone: None,
+        }
+    }
+}
+
+/// The pose of an armature's channels, in `pose.bones` order; its *bones* are the deforming
+/// channels, in that order.
+#[derive(Clone, Debug)]
+pub struct ArmaturePose {
+    channels: Vec<PoseChannel>,
+    bones: Vec<usize>,
+    /// First joint of each bone's B-Bone in the expanded bone list.
+    starts: Vec<Option<u32>>,
+    expanded: usize,
+    binding_signature: u64,
+    pose_signature: u64,
+}
+
+impl ArmaturePose {
+    /// Checks that every matrix and envelope is finite and every B-Bone cache has one entry per
+    /// joint (`segments + 1`, the deform matrices and the Curved boundaries alike).
+    pub fn new(channels: Vec<PoseChannel>) -> Result<Self, SkinError> {
+        for (i, c) in channels.iter().enumerate() {
+            let bad = |problem: String| Err(SkinError::InvalidInfluences(format!("pose channel {i} ({}): {problem}", c.name)));
+            let e = &c.envelope;
+            let finite = c.channel.is_finite()
+                && c.rest.is_finite()
+                && c.length.is_finite()
+                && e.head.is_finite()
+                && e.tail.is_finite()
+                && [e.head_radius, e.tail_radius, e.distance, e.weight].iter().all(|v| v.is_finite());
+            if !finite {
+                return bad("a matrix, length or envelope value is NaN or infinite".into());
+            }
+            if let Some(b) = &c.bbone {
+                let joints = c.segments as usize + 1;
+                if c.segments < 2 || b.deform.len() != joints || b.rest_joints.len() != joints {
+                    return bad(format!("a B-Bone of {} segments needs {joints} joints, got {} and {}", c.segments, b.deform.len(), b.rest_joints.len()));
+                }
+                if !(b.boundaries.is_empty() || b.boundaries.len() == joints) {
+                    return bad(format!("the Curved mapping needs {joints} boundaries, got {}", b.boundaries.len()));
+                }
+                let all_finite = b.inverse_rest.is_finite()
+                    && b.arc_length_reciprocal.is_finite()
+                    && b.deform.iter().chain(&b.rest_joints).all(Mat4::is_finite);
+                if !all_finite {
+                    return bad("a B-Bone matrix is NaN or infinite".into());
+                }
+            }
+        }
+        let bones: Vec<usize> = channels.iter().enumerate().filter(|(_, c)| c.deform).map(|(i, _)| i).collect();
+        let segments: Vec<u32> = bones.iter().map(|&i| channels[i].bbone.as_ref().map_or(1, |_| channels[i].segments)).collect();
+        let (starts, expanded) = bbone_joint_starts(&segments);
+        let mut pose = Self { channels, bones, starts, expanded, binding_signature: 0, pose_signature: 0 };
+        pose.binding_signature = pose.binding_digest();
+        pose.pose_signature = pose.pose_digest();
+        Ok(pose)
+    }
+
+    pub fn channels(&self) -> &[PoseChannel] {
+        &self.channels
+    }
+
+    /// The deforming channels' indices in `pose.bones`.
+    pub fn bone_indices(&self) -> &[usize] {
+        &self.bones
+    }
+
+    /// The deforming channels, in order: the bones influences refer to.
+    pub fn bones(&self) -> impl ExactSizeIterator<Item = &PoseChannel> + '_ {
+        self.bones.iter().map(|&i| &self.channels[i])
+    }
+
+    pub fn bone_count(&self) -> usize {
+        self.bones.len()
+    }
+
+    /// Length of the expanded bone list: the bones, then every B-Bone's joints.
+    pub fn expanded_bone_count(&self) -> usize {
+        self.expanded
+    }
+
+    /// Each bone's segment count as it deforms: `N` for a B-Bone, 1 otherwise.
+    pub fn segments(&self) -> Vec<u32> {
+        self.bones().map(|c| if c.bbone.is_some() { c.segments } else { 1 }).collect()
+    }
+
+    /// The expanded deform matrices: each bone's channel matrix, then each B-Bone's joints'
+    /// deform matrices (Blender's own, from its cache).
+    pub fn deform_matrices(&self) -> Vec<Mat4> {
+        let mut out: Vec<Mat4> = self.bones().map(|c| c.channel).collect();
+        out.extend(self.bones().filter_map(|c| c.bbone.as_ref()).flat_map(|b| b.deform.iter().copied()));
+        out
+    }
+
+    /// The expanded rest matrices: each bone's rest matrix, then each B-Bone joint's orthonormal
+    /// rest basis `normalize(rest·R)`, as Blender computes the joints' dual quaternions.
+    pub fn rest_matrices(&self) -> Vec<Mat4> {
+        let mut out: Vec<Mat4> = self.bones().map(|c| c.rest).collect();
+        for c in self.bones() {
+            if let Some(b) = &c.bbone {
+                out.extend(b.rest_joints.iter().map(|r| joint_rest(c.rest, *r)));
+            }
+        }
+        out
+    }
+
+    /// The bones' envelopes.
+    pub fn envelopes(&self) -> Vec<Envelope> {
+        self.bones().map(|c| c.envelope).collect()
+    }
+
+    /// The bones' B-Bones (`None` for the others) with Blender's mapping: Curved where the cache
+    /// has boundaries, Straight otherwise.
+    pub fn bbones(&self) -> Vec<Option<BBone<'_>>> {
+        self.bones()
+            .zip(&self.starts)
+            .map(|(c, start)| {
+                let (b, first) = (c.bbone.as_ref()?, (*start)?);
+                let mapping = if b.boundaries.is_empty() {
+                    Mapping::Straight
+                } else {
+                    Mapping::Curved { boundaries: &b.boundaries, arc_length_reciprocal: b.arc_length_reciprocal }
+                };
+                Some(BBone { first, segments: c.segments, inverse_rest: b.inverse_rest, length: c.length, mapping })
+            })
+            .collect()
+    }
+
+    /// This frame's influences for vertex-group influences `groups` over this pose's bones
+    /// (see [`Influences::effective`]).
+    pub fn effective(
+        &self,
+        groups: &Influences,
+        positions: &[[f32; 3]],
+        premat: Option<Mat4>,
+        use_vertex_groups: bool,
+        use_envelopes: bool,
+    ) -> Result<Influences, SkinError> {
+        if groups.bone_count() != self.bone_count() {
+            return Err(SkinError::LengthMismatch {
+                what: "pose bones (the deforming bones the influences refer to)",
+                expected: groups.bone_count(),
+                got: self.bone_count(),
+            });
+        }
+        let envelopes = self.envelopes();
+        let bbones = self.bbones();
+        let what = Effective {
+            envelopes: Some(&envelopes),
+            use_vertex_groups,
+            use_envelopes,
+            bbones: &bbones,
+            expanded_bone_count: self.expanded,
+        };
+        groups.effective(positions, premat, &what)
+    }
+
+    /// A 64-bit digest of everything the influences depend on besides the vertices: the
+    /// channels' names and order and deform flags, and the bones' rest matrices, lengths,
+    /// envelopes, B-Bone settings and rest shapes (cache included). Equal digests: the same
+    /// influences.
+    pub fn binding_signature(&self) -> u64 {
+        self.binding_signature
+    }
+
+    /// A 64-bit digest of the pose: the expanded deform matrices (equal digests: the same
+    /// deformation for the same binding).
+    pub fn pose_signature(&self) -> u64 {
+        self.pose_signature
+    }
+
+    fn binding_digest(&self) -> u64 {
+        let mut h = Digest::default();
+        h.word(self.channels.len() as u64);
+        for c in &self.channels {
+            h.bytes(c.name.as_bytes());
+            h.word(u64::from(c.deform));
+            if !c.deform {
+                continue;
+            }
+            h.matrix(&c.rest);
+            let e = &c.envelope;
+            h.floats(&[c.length, e.head_radius, e.tail_radius, e.distance, e.weight]);
+            h.floats(&e.head.to_array());
+            h.floats(&e.tail.to_array());
+            h.word(u64::from(e.multiply_groups) | u64::from(c.curved) << 1 | u64::from(c.segments) << 2);
+            match &c.bbone {
+                None => h.word(0),
+                Some(b) => {
+                    h.word(b.rest_joints.len() as u64);
+                    h.matrix(&b.inverse_rest);
+                    b.rest_joints.iter().for_each(|m| h.matrix(m));
+                    h.word(b.boundaries.len() as u64);
+                    for s in &b.boundaries {
+                        h.floats(&s.point.to_array());
+                        h.floats(&s.normal.to_array());
+                        h.floats(&[s.offset, s.depth_scale]);
+                    }
+                    h.floats(&[b.arc_length_reciprocal]);
+                }
+            }
+        }
+        h.finish()
+    }
+
+    fn pose_digest(&self) -> u64 {
+        let mut h = Digest::default();
+        for c in self.bones() {
+            h.matrix(&c.channel);
+            if let Some(b) = &c.bbone {
+                b.deform.iter().for_each(|m| h.matrix(m));
+            }
+        }
+        h.finish()
+    }
+}
+
+/// A fast word-by-word digest (FxHash's step with a final mix). Each step is a bijection of the
+/// state for a fixed word and of the word for a fixed state, so changing any single word always
+/// changes the result; unrelated inputs collide with probability about 2⁻⁶⁴.
+#[derive(Default)]
+struct Digest(u64);
+
+impl Digest {
+    const K: u64 = 0x517c_c1b7_2722_0a95;
+
+    fn word(&mut self, w: u64) {
+        self.0 = (self.0.rotate_left(5) ^ w).wrapping_mul(Self::K);
+    }
+
+    fn floats(&mut self, v: &[f32]) {
+        for pair in v.chunks(2) {
+            let hi = pair.get(1).map_or(0, |f| u64::from(f.to_bits()));
+            self.word(u64::from(pair[0].to_bits()) | hi << 32);
+        }
+        self.word(v.len() as u64);
+    }
+
+    fn matrix(&mut self, m: &Mat4) {
+        self.floats(&m.to_cols_array());
+    }
+
+    fn bytes(&mut self, b: &[u8]) {
+        for chunk in b.chunks(8) {
+            let mut w = [0u8; 8];
+            w[..chunk.len()].copy_from_slice(chunk);
+            self.word(u64::from_le_bytes(w));
+        }
+        self.word(b.len() as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        // splitmix64's finalizer, so that nearby inputs give unrelated outputs.
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+}
+
+#[cfg(test)]
+mod tests;

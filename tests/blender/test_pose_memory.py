@@ -1,0 +1,406 @@
+"""B-Bones and envelopes through the pose reader (Blender's memory: channel matrices, bone data,
+the runtime B-Bone cache): what it reads against Blender's Python API, and DQ Skin against the
+Armature modifier on every B-Bone setting, with the memory path (no per-joint or per-vertex
+Python) and with the Python path it falls back to.
+
+Bar: max vertex distance ≤ 1e-5 × the mesh's bounding-box diagonal; the segment mapping equal to
+`PoseBone.bbone_segment_index` to the bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Quaternion, Vector
+
+from characters import rigify_character
+from scenes import armature_chain, armature_modifier, chain_weights, link, tube
+from dqtest import REL_TOL, add_dq_skin, evaluated_positions, reference_copy
+from dqtest import deviation as relative_deviation
+
+LENGTH = 4.0
+
+
+def bbone_rig(segments: int = 6, mapping: str = "STRAIGHT", rings: int = 48):
+    """A tube along Z on a connected chain of 4 bones whose middle two are B-Bones with a curved
+    rest shape, plus two non-deforming bones to serve as custom handles; posed to bend and twist."""
+    arm = armature_chain("Rig", 4, LENGTH)
+    bpy.ops.object.mode_set(mode="EDIT")
+    for name, head in (("HandleStart", (0.6, 0.0, 0.9)), ("HandleEnd", (-0.5, 0.3, 3.1))):
+        b = arm.data.edit_bones.new(name)
+        b.head = head
+        b.tail = (head[0], head[1] + 0.5, head[2])
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for name in ("HandleStart", "HandleEnd"):
+        arm.data.bones[name].use_deform = False
+        arm.pose.bones[name].rotation_mode = "QUATERNION"
+    obj = tube("Tube", rings, 16, LENGTH, 0.4)
+    chain_weights(obj, arm, LENGTH, blend=0.8)
+    mod = armature_modifier(obj, arm)
+    for b in middle(arm.data.bones):
+        b.bbone_segments = segments
+        b.bbone_mapping_mode = mapping
+        b.bbone_curveinx = 0.35
+        b.bbone_curveoutz = -0.25
+    pbs = arm.pose.bones
+    pbs["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 0.6)
+    pbs["Bone2"].rotation_quaternion = Quaternion((0, 1, 0.2), 1.1)
+    pbs["Bone3"].rotation_quaternion = Quaternion((0, 0, 1), 0.8)
+    return obj, arm, mod
+
+
+def middle(collection):
+    return [collection["Bone1"], collection["Bone2"]]
+
+
+def _segments(arm, n):
+    for b in middle(arm.data.bones):
+        b.bbone_segments = n
+
+
+def _ease_rest(arm):
+    for b in middle(arm.data.bones):
+        b.bbone_easein, b.bbone_easeout = 1.8, 0.3
+
+
+def _ease_pose(arm):
+    for pb in middle(arm.pose.bones):
+        pb.bbone_easein, pb.bbone_easeout = 1.4, -0.6
+
+
+def _handles(kind):
+    def apply(arm):
+        bones, pbs = arm.data.bones, arm.pose.bones
+        for b in middle(bones):
+            b.bbone_handle_type_start = b.bbone_handle_type_end = kind
+            b.bbone_custom_handle_start = bones["HandleStart"]
+            b.bbone_custom_handle_end = bones["HandleEnd"]
+        pbs["HandleStart"].location = (0.2, -0.1, 0.3)
+        pbs["HandleStart"].rotation_quaternion = Quaternion((0, 0, 1), 0.7)
+        pbs["HandleEnd"].rotation_quaternion = Quaternion((1, 0, 0), -0.5)
+
+    return apply
+
+
+def _roll(arm):
+    arm.data.bones["Bone1"].bbone_rollin = 0.3
+    for pb in middle(arm.pose.bones):
+        pb.bbone_rollin, pb.bbone_rollout = 0.9, -0.7
+
+
+def _inherit_end_roll(arm):
+    arm.pose.bones["Bone1"].bbone_rollout = 1.1
+    arm.data.bones["Bone2"].use_endroll_as_inroll = True
+
+
+def _scale(arm):
+    pbs = arm.pose.bones
+    pbs["Bone1"].bbone_scalein = (1.4, 1.0, 0.7)
+    pbs["Bone1"].bbone_scaleout = (0.6, 1.3, 1.2)
+    pbs["Bone2"].bbone_scalein = (1.2, 0.8, 1.5)
+
+
+def _ease_scale(arm):
+    _handles("ABSOLUTE")(arm)
+    _scale(arm)
+    bones = arm.data.bones
+    for b in middle(bones):
+        b.use_scale_easing = True
+        b.bbone_handle_use_ease_start = b.bbone_handle_use_ease_end = True
+        b.bbone_handle_use_scale_start = (True, False, True)
+        b.bbone_handle_use_scale_end = (False, True, True)
+    arm.pose.bones["HandleStart"].scale = (1.5, 0.8, 1.2)
+    arm.pose.bones["HandleEnd"].scale = (0.7, 1.6, 0.9)
+
+
+def _curve(arm):
+    for b in middle(arm.data.bones):
+        b.bbone_curveinz, b.bbone_curveoutx = 0.2, -0.3
+    for pb in middle(arm.pose.bones):
+        pb.bbone_curveinx, pb.bbone_curveinz = 0.8, -0.4
+        pb.bbone_curveoutx, pb.bbone_curveoutz = -0.6, 0.5
+
+
+def _scaled_bones(arm):
+    pbs = arm.pose.bones
+    pbs["Bone1"].scale = (1.3, 0.8, 1.1)
+    pbs["Bone2"].scale = (0.7, 1.4, 0.9)
+
+
+CASES = {
+    "segments 2": lambda arm: _segments(arm, 2),
+    "segments 8": lambda arm: _segments(arm, 8),
+    "segments 32": lambda arm: _segments(arm, 32),
+    "ease in and out, rest": _ease_rest,
+    "ease in and out, pose": _ease_pose,
+    "handles auto": _handles("AUTO"),
+    "handles absolute": _handles("ABSOLUTE"),
+    "handles relative": _handles("RELATIVE"),
+    "handles tangent": _handles("TANGENT"),
+    "roll in and out": _roll,
+    "inherit end roll": _inherit_end_roll,
+    "scale in and out": _scale,
+    "ease and scale from handles": _ease_scale,
+    "curve in and out": _curve,
+    "scaled bones": _scaled_bones,
+}
+
+
+@pytest.fixture
+def memory_only(dq_skin, monkeypatch):
+    """The Python path fails if it runs: whatever passes used the pose from memory."""
+
+    def refuse(*_a, **_k):
+        raise AssertionError("the Python path ran: the pose should come from memory")
+
+    for name in ("with_bbone_joints", "curved_bbone_mapping", "bone_lengths"):
+        monkeypatch.setattr(dq_skin.rig, name, refuse)
+    return dq_skin
+
+
+@pytest.fixture
+def python_only(dq_skin, monkeypatch):
+    """The pose reader refuses every read: the Python path deforms."""
+
+    class Refusing:
+        def read(self, armature):
+            raise ValueError("armature: refused by the test")
+
+    monkeypatch.setattr(dq_skin.memory, "_pose", Refusing())
+    monkeypatch.setattr(dq_skin.memory, "_built", True)
+    return dq_skin
+
+
+def compare(dq_skin, obj, arm, method: str, frame: int = 3):
+    reference = reference_copy(obj, method == "DUAL_QUATERNION")
+    mod = add_dq_skin(obj, method)
+    bpy.context.scene.frame_set(frame)
+    st = dq_skin.modifier.state_of(obj, mod)
+    assert st.status.live, st.status.message
+    ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
+    dev = relative_deviation(ours, theirs)
+    assert dev <= REL_TOL, dev
+    return mod, reference, theirs
+
+
+@pytest.mark.parametrize("method", ["LINEAR", "DUAL_QUATERNION"])
+@pytest.mark.parametrize("mapping", ["STRAIGHT", "CURVED"])
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_every_b_bone_setting_matches_the_armature_modifier(memory_only, case, mapping, method):
+    obj, arm, _ = bbone_rig(mapping=mapping)
+    CASES[case](arm)
+    _, reference, theirs = compare(memory_only, obj, arm, method)
+    # The case's B-Bones really shape the deformation: as plain bones the mesh differs.
+    _segments(arm, 1)
+    assert np.abs(evaluated_positions(reference) - theirs).max() > 1e-3
+
+
+@pytest.mark.parametrize("method", ["LINEAR", "DUAL_QUATERNION"])
+def test_the_python_path_matches_too(python_only, method):
+    obj, arm, _ = bbone_rig(mapping="CURVED")
+    _curve(arm)
+    _handles("RELATIVE")(arm)
+    compare(python_only, obj, arm, method)
+
+
+@pytest.mark.parametrize("mapping", ["STRAIGHT", "CURVED"])
+@pytest.mark.parametrize("method", ["LINEAR", "DUAL_QUATERNION"])
+def test_envelopes_on_b_bones(memory_only, method, mapping):
+    obj, arm, arm_mod = bbone_rig(mapping=mapping)
+    for b in arm.data.bones:
+        b.envelope_distance, b.head_radius, b.tail_radius = 0.6, 0.3, 0.3
+    # Every third vertex has no group (envelopes fill in); Bone1 multiplies its group.
+    for g in obj.vertex_groups:
+        g.remove(list(range(0, len(obj.data.vertices), 3)))
+    arm.data.bones["Bone1"].use_envelope_multiply = True
+    arm_mod.use_bone_envelopes = True
+    compare(memory_only, obj, arm, method)
+
+
+@pytest.mark.parametrize("method", ["LINEAR", "DUAL_QUATERNION"])
+def test_segments_and_mapping_changed_by_script(memory_only, method):
+    obj, arm, _ = bbone_rig(segments=4)
+    mod, reference, _ = compare(memory_only, obj, arm, method)
+    for segments, mapping, frame in ((12, "CURVED", 5), (1, "CURVED", 7), (3, "STRAIGHT", 9)):
+        for b in middle(arm.data.bones):
+            b.bbone_segments = segments
+            b.bbone_mapping_mode = mapping
+        bpy.context.scene.frame_set(frame)
+        assert memory_only.modifier.state_of(obj, mod).status.live
+        dev = relative_deviation(evaluated_positions(obj), evaluated_positions(reference))
+        assert dev <= REL_TOL, (segments, mapping, dev)
+
+
+@pytest.mark.parametrize("method", ["LINEAR", "DUAL_QUATERNION"])
+def test_animating_only_the_b_bone_shape(memory_only, method):
+    """Keys on B-Bone properties alone leave every `matrix_channel` as it was: the result must
+    still follow them."""
+    obj, arm, _ = bbone_rig(mapping="CURVED")
+    pb = arm.pose.bones["Bone1"]
+    for frame, value in ((1, 0.0), (10, 1.5)):
+        pb.bbone_curveinx = value
+        pb.bbone_easeout = value
+        pb.keyframe_insert("bbone_curveinx", frame=frame)
+        pb.keyframe_insert("bbone_easeout", frame=frame)
+    mod, reference, first = compare(memory_only, obj, arm, method, frame=1)
+    bpy.context.scene.frame_set(10)
+    theirs = evaluated_positions(reference)
+    assert np.abs(theirs - first).max() > 1e-2, "the keys move the mesh"
+    assert relative_deviation(evaluated_positions(obj), theirs) <= REL_TOL
+
+
+def _row_major(m) -> np.ndarray:
+    return np.array(m, np.float32)
+
+
+def test_the_reader_gives_what_the_python_api_gives(dq_skin):
+    obj, arm, _ = bbone_rig(segments=8, mapping="CURVED")
+    _curve(arm)
+    _handles("RELATIVE")(arm)
+    _ease_scale(arm)
+    arm.data.bones["Bone2"].bbone_mapping_mode = "STRAIGHT"
+    arm.data.bones["Bone0"].bbone_segments = 3  # Straight, not curved at rest
+    arm.data.bones["Bone3"].use_envelope_multiply = True
+    arm.data.bones["Bone3"].envelope_weight = 0.4
+    bpy.context.scene.frame_set(4)
+    arm_eval = arm.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    data = dq_skin.pose.read(arm_eval)
+    assert data is not None, dq_skin.pose.last_error
+    pbs = list(arm_eval.pose.bones)
+    deforming = [pb for pb in pbs if pb.bone.use_deform]
+    assert data.names == [pb.name for pb in deforming]
+    np.testing.assert_array_equal(data.bone_indices, [i for i, pb in enumerate(pbs) if pb.bone.use_deform])
+    b = len(deforming)
+    assert data.bone_count == b
+    deform, rest = data.deform, data.rest
+    np.testing.assert_array_equal(deform[:b], [_row_major(pb.matrix_channel) for pb in deforming])
+    np.testing.assert_array_equal(rest[:b], [_row_major(pb.bone.matrix_local) for pb in deforming])
+    np.testing.assert_array_equal(data.segments, [pb.bone.bbone_segments for pb in deforming])
+    binding = dq_skin.rig.bind(obj, arm_eval)
+    np.testing.assert_array_equal(data.envelopes, dq_skin.rig.envelopes(arm_eval, binding))
+    # The joints: Blender's cache against what its Python API gives for them.
+    first = b
+    for pb in deforming:
+        n = pb.bone.bbone_segments
+        if n < 2:
+            continue
+        joints = np.array([_row_major(pb.bbone_segment_matrix(a)) for a in range(n + 1)])
+        rest_joints = np.array([_row_major(pb.bbone_segment_matrix(a, rest=True)) for a in range(n + 1)])
+        want_deform, want_rest = dq_skin.dqskin.bbone_segment_matrices(
+            _row_major(pb.matrix_channel), _row_major(pb.bone.matrix_local), joints, rest_joints
+        )
+        np.testing.assert_allclose(deform[first : first + n + 1], want_deform, atol=2e-5)
+        np.testing.assert_allclose(rest[first : first + n + 1], want_rest, atol=2e-6)
+        first += n + 1
+    assert first == data.expanded_bone_count == len(deform) == len(rest)
+    # The segment mapping, Straight and Curved, to the bit: one vertex per sample point, weight 1
+    # on one B-Bone, so its two effective weights are exactly 1 − blend and blend.
+    rng = np.random.default_rng(5)
+    points = np.column_stack([rng.uniform(-0.8, 0.8, 400), rng.uniform(-0.8, 0.8, 400), rng.uniform(-0.3, LENGTH + 0.3, 400)]).astype(np.float32)
+    offsets = np.arange(len(points) + 1)
+    first = b
+    checked = 0
+    for k, pb in enumerate(deforming):
+        n = int(data.segments[k])
+        if n < 2:
+            continue
+        influences = dq_skin.dqskin.Influences(offsets, np.full(len(points), k), np.ones(len(points), np.float32), b)
+        effective = influences.effective(points, pose=data)
+        pairs_bones = effective.bones.reshape(-1, 2)
+        pairs_weights = effective.weights.reshape(-1, 2)
+        for v, co in enumerate(points):
+            index, blend = pb.bbone_segment_index(Vector(co.tolist()))
+            assert pairs_bones[v, 0] - first == index, (pb.name, v)
+            assert pairs_weights[v, 1] == np.float32(blend), (pb.name, v, pairs_weights[v, 1], blend)
+            checked += 1
+        first += n + 1
+    assert checked == 400 * 3
+
+
+def test_the_reader_refuses_what_is_not_an_armature(dq_skin):
+    obj, arm, _ = bbone_rig()
+    reader = dq_skin.memory.pose_reader()
+    assert reader is not None, dq_skin.memory.pose_error
+    with pytest.raises(ValueError, match="armature must be an armature object"):
+        reader.read(obj)
+    with pytest.raises(TypeError, match="armature must be a bpy.types.Object"):
+        reader.read(arm.data)
+    with pytest.raises(TypeError, match="armature must be a bpy.types.Object"):
+        reader.read(arm.as_pointer())
+    empty = link(bpy.data.objects.new("Empty", None))
+    with pytest.raises(ValueError, match="armature"):
+        reader.read(empty)
+    assert reader.read(arm).bone_count == 4
+
+
+def test_binding_and_pose_signatures(dq_skin):
+    obj, arm, _ = bbone_rig()
+    dg = bpy.context.evaluated_depsgraph_get()
+
+    def read():
+        return dq_skin.pose.read(arm.evaluated_get(bpy.context.evaluated_depsgraph_get()))
+
+    bpy.context.scene.frame_set(1)
+    base = read()
+    assert base is not None and dg is not None
+    same = read()
+    assert (same.binding_signature, same.pose_signature) == (base.binding_signature, base.pose_signature)
+    arm.pose.bones["Bone1"].bbone_curveinx = 0.9  # the pose's B-Bone shape only
+    bpy.context.view_layer.update()
+    shaped = read()
+    assert shaped.binding_signature == base.binding_signature and shaped.pose_signature != base.pose_signature
+    arm.data.bones["Bone2"].bbone_easein = 1.7  # the rest shape
+    bpy.context.view_layer.update()
+    rest = read()
+    assert rest.binding_signature != base.binding_signature
+    arm.data.bones["HandleEnd"].use_deform = True
+    bpy.context.view_layer.update()
+    assert read().binding_signature != rest.binding_signature
+    assert read().bone_count == 5
+
+
+def test_many_segments_and_many_bones_per_frame_read_once(memory_only):
+    """Every DQ Skin frame reads the pose once and computes influences only when the vertices or
+    the bones' rest data change."""
+    obj, arm, _ = bbone_rig(segments=16, mapping="CURVED")
+    mod, reference, _ = compare(memory_only, obj, arm, "DUAL_QUATERNION")
+    st = memory_only.modifier.state_of(obj, mod)
+    kept = st.binding.binding.effective[1]
+    for frame in (4, 5, 6):
+        arm.pose.bones["Bone2"].rotation_quaternion = Quaternion((0, 1, 0), 0.2 * frame)
+        arm.pose.bones["Bone2"].keyframe_insert("rotation_quaternion", frame=frame)
+    for frame in (4, 5, 6):
+        bpy.context.scene.frame_set(frame)
+        assert relative_deviation(evaluated_positions(obj), evaluated_positions(reference)) <= REL_TOL
+    assert st.binding.binding.effective[1] is kept, "the pose alone does not change the influences"
+    arm.data.bones["Bone1"].bbone_easein = 0.4
+    bpy.context.scene.frame_set(7)
+    assert st.binding.binding.effective[1] is not kept
+    assert relative_deviation(evaluated_positions(obj), evaluated_positions(reference)) <= REL_TOL
+    assert math.isfinite(st.status.seconds)
+
+
+def test_a_generated_rigify_character_matches_the_armature_modifier(memory_only):
+    """Rigify's human rig (160 deforming bones, 52 B-Bones with custom handles, ease and scale)
+    on a body with automatic weights, playing an animation that bends, twists and scales."""
+    body, rig = rigify_character()
+    bbones = [b for b in rig.data.bones if b.use_deform and b.bbone_segments > 1]
+    assert len(bbones) >= 40
+    other = body.copy()
+    bpy.context.scene.collection.objects.link(other)
+    pairs = []
+    for obj, method in ((body, "LINEAR"), (other, "DUAL_QUATERNION")):
+        reference = reference_copy(obj, method == "DUAL_QUATERNION")
+        pairs.append((obj, add_dq_skin(obj, method), reference))
+    rest = evaluated_positions(pairs[0][2])
+    for frame in (1, 12, 20, 33):
+        bpy.context.scene.frame_set(frame)
+        for obj, mod, reference in pairs:
+            assert memory_only.modifier.state_of(obj, mod).status.live
+            theirs = evaluated_positions(reference)
+            dev = relative_deviation(evaluated_positions(obj), theirs)
+            assert dev <= REL_TOL, (obj.name, frame, dev)
+    assert np.abs(theirs - rest).max() > 0.05, "the animation moves the body"

@@ -292,11 +292,56 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
     for (k, out) in out.chunks_mut(LANES).enumerate() {
         let first = start + k * LANES;
         let n = out.len();
-        if ISA != ISA_BASELINE && n == LANES {
-            // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction sets
-            // were detected; the job's influences and pose fit together (`Job::new`), so every
-            // bone index of the batch's slots indexes every table the method reads.
-            unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, job, first, out.try_into().expect("a full batch"), &mut scratch) };
+        if ISA != ISA_BASELINE {
+            let slots = job.influences.batch(first / LANES);
+            if n == LANES {
+                fn full<T>(a: &[T], first: usize) -> &[T; LANES] {
+                    a[first..first + LANES].try_into().expect("a full batch")
+                }
+                let inputs = BatchInputs {
+                    positions: full(job.positions, first),
+                    strength: job.mask.map(|a| full(a, first)),
+                    blend_amount: job.blend_amount.map(|a| full(a, first)),
+                    centers: job.centers.map(|c| full(c, first)),
+                    slots,
+                };
+                // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction
+                // sets were detected; the job's influences and pose fit together (`Job::new`), so
+                // every bone index of the batch's slots indexes every table the method reads.
+                unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, inputs, out.try_into().expect("a full batch"), &mut scratch) };
+            } else {
+                // The last, partial batch goes through the same SIMD body, padded (the padding
+                // lanes' slots have weight 0 and their results are dropped): a vertex's result
+                // does not depend on where it is in the mesh, so vertices split at one place
+                // (UV seams, sharp edges) stay together, as they do under Blender's modifier.
+                let pad = |a: Option<&[f32]>| {
+                    a.map(|a| {
+                        let mut p = [0.0f32; LANES];
+                        p[..n].copy_from_slice(&a[first..first + n]);
+                        p
+                    })
+                };
+                let pad_points = |a: &[[f32; 3]]| {
+                    let mut p = [[0.0f32; 3]; LANES];
+                    p[..n].copy_from_slice(&a[first..first + n]);
+                    p
+                };
+                let positions = pad_points(job.positions);
+                let (strength, blend_amount) = (pad(job.mask), pad(job.blend_amount));
+                let centers = job.centers.map(pad_points);
+                let inputs = BatchInputs {
+                    positions: &positions,
+                    strength: strength.as_ref(),
+                    blend_amount: blend_amount.as_ref(),
+                    centers: centers.as_ref(),
+                    slots,
+                };
+                let mut padded = [[0.0f32; 3]; LANES];
+                // SAFETY: as for a full batch; the padding lanes' bone indices are 0, which
+                // indexes every table (a pose has at least one bone).
+                unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, inputs, &mut padded, &mut scratch) };
+                out.copy_from_slice(&padded[..n]);
+            }
             continue;
         }
         let original = load_points::<ISA>(&job.positions[first..first + n]);
@@ -332,36 +377,41 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
     }
 }
 
+/// What one batch of `LANES` vertices reads: sliced from the job, or a partial batch padded.
+struct BatchInputs<'a> {
+    positions: &'a [[f32; 3]; LANES],
+    strength: Option<&'a [f32; LANES]>,
+    blend_amount: Option<&'a [f32; LANES]>,
+    centers: Option<&'a [[f32; 3]; LANES]>,
+    slots: &'a [Slot],
+}
+
 /// One full batch with the SIMD kernels of the copy `ISA`.
 ///
 /// # Safety
 /// The CPU has the instruction sets of `ISA` (not the baseline); every bone index of the batch's
 /// slots indexes every table of `simd_job` that the method reads.
 #[inline(always)]
-unsafe fn full_batch<'a, const ISA: u8, const KIND: u8, const SCALED: bool>(
+unsafe fn full_batch<const ISA: u8, const KIND: u8, const SCALED: bool>(
     simd_job: &BatchJob<'_>,
-    job: &Job<'a>,
-    first: usize,
+    inputs: BatchInputs<'_>,
     out: &mut [[f32; 3]; LANES],
     scratch: &mut Scratch,
 ) {
-    let slots = job.influences.batch(first / LANES);
-    let full = |a: &'a [f32]| -> &'a [f32; LANES] { a[first..first + LANES].try_into().expect("a full batch") };
-    let positions = job.positions[first..first + LANES].try_into().expect("a full batch");
-    let centers = job.centers.map(|c| c[first..first + LANES].try_into().expect("a full batch"));
+    let BatchInputs { positions, strength, blend_amount, centers, slots } = inputs;
     match ISA {
         #[cfg(target_arch = "x86_64")]
         ISA_AVX512 => {
             if let (CENTERS, Some(centers)) = (KIND, centers) {
                 // SAFETY: the caller's contract.
-                unsafe { super::avx512::batch_centers::<SCALED>(simd_job, positions, centers, out, slots, job.mask.map(full)) };
+                unsafe { super::avx512::batch_centers::<SCALED>(simd_job, positions, centers, out, slots, strength) };
             } else {
                 // SAFETY: the caller's contract.
-                unsafe { super::avx512::batch::<KIND>(simd_job, positions, out, slots, job.mask.map(full), job.blend_amount.map(full)) };
+                unsafe { super::avx512::batch::<KIND>(simd_job, positions, out, slots, strength, blend_amount) };
             }
         }
         _ => {
-            let batch = FullBatch { positions, out, slots, strength: job.mask.map(full), blend_amount: job.blend_amount.map(full), centers };
+            let batch = FullBatch { positions, out, slots, strength, blend_amount, centers };
             match ISA {
                 // SAFETY: the caller's contract.
                 #[cfg(target_arch = "x86_64")]

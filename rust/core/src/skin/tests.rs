@@ -388,6 +388,39 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// A vertex's result does not depend on where it is in the mesh: in a full SIMD batch, in the
+    /// partial last one or on another thread's chunk, every copy gives the same bits for the same
+    /// inputs (vertices split at one place, at UV seams and sharp edges, must stay together).
+    #[test]
+    fn equal_vertices_skin_to_equal_bits_wherever_they_are((rig, positions, lists, mask, premat) in case()) {
+        let influences_of = |count: usize| {
+            let repeated: Vec<Vec<(u32, f32)>> = (0..count).map(|_| lists[0].clone()).collect();
+            Influences::from_lists(&repeated, rig.rest.len()).unwrap()
+        };
+        let pose = Pose::new(&rig.deform, Some(&rig.rest)).unwrap();
+        // Two full batches of 16 and a partial one; then more than one parallel chunk.
+        for count in [37, kernels::CHUNK + 21] {
+            let points = vec![positions[0]; count];
+            let masks = vec![mask[0]; count];
+            let influences = influences_of(count);
+            let options = SkinOptions { premat: Some(premat), postmat: Some(premat.inverse()), mask: Some(&masks) };
+            let amount = vec![0.6f32; count];
+            for method in [Method::Linear, Method::DualQuaternion, Method::Blend { amount: Some(&amount), factor: 0.7 }] {
+                for simd in kernels::Simd::available() {
+                    let mut out = vec![[f32::NAN; 3]; count];
+                    skin_with(simd, method, &points, &influences, &pose, &options, &mut out).unwrap();
+                    for (v, p) in out.iter().enumerate() {
+                        prop_assert!(p.map(f32::to_bits) == out[0].map(f32::to_bits), "{:?} {:?}: vertex {} gives {:?}, vertex 0 {:?}", simd, method, v, p, out[0]);
+                    }
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn the_order_of_influences_decides_dqs_signs_as_in_blender() {
     // Three bones whose rotations are pairwise more than 90° apart in quaternion space: the sign

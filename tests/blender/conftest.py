@@ -67,3 +67,26 @@ def assets() -> Path:
     if not ASSETS.is_dir():
         pytest.fail(f"the shared test characters are missing: {ASSETS}")
     return ASSETS
+
+
+# Blender 4.2's bpy module frees Python-defined classes (the glTF exporter's) in C++ static
+# destructors after Python has finalized: once a glTF export ran, the process segfaults on exit
+# (gdb: ~SpaceType -> bpy_class_free -> PyGILState_Ensure with no interpreter), with or without
+# DQ Skin (a script importing and exporting CesiumMan does it). Fixed from 4.3. There the process
+# ends once pytest has reported and returned its status, before those destructors run.
+EXIT_BEFORE_BLENDERS_TEARDOWN = bpy.app.version < (4, 3, 0)
+
+
+_STATUS = pytest.StashKey[int]()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    session.config.stash[_STATUS] = int(exitstatus)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    if EXIT_BEFORE_BLENDERS_TEARDOWN:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(config.stash.get(_STATUS, 1))

@@ -105,6 +105,10 @@ test-windows: $(STAMPS)/deps $(STAMPS)/wine $(WINE_PRNG)
 # Debian). Measures nothing: ARM speed needs an ARM machine (README, Performance).
 ARM_TARGET := aarch64-unknown-linux-gnu
 ARM_SYSROOT := /usr/aarch64-linux-gnu
+# The naive O(vertices × triangles) reference on the 3,000-vertex creature (twice) takes minutes under
+# emulation; the precompute's NEON sums are checked against it on the twist cylinder and on
+# random meshes there, and the creature's certified fast path still runs.
+ARM_SKIP := precompute_matches_the_naive_formula_on_the_creature
 test-arm: $(STAMPS)/deps
 	@if ! command -v qemu-aarch64-static >/dev/null || [ ! -e $(ARM_SYSROOT)/lib/ld-linux-aarch64.so.1 ]; then \
 	  sudo=$$([ "$$(id -u)" = 0 ] || echo sudo); \
@@ -116,7 +120,7 @@ test-arm: $(STAMPS)/deps
 	DQSKIN_ZIG_PYTHON=$(abspath $(PY)) \
 	CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=$(abspath rust/cross/aarch64-linux-gnu-cc) \
 	CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="qemu-aarch64-static -L $(ARM_SYSROOT)" \
-	PROPTEST_RNG_SEED=20261122 cargo test -p dqskin-core --release --target $(ARM_TARGET) --lib --tests
+	PROPTEST_RNG_SEED=20261122 cargo test -p dqskin-core --release --target $(ARM_TARGET) --lib --tests -- --skip $(ARM_SKIP)
 
 # The Blender tests on the other Blender releases, each from its own bpy wheel and CPython in
 # .venvs/ (see tests/run_blenders.py); `make test` covers the pinned one.

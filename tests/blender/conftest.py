@@ -16,6 +16,7 @@ them can pick up another copy. test_packaging.py checks which file was imported.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -39,6 +40,11 @@ os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(EXTENSION_SITE_PACK
 os.environ["BLENDER_USER_RESOURCES"] = str(USER)
 
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
+
+# Tests send SIGINT to their subprocesses, as Ctrl-C does: a shell that starts this run in the
+# background without job control has SIGINT ignored (POSIX), which children would inherit.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 EXTENSION = "bl_ext.user_default.dq_skin"
 

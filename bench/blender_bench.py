@@ -223,11 +223,12 @@ def alternate(variants: dict, frames, rounds: int, per_round: int, phases: Phase
 
 
 class HandlerParts:
-    """Time inside DQ Skin's frame handler on the envelope/B-Bone path: reading the pose
-    (`pose.frame`), this frame's influences (`pose.influences`), the kernel (`skin_many`) and
-    writing the result (`results.write_positions`), summed per frame."""
+    """Time inside DQ Skin's frame handler on the envelope/B-Bone path: reading the pose from
+    memory (in `pose.armature_signature`, once per armature and handler call), the frame's
+    bones from it (`pose.frame`), this frame's influences (`pose.influences`), the kernel
+    (`skin_many`) and writing the result (`results.write_positions`), per call."""
 
-    PARTS = {"read_pose": ("pose", "frame"), "influences": ("pose", "influences"), "kernel": ("dqskin", "skin_many"), "write": ("results", "write_positions")}
+    PARTS = {"read_pose": ("pose", "armature_signature"), "pose_frame": ("pose", "frame"), "influences": ("pose", "influences"), "kernel": ("dqskin", "skin_many"), "write": ("results", "write_positions")}
 
     def __init__(self):
         self.addon = sys.modules[ADDON]
@@ -259,20 +260,18 @@ class HandlerParts:
 
 
 def kernel_ms(obj, runs: int) -> dict:
-    """`dqskin.skin` alone on the same inputs the modifier used (Linear and DQS)."""
-    mod_ = sys.modules[ADDON]
-    mod = next(m for m in obj.modifiers if m.type == "NODES")
-    st = mod_.modifier.state(obj, mod)
-    arm = mod_.nodes.get(mod, "Armature")
-    positions = mod_.meshdata.get(obj).positions
-    matrices = mod_.rig.frame(st.binding, obj, arm)
-    out = np.empty_like(positions)
+    """`dqskin.skin_many` alone on the job the modifier last ran (its inputs, spaces and
+    output), Linear and Dual Quaternion."""
+    addon = sys.modules[ADDON]
+    mod = addon.modifier.dq_skin_modifiers(obj)[0]
+    job = addon.modifier.state_of(obj, mod).output.job
     res = {}
     for method in ("linear", "dual_quaternion"):
+        j = addon.dqskin.SkinJob(job.positions, job.influences, job.deform, job.rest, method=method, premat=job.premat, postmat=job.postmat, mask=job.mask)
         ts = []
         for _ in range(runs):
             t = time.perf_counter()
-            mod_.rig.skin(st.binding, obj, arm, positions, method, out=out, matrices=matrices)
+            addon.dqskin.skin_many([j])
             ts.append(time.perf_counter() - t)
         res[f"kernel_{method}_ms"] = 1e3 * float(np.median(ts))
     return res
@@ -345,6 +344,13 @@ def case_bbone_grid(vertices: int, mapping: str, method: str, quick: bool) -> di
     return row
 
 
+def positions_of(obj, depsgraph) -> np.ndarray:
+    mesh = obj.evaluated_get(depsgraph).data
+    out = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.attributes["position"].data.foreach_get("vector", out)
+    return out
+
+
 def case_rigify(quick: bool) -> dict:
     """The Rigify character: the Armature modifier (Preserve Volume off and on) and DQ Skin
     (Linear and Dual Quaternion), each on its own copy of the mesh, and the rig alone (a copy
@@ -367,14 +373,27 @@ def case_rigify(quick: bool) -> dict:
     for name, method in (("dq_skin_linear", "LINEAR"), ("dq_skin_dqs", "DUAL_QUATERNION")):
         show_only(variants[name])
         add_dq_skin(variants[name], method)
+    frames = (5, 12, 19, 26, 33)
+    show_only(variants["dq_skin_linear"])
+    for f in frames[:3]:
+        bpy.context.scene.frame_set(f)
+    in_evaluation = InEvaluation(variants["dq_skin_linear"], rig, body)
+    variants["in_evaluation_linear"] = in_evaluation.obj
     phases, parts = Phases(), HandlerParts()
     phases.install()
     parts.install()
     try:
-        row = alternate({k: [v] for k, v in variants.items()}, (5, 12, 19, 26, 33), 2 if quick else 6, 5 if quick else 9, phases)
+        row = alternate({k: [v] for k, v in variants.items()}, frames, 2 if quick else 6, 5 if quick else 9, phases)
+        # The alternative deforms as DQ Skin does (the same job): checked against the Armature modifier.
+        show_only(body, in_evaluation.obj)
+        bpy.context.scene.frame_set(frames[-1])
+        dg = bpy.context.evaluated_depsgraph_get()
+        row["in_evaluation_linear_max_deviation"] = float(np.abs(positions_of(in_evaluation.obj, dg) - positions_of(body, dg)).max())
+        row["in_evaluation_driver_calls"] = in_evaluation.calls
     finally:
         phases.remove()
         parts.remove()
+        in_evaluation.remove()
     row.update(parts.medians("dq_skin"))
     deforming = [b for b in rig.data.bones if b.use_deform]
     row.update(
@@ -384,11 +403,77 @@ def case_rigify(quick: bool) -> dict:
         bbones=sum(b.bbone_segments > 1 for b in deforming),
         build_s=build_s,
     )
-    for skin, reference in (("dq_skin_linear", "armature_linear"), ("dq_skin_dqs", "armature_pv")):
+    for skin, reference in (("dq_skin_linear", "armature_linear"), ("dq_skin_dqs", "armature_pv"), ("in_evaluation_linear", "armature_linear")):
         row[f"{reference}_share_ms"] = row[f"{reference}_ms"] - row["none_ms"]
         row[f"{skin}_share_ms"] = row[f"{skin}_ms"] - row["none_ms"]
         row[f"{skin}_share_speedup"] = row[f"{reference}_share_ms"] / max(row[f"{skin}_share_ms"], 1e-6)
     return row
+
+
+class InEvaluation:
+    """A measured alternative to DQ Skin's second evaluation, for one DQ Skin object whose
+    modifier is live (a B-Bone or envelope binding): a copy of its mesh whose only modifier is
+    a Mesh Cache reading a PC2 file on tmpfs, and a Python driver on that modifier (after every
+    deforming bone in Blender's graph: one variable per bone) that skins with the DQ Skin
+    modifier's own job and writes the file, inside Blender's first evaluation. Not a product
+    path: it needs Python drivers (blocked in untrusted files unless the function is known to
+    Blender's secure-expression check) and a file per object."""
+
+    def __init__(self, dq, rig, body):
+        import struct
+        import tempfile
+
+        addon = sys.modules[ADDON]
+        mod = addon.modifier.dq_skin_modifiers(dq)[0]
+        st = addon.modifier.state_of(dq, mod)
+        assert st.status.live and st.needs_effective and st.output.job is not None, st.status.message
+        self.obj = body.copy()
+        self.obj.data = body.data.copy()
+        self.obj.name = f"{body.name} in-evaluation"
+        bpy.context.scene.collection.objects.link(self.obj)
+        for m in list(self.obj.modifiers):
+            self.obj.modifiers.remove(m)
+        n = len(body.data.vertices)
+        folder = "/dev/shm" if os.path.isdir("/dev/shm") else tempfile.gettempdir()
+        self.path = os.path.join(folder, f"dqskin-bench-{os.getpid()}.pc2")
+        self.header = b"POINTCACHE2\0" + struct.pack("<iiffi", 1, n, 0.0, 1.0, 1)
+        with open(self.path, "wb") as f:
+            f.write(self.header + np.zeros(n * 3, np.float32).tobytes())
+        self.fd = os.open(self.path, os.O_WRONLY)
+        m = self.obj.modifiers.new("DQ Skin in evaluation", "MESH_CACHE")
+        m.cache_format, m.filepath = "PC2", self.path
+        m.time_mode, m.play_mode, m.eval_frame = "FRAME", "CUSTOM", 0.0
+        m.deform_mode, m.interpolation = "OVERWRITE", "NONE"
+        binding, segments = st.binding.binding, st.binding.segments
+        namespace = bpy.app.driver_namespace
+        self.calls = 0
+        frame, skin_many = addon.pose.frame, addon.dqskin.skin_many  # (before `HandlerParts` wraps them)
+
+        def skin(*_):
+            self.calls += 1
+            arm_eval = rig.evaluated_get(namespace["depsgraph"])
+            job = st.output.job
+            job.deform = frame(arm_eval, binding, segments).deform
+            skin_many([job])
+            os.pwrite(self.fd, memoryview(st.output.buffer).cast("B"), len(self.header))
+            return 1.0
+
+        namespace["dqskin_bench_skin"] = skin
+        driver = m.driver_add("factor").driver
+        driver.type = "SCRIPTED"
+        for i, name in enumerate(binding.bone_names):
+            v = driver.variables.new()
+            v.name, v.type = f"b{i}", "SINGLE_PROP"
+            v.targets[0].id = rig
+            # A B-Bone property links the driver after the bone's segments, any other after the bone.
+            prop = "bbone_easein" if rig.data.bones[name].bbone_segments > 1 else "matrix"
+            v.targets[0].data_path = f'pose.bones["{name}"].{prop}'
+        driver.expression = "dqskin_bench_skin()"
+
+    def remove(self):
+        bpy.app.driver_namespace.pop("dqskin_bench_skin", None)
+        os.close(self.fd)
+        os.unlink(self.path)
 
 
 def case_binding(vertices: int) -> dict:

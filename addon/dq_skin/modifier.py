@@ -71,6 +71,7 @@ class Context:
     unchanged: set = field(default_factory=set)  # objects Blender did not update: cached settings hold
     unmoved: set = field(default_factory=set)  # objects whose transform did not change
     poses: dict = field(default_factory=dict)  # armature uid -> this evaluation's pose matrices
+    pose_data: dict = field(default_factory=dict)  # armature uid -> its pose from memory (`pose.read`)
 
     @property
     def render(self) -> bool:
@@ -93,6 +94,7 @@ class Plan:
     start: float
     quick: bool = False  # steady playback: only the positions change
     render: bool = False  # a render's evaluation (only the render side of the companion changes)
+    data: object = None  # the mesh's `meshdata.MeshData` as `_prepare` read it (full path)
 
 
 def evaluate_object(obj, ctx: Context, force: bool = False) -> bool:
@@ -403,7 +405,7 @@ def _prepare(obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: C
             "put DQ Skin before modifiers that add or remove vertices"
         )
     if st.needs_effective:
-        bones = pose.frame(arm_eval, binding, st.binding.segments)  # with every B-Bone's joints
+        bones = pose.frame(arm_eval, binding, st.binding.segments, ctx.pose_data)  # with every B-Bone's joints
         pose_key = bones.key
     else:
         deform = ctx.poses.get(arm.session_uid)
@@ -434,7 +436,7 @@ def _prepare(obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: C
         )
         deform, rest = bones.deform, bones.rest
     job = out.job = _job(st, s, positions, influences, deform, rest, premat, postmat)
-    return Plan(obj, mod, st, s, result, kind, key, job, deforms, start, render=ctx.render)
+    return Plan(obj, mod, st, s, result, kind, key, job, deforms, start, render=ctx.render, data=data)
 
 
 def _binding(obj, arm, arm_eval, st: ModifierState, s: settings.Settings, data, ctx: Context):
@@ -442,7 +444,7 @@ def _binding(obj, arm, arm_eval, st: ModifierState, s: settings.Settings, data, 
     (the armature's bones are compared on every full evaluation, whatever changed them: from
     Blender's memory, see `pose.armature_signature`)."""
     cache = st.binding
-    key = BindingKey(data.uid, data.version, arm.session_uid, pose.armature_signature(arm_eval), s.mask_group, s.invert_mask, s.blend_group, s.use_vertex_groups)
+    key = BindingKey(data.uid, data.version, arm.session_uid, pose.armature_signature(arm_eval, ctx.pose_data), s.mask_group, s.invert_mask, s.blend_group, s.use_vertex_groups)
     if cache.binding is None or cache.key != key:
         cache.clear()
         binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups, data=data)
@@ -525,7 +527,7 @@ def finish(plan: Plan) -> None:
         out.written = plan.key
         st.status.seconds = time.perf_counter() - plan.start
         return
-    data = meshdata.get(obj)
+    data = plan.data if plan.data is not None else meshdata.get(obj)
     if kind == nodes.RESULT_REPLACE:
         mesh = result.data
         revision = meshdata.revision(obj.data)

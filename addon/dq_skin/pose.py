@@ -24,9 +24,17 @@ last_error = ""
 """Why the last read from memory was refused ("" if it was not)."""
 
 
-def read(arm_eval) -> "dqskin.PoseData | None":
-    """The pose of an (evaluated) armature object from memory, or None (see `last_error`)."""
+def read(arm_eval, cache: dict | None = None) -> "dqskin.PoseData | None":
+    """The pose of an (evaluated) armature object from memory, or None (see `last_error`).
+    With `cache` (one handler call's, see `modifier.Context.pose_data`), each armature is read
+    once: a full evaluation needs the pose for the binding's signature and for the frame."""
     global last_error
+    if cache is not None:
+        key = arm_eval.session_uid
+        if key not in cache:
+            cache[key] = (read(arm_eval), last_error)
+        data, last_error = cache[key]
+        return data
     reader = memory.pose_reader()
     if reader is None:
         last_error = memory.pose_error
@@ -40,11 +48,11 @@ def read(arm_eval) -> "dqskin.PoseData | None":
     return data
 
 
-def armature_signature(arm_eval):
+def armature_signature(arm_eval, cache: dict | None = None):
     """What of the armature's bones a binding depends on: the memory's binding signature (names,
     order, deform flags, rest matrices, envelopes, B-Bone segments, mapping modes and rest
     shapes), or `rig.armature_signature` through the Python API."""
-    data = read(arm_eval)
+    data = read(arm_eval, cache)
     if data is not None:
         return ("memory", data.binding_signature)
     return rig.armature_signature(arm_eval)
@@ -63,11 +71,11 @@ class Bones:
     """The pose from memory (None: read through the Python API)."""
 
 
-def frame(arm_eval, binding: rig.Binding, segments: np.ndarray) -> Bones:
+def frame(arm_eval, binding: rig.Binding, segments: np.ndarray, cache: dict | None = None) -> Bones:
     """This frame's bones for `binding` (made for `arm_eval`'s deforming bones): from memory when
     the reader gives the binding's bones, else through the Python API (`segments`: the bones'
-    segment counts, `rig.bbone_segments`)."""
-    data = read(arm_eval)
+    segment counts, `rig.bbone_segments`; `cache` as for `read`)."""
+    data = read(arm_eval, cache)
     if data is not None and _same_bones(data, binding):
         return Bones(data.deform, data.rest, ("memory", data.pose_signature, data.binding_signature), data)
     deform = rig.pose_matrices(arm_eval)

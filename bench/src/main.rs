@@ -180,10 +180,14 @@ fn main() {
                 // conditions on a shared machine; each keeps its best time (after a warm-up round).
                 let mut reference = f64::INFINITY;
                 let mut best = vec![f64::INFINITY; cases.len()];
+                let space = glam::Mat4::from_rotation_translation(glam::Quat::from_rotation_z(0.3), glam::Vec3::new(0.5, -1.0, 2.0));
                 for round in 0..=runs {
                     let r = once(&mut || bandwidth_reference(&s, &mut out));
                     for (k, (_, method, _, pose)) in cases.iter().enumerate() {
-                        let opts = SkinOptions::default();
+                        // The object and armature spaces every Blender job has (the modifier's
+                        // premat and postmat): the Python module once ran them 3x slower than this
+                        // binary did without them (intrinsics left uninlined).
+                        let opts = SkinOptions { premat: Some(space), postmat: Some(space.inverse()), mask: None };
                         let t = once(&mut || {
                             skin(*method, &s.positions, &s.influences, pose, &opts, &mut out).expect("skin")
                         });

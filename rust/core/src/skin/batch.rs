@@ -206,17 +206,26 @@ pub(super) unsafe fn skin_batch<V: VectorOps, const KIND: u8, const SCALED: bool
         let lanes = p * V::WIDTH..(p + 1) * V::WIDTH;
         let lane0 = lanes.start;
         let o = v.load_points(&batch.positions[lanes.clone()]);
-        let a = batch.strength.map_or(v.splat(1.0), |s| v.load(&s[lanes.clone()]));
+        let a = match batch.strength {
+            Some(s) => v.load(&s[lanes.clone()]),
+            None => v.splat(1.0),
+        };
         let mut contrib = zero;
         for slot in slots {
             contrib = v.add(contrib, v.load(&slot.weights[lanes.clone()]));
         }
-        let p = job.premat.map_or(o, |m| apply(v, m, o));
+        let p = match job.premat {
+            Some(m) => apply(v, m, o),
+            None => o,
+        };
         // The windows: a LinearBone's rows (floats 0–11), a DqBone's dual part (4–7), a
         // PivotDualBone (0–15), a CorBone's rows, rotation and scale/shear part (0–27).
         let moved = if let (true, Some(c)) = (centers, batch.centers) {
             let c = v.load_points(&c[lanes.clone()]);
-            let c = job.premat.map_or(c, |m| apply(v, m, c));
+            let c = match job.premat {
+                Some(m) => apply(v, m, c),
+                None => c,
+            };
             if SCALED {
                 // One window over the rows, the rotation (its sum unused) and the scale/shear
                 // part: one index and weight per influence for both sums. SAFETY: the caller's
@@ -261,13 +270,19 @@ pub(super) unsafe fn skin_batch<V: VectorOps, const KIND: u8, const SCALED: bool
                 LINEAR => lbs,
                 BLEND => {
                     let factor = v.splat(job.blend_factor);
-                    let alpha = batch.blend_amount.map_or(factor, |amount| v.mul(factor, v.load(&amount[lanes.clone()])));
+                    let alpha = match batch.blend_amount {
+                        Some(amount) => v.mul(factor, v.load(&amount[lanes.clone()])),
+                        None => factor,
+                    };
                     each3(|k| v.mul_add(alpha, v.sub(dqs[k], lbs[k]), lbs[k]))
                 }
                 _ => dqs,
             }
         };
-        let r = job.postmat.map_or(moved, |m| apply(v, m, moved));
+        let r = match job.postmat {
+            Some(m) => apply(v, m, moved),
+            None => moved,
+        };
         // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
         let untouched = v.eq(a, zero);
         let r = each3(|k| v.select(untouched, o[k], r[k]));

@@ -56,6 +56,7 @@ impl<'a> Job<'a> {
     pub(crate) fn new(kind: Kind, positions: &'a [[f32; 3]], influences: &'a Influences, pose: &'a Pose) -> Self {
         assert_eq!(pose.bone_count(), influences.bone_count(), "the pose must have one bone per bone index");
         assert!(kind == Kind::Linear || pose.has_dual_quaternions(), "this method needs the rest matrices");
+        assert!(kind != Kind::CentersOfRotation || pose.has_centers(), "this method needs the centers tables");
         assert_eq!(positions.len(), influences.vertex_count(), "one position per vertex");
         Job {
             kind,

@@ -41,6 +41,7 @@ pub use envelope::{distance_factor, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
 pub use influences::{Influence, Influences, MAX_INFLUENCES_PER_VERTEX};
 pub use pose::{affine_problem, Pose};
+use pose::Tables;
 
 
 use glam::Mat4;
@@ -260,7 +261,12 @@ pub fn skin_many(jobs: &mut [ManyJob<'_>]) -> Vec<Result<(), SkinError>> {
     use rayon::prelude::*;
     let simd = kernels::Simd::detect();
     let one = move |j: &mut ManyJob<'_>| {
-        let pose = Pose::new(j.deform, j.rest)?;
+        let tables = match j.method {
+            Method::Linear => Tables::Linear,
+            Method::DualQuaternion | Method::Blend { .. } => Tables::DualQuaternion,
+            Method::CentersOfRotation { .. } => Tables::Centers,
+        };
+        let pose = Pose::with_tables(j.deform, j.rest, tables)?;
         skin_with(simd, j.method, j.positions, j.influences, &pose, &j.options, j.out)
     };
     if jobs.len() <= 1 {

@@ -129,6 +129,16 @@ pub struct Pose {
     scaled: Vec<bool>,
 }
 
+/// Which per-bone tables a [`Pose`] holds, each level with those of the levels before it:
+/// LBS reads only the matrices, DQS and Blend also the dual quaternions and pivots, Optimized
+/// Centers also its own records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Tables {
+    Linear,
+    DualQuaternion,
+    Centers,
+}
+
 /// Tolerance of Blender's `is_orthonormal_m3` (on column dot products and squared lengths).
 const ORTHONORMAL_TOLERANCE: f32 = 1e-5;
 /// Blender takes the scale path when `|column lengths − 1|² > (1e-4)²`.
@@ -142,6 +152,13 @@ impl Pose {
     /// Errors name the first bone whose matrix is not finite, not affine, or (for rest matrices)
     /// not invertible.
     pub fn new(deform: &[Mat4], rest: Option<&[Mat4]>) -> Result<Self, SkinError> {
+        Self::with_tables(deform, rest, Tables::Centers)
+    }
+
+    /// [`Pose::new`] with only the tables up to `tables` (one skinning computes only what its
+    /// method reads: on a Rigify character's 720 expanded bones the dual quaternion and centers
+    /// tables cost a Linear frame more than its vertices did). The inputs are checked alike.
+    pub(crate) fn with_tables(deform: &[Mat4], rest: Option<&[Mat4]>, tables: Tables) -> Result<Self, SkinError> {
         for (bone, m) in deform.iter().enumerate() {
             check_affine("deform", bone, m)?;
         }
@@ -165,6 +182,9 @@ impl Pose {
                         problem: "is not invertible",
                     });
                 }
+                if tables == Tables::Linear {
+                    continue;
+                }
                 let (q, is_scaled) = blender_bone_rotation(m, b);
                 let q = q.normalize();
                 let t = m.w_axis.truncate();
@@ -180,6 +200,10 @@ impl Pose {
                 let pivot_bone = PivotBone { translation: AffineRows::from_mat4(&p), real: Vec4::from(q) };
                 pivot_dual.push(PivotDualBone::new(&pivot_bone));
                 pivot.push(pivot_bone);
+                scaled.push(is_scaled);
+                if tables != Tables::Centers {
+                    continue;
+                }
                 let stretch = if is_scaled { Mat3::from_quat(q).transpose() * Mat3::from_mat4(*m) } else { Mat3::IDENTITY };
                 let (s0, s1, s2) = (stretch.row(0), stretch.row(1), stretch.row(2));
                 cor.push(CorBone {
@@ -190,7 +214,6 @@ impl Pose {
                     padding: [0.0; 7],
                 });
                 cor_rigid.push(CorRigidBone { real: Vec4::from(q), half_translation: (0.5 * t).extend(0.0) });
-                scaled.push(is_scaled);
             }
         }
         Ok(Self { linear, dq, pivot, pivot_dual, cor, cor_rigid, scaled })
@@ -206,6 +229,12 @@ impl Pose {
     #[inline]
     pub fn has_dual_quaternions(&self) -> bool {
         self.dq.len() == self.linear.len()
+    }
+
+    /// Whether the centers of rotation tables were computed (with the rest matrices).
+    #[inline]
+    pub(crate) fn has_centers(&self) -> bool {
+        self.cor.len() == self.linear.len() && self.cor_rigid.len() == self.linear.len()
     }
 
     /// Whether any bone goes through Blender's scale path (scale, shear or reflection).

@@ -123,9 +123,14 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
         # Skin right away, so the first frame is already DQ Skin's (and binding errors show).
         # The view layer's depsgraph as last evaluated (the armatures' poses are there): forcing
         # an evaluation here would rebuild the scene's relations once more for nothing.
+        # Records first, then one context: each new record changes the scene's structure, and a
+        # context per object would rebuild the scan of what simulates on what once per object
+        # (with 200 characters, 1.2 s of a 5.4 s operator).
         depsgraph = context.view_layer.depsgraph
-        for obj in added:
-            REGISTRY.evaluate(REGISTRY.record_of(obj), depsgraph)
+        records = [REGISTRY.record_of(obj) for obj in added]
+        ctx = REGISTRY.context(depsgraph)
+        for rec in records:
+            REGISTRY.evaluate(rec, depsgraph, ctx=ctx)
         if len(added) == 1:
             mod = modifier.dq_skin_modifiers(added[0])[-1]
             self.report({"INFO"}, f"DQ Skin ({nodes.get_method(mod)}) replaces {nodes.get_companion(mod)['name']!r} on {added[0].name}")

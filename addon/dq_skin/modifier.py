@@ -94,7 +94,7 @@ class Plan:
     start: float
     quick: bool = False  # steady playback: only the positions change
     render: bool = False  # a render's evaluation (only the render side of the companion changes)
-    data: object = None  # the mesh's `meshdata.MeshData` as `_prepare` read it (full path)
+    data: object = None  # the mesh's `meshdata.MeshData` as `_prepare` read it (every full-path plan has it)
 
 
 def evaluate_object(obj, ctx: Context, force: bool = False) -> bool:
@@ -527,7 +527,7 @@ def finish(plan: Plan) -> None:
         out.written = plan.key
         st.status.seconds = time.perf_counter() - plan.start
         return
-    data = plan.data if plan.data is not None else meshdata.get(obj)
+    data = plan.data
     if kind == nodes.RESULT_REPLACE:
         mesh = result.data
         revision = meshdata.revision(obj.data)

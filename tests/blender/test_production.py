@@ -800,7 +800,7 @@ def test_weight_changes_show_on_the_next_evaluation(dq_skin):
     assert_same(obj, tw)
 
 
-def test_add_to_all_selected_objects_at_once(dq_skin):
+def test_add_to_all_selected_objects_at_once(dq_skin, monkeypatch):
     objs = []
     for i in range(4):
         obj, arm, _ = animated_tube(seed=0.1 * i)
@@ -816,12 +816,9 @@ def test_add_to_all_selected_objects_at_once(dq_skin):
         scans.append(version)
         return build(version)
 
-    scan.build = counted
-    try:
-        with bpy.context.temp_override(active_object=objs[0], selected_objects=[*objs, plain]):
-            assert bpy.ops.object.dq_skin_add(all_selected=True, method="DUAL_QUATERNION") == {"FINISHED"}
-    finally:
-        del scan.build
+    monkeypatch.setattr(scan, "build", counted)
+    with bpy.context.temp_override(active_object=objs[0], selected_objects=[*objs, plain]):
+        assert bpy.ops.object.dq_skin_add(all_selected=True, method="DUAL_QUATERNION") == {"FINISHED"}
     # What simulates on what is scanned once for the operator (not once per object: with 200
     # characters that was 1.2 s), and again at most for the update Blender runs after it.
     assert len(scans) <= 2, scans

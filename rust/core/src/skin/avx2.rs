@@ -9,7 +9,7 @@
 
 use core::arch::x86_64::*;
 
-use super::batch::{each4, transposed_window_sums, VectorOps};
+use super::batch::{transposed_window_sums, VectorOps};
 use super::influences::{Slot, LANES};
 
 /// Proof that the CPU has AVX2 and FMA.
@@ -202,39 +202,52 @@ impl VectorOps for Avx2 {
         // the record too. Known at compile time.
         assert!(offset + 4 * ROWS.next_multiple_of(2) <= stride, "the window's pairs of rows lie inside the record");
         debug_assert!(signed.is_none_or(|s| s.len() == slots.len()));
-        let group = if ROWS <= 4 { 4 } else { 2 };
+        // Lanes `l` and `l + 4` share the registers of a row after the sums, so the lanes are
+        // summed in pairs (l, l + 4), as many pairs at a time as eight accumulators hold, and
+        // each finished pair goes straight to its rows: the accumulators of only one group
+        // are live at a time.
+        let per_lane = ROWS.div_ceil(2);
+        let pairs_per_group = if ROWS == 4 { 1 } else { 4 / per_lane.min(4) };
         // SAFETY: AVX as in `instructions!`; the loads as below.
         unsafe {
-            // [lane][pair]: rows 2j (low half) and 2j + 1 (high half) of the lane.
-            let mut pairs = [[_mm256_setzero_ps(); 4]; 8];
-            for g in 0..8 / group {
+            // rows[r][l]: row r of lane l (low half) and of lane l + 4 (high half).
+            let mut rows = [[_mm256_setzero_ps(); 4]; ROWS];
+            for g in 0..4 / pairs_per_group {
+                let first = g * pairs_per_group;
+                // [lane pair][half][register j]: rows 2j (low half) and 2j + 1 (high half) of lane
+                // first + pair (half 0) or first + pair + 4 (half 1).
+                let mut acc = [[[_mm256_setzero_ps(); 4]; 2]; 4];
                 for (s, slot) in slots.iter().enumerate() {
                     let weights = signed.map_or(&slot.weights, |w| &w[s]);
-                    for l in g * group..(g + 1) * group {
-                        let lane = lane0 + l;
-                        debug_assert!((slot.bones[lane] as usize) < table.len());
-                        // SAFETY: the caller's contract: the lane's bone indexes `table`; the
-                        // pairs of rows lie inside its record (asserted above).
-                        let record = base.add(slot.bones[lane] as usize * stride + offset);
-                        let w = _mm256_broadcast_ss(&weights[lane]);
-                        for j in 0..ROWS.div_ceil(2) {
-                            pairs[l][j] = _mm256_fmadd_ps(_mm256_loadu_ps(record.add(8 * j)), w, pairs[l][j]);
+                    for (k, pair) in acc.iter_mut().enumerate().take(pairs_per_group) {
+                        for (half, regs) in pair.iter_mut().enumerate() {
+                            let lane = lane0 + first + k + 4 * half;
+                            debug_assert!((slot.bones[lane] as usize) < table.len());
+                            // SAFETY: the caller's contract: the lane's bone indexes `table`; the
+                            // pairs of rows lie inside its record (asserted above).
+                            let record = base.add(slot.bones[lane] as usize * stride + offset);
+                            let w = _mm256_broadcast_ss(&weights[lane]);
+                            for (j, reg) in regs.iter_mut().enumerate().take(per_lane) {
+                                *reg = _mm256_fmadd_ps(_mm256_loadu_ps(record.add(8 * j)), w, *reg);
+                            }
                         }
                     }
                 }
-            }
-            // Row r of lanes l (low half) and l + 4 (high half), then the in-half transposes.
-            let mut sums = [[_mm256_setzero_ps(); 4]; ROWS];
-            for (r, sum) in sums.iter_mut().enumerate() {
-                let rows = each4(|l| {
-                    let (a, b) = (pairs[l][r / 2], pairs[l + 4][r / 2]);
-                    if r % 2 == 1 {
-                        _mm256_permute2f128_ps::<0x31>(a, b)
-                    } else {
-                        _mm256_permute2f128_ps::<0x20>(a, b)
+                for (k, pair) in acc.iter().enumerate().take(pairs_per_group) {
+                    for (r, row) in rows.iter_mut().enumerate() {
+                        let (a, b) = (pair[0][r / 2], pair[1][r / 2]);
+                        row[first + k] = if r % 2 == 1 {
+                            _mm256_permute2f128_ps::<0x31>(a, b)
+                        } else {
+                            _mm256_permute2f128_ps::<0x20>(a, b)
+                        };
                     }
-                });
-                *sum = transpose_halves(self, rows);
+                }
+            }
+            // The in-half transposes: row r of lanes l and l + 4 to its four components.
+            let mut sums = [[_mm256_setzero_ps(); 4]; ROWS];
+            for (sum, row) in sums.iter_mut().zip(rows) {
+                *sum = transpose_halves(self, row);
             }
             sums
         }

@@ -318,29 +318,66 @@ impl Affine {
 
 /// LBS sums in registers: the weighted rows `Σ wᵢ·Mᵢ` (row-major 3×4) and the total weight.
 ///
+/// Summed per lane: each influence adds its weight (a broadcast load) times its bone's whole
+/// 16-float record (one load, folded into the FMA) to its lane's accumulator, and the sixteen
+/// accumulators are transposed once per batch. Transposing every slot's records instead cost
+/// 48 shuffles and 16 inserts per slot, which bounded LBS on the vector ports. The same FMA per
+/// float in the same slot order, so the sums are bit-identical to the portable copy's.
+///
 /// # Safety
 /// As [`accumulate_rigid`], for `linear`.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], __m512) {
-    let mut acc = [_mm512_setzero_ps(); 12];
+    const { assert!(core::mem::size_of::<LinearBone>() == 64) };
+    let base = linear.as_ptr() as *const f32;
+    let mut lanes = [_mm512_setzero_ps(); LANES];
     let mut contrib = _mm512_setzero_ps();
     for slot in slots {
-        // SAFETY: indices are in range (validated); a LinearBone is 16 floats (rows, padding).
-        let a = unsafe { load_columns(linear, &slot.bones, 0) };
-        // SAFETY: as above.
-        let b = unsafe { load_columns(linear, &slot.bones, 8) };
+        for (l, lane) in lanes.iter_mut().enumerate() {
+            // SAFETY: indices are in range (validated); a LinearBone is 16 floats (rows,
+            // zero padding).
+            let record = unsafe { _mm512_loadu_ps(base.add(record_offset(linear, &slot.bones, l))) };
+            *lane = _mm512_fmadd_ps(record, _mm512_set1_ps(slot.weights[l]), *lane);
+        }
         // SAFETY: a slot has 16 weights.
-        let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
-        for k in 0..8 {
-            acc[k] = _mm512_fmadd_ps(a[k], w, acc[k]);
-        }
-        for k in 0..4 {
-            acc[8 + k] = _mm512_fmadd_ps(b[k], w, acc[8 + k]);
-        }
-        contrib = _mm512_add_ps(contrib, w);
+        contrib = _mm512_add_ps(contrib, unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) });
     }
-    (acc, contrib)
+    (transpose_rows(&lanes), contrib)
+}
+
+/// Floats 0–11 of sixteen lane vectors as twelve 16-lane component vectors (float 12–15, the
+/// padding, dropped): the in-block 4×4 transposes of each group of four lanes, then the
+/// 128-bit blocks gathered across the groups.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn transpose_rows(r: &[__m512; LANES]) -> [__m512; 12] {
+    // u[g][e]: block b holds float 4b + e of lanes 4g .. 4g + 4.
+    let u: [[__m512; 4]; 4] = core::array::from_fn(|g| {
+        let r = &r[4 * g..4 * g + 4];
+        let t0 = _mm512_unpacklo_ps(r[0], r[1]);
+        let t1 = _mm512_unpackhi_ps(r[0], r[1]);
+        let t2 = _mm512_unpacklo_ps(r[2], r[3]);
+        let t3 = _mm512_unpackhi_ps(r[2], r[3]);
+        [
+            _mm512_shuffle_ps::<0x44>(t0, t2),
+            _mm512_shuffle_ps::<0xEE>(t0, t2),
+            _mm512_shuffle_ps::<0x44>(t1, t3),
+            _mm512_shuffle_ps::<0xEE>(t1, t3),
+        ]
+    });
+    let mut out = [_mm512_setzero_ps(); 12];
+    for e in 0..4 {
+        // Blocks 0–1 (low) and 2–3 (high) of groups 0 and 1, and of groups 2 and 3.
+        let lo01 = _mm512_shuffle_f32x4::<0x44>(u[0][e], u[1][e]);
+        let hi01 = _mm512_shuffle_f32x4::<0xEE>(u[0][e], u[1][e]);
+        let lo23 = _mm512_shuffle_f32x4::<0x44>(u[2][e], u[3][e]);
+        let hi23 = _mm512_shuffle_f32x4::<0xEE>(u[2][e], u[3][e]);
+        out[e] = _mm512_shuffle_f32x4::<0x88>(lo01, lo23);
+        out[4 + e] = _mm512_shuffle_f32x4::<0xDD>(lo01, lo23);
+        out[8 + e] = _mm512_shuffle_f32x4::<0x88>(hi01, hi23);
+    }
+    out
 }
 
 /// Everything skinning does to one full batch of 16 vertices, in registers: load, `premat`,

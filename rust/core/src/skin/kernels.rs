@@ -112,6 +112,21 @@ pub(crate) enum InstructionSet {
     Neon,
 }
 
+impl InstructionSet {
+    /// The name `DQSKIN_SIMD` gives the copy.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            InstructionSet::Baseline => "baseline",
+            #[cfg(target_arch = "x86_64")]
+            InstructionSet::Avx2Fma => "avx2",
+            #[cfg(target_arch = "x86_64")]
+            InstructionSet::Avx512 => "avx512",
+            #[cfg(target_arch = "aarch64")]
+            InstructionSet::Neon => "neon",
+        }
+    }
+}
+
 /// Which compiled copy of the kernels to run. A value is proof that the CPU has the copy's
 /// instruction sets: it is only made by [`Simd::available`] (and so [`Simd::detect`]) after
 /// detecting them, so code holding one may run that copy's `#[target_feature]` functions.

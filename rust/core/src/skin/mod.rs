@@ -165,6 +165,12 @@ pub fn skin(
     skin_with(kernels::Simd::detect(), method, positions, influences, pose, options, out)
 }
 
+/// The compiled copy of the kernels that [`skin`] and [`skin_many`] run here: `baseline`,
+/// `avx2`, `avx512` or `neon` (the best the CPU has, or the one `DQSKIN_SIMD` asks for).
+pub fn kernel_copy() -> &'static str {
+    kernels::Simd::detect().instruction_set().name()
+}
+
 /// [`skin`] on a given compiled copy of the kernels (tests run every copy the CPU has).
 fn skin_with(
     simd: kernels::Simd,

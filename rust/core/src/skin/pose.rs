@@ -25,12 +25,13 @@ impl AffineRows {
     }
 }
 
-/// A bone's deform matrix for LBS, padded to one 64-byte line so that SIMD code can load any
-/// 8-float window of it.
+/// A bone's deform matrix for LBS, padded with zeros to one 64-byte line so that SIMD code can
+/// load any 8-float window of it, or all of it as one 16-float vector.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct LinearBone {
     pub matrix: AffineRows,
+    pub padding: [f32; 4],
 }
 
 /// A bone as Blender's Preserve Volume sees it: the unit rotation quaternion `real` (x, y, z, w)
@@ -162,7 +163,7 @@ impl Pose {
         for (bone, m) in deform.iter().enumerate() {
             check_affine("deform", bone, m)?;
         }
-        let linear = deform.iter().map(|m| LinearBone { matrix: AffineRows::from_mat4(m) }).collect();
+        let linear = deform.iter().map(|m| LinearBone { matrix: AffineRows::from_mat4(m), padding: [0.0; 4] }).collect();
         let (mut dq, mut pivot, mut pivot_dual, mut cor, mut cor_rigid, mut scaled) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         if let Some(rest) = rest {

@@ -283,12 +283,28 @@ def case_grid(vertices: int, later: str, method: str, quick: bool) -> dict:
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     grid, arm = grid_rig(vertices)
     variants, bind_s = three_ways(grid, method, later)
+    frames = (5, 12, 19, 26, 33)
+    # Small meshes: also the in-evaluation alternative (no second evaluation), on its own copy.
+    in_evaluation = None
+    if vertices <= 10_000 and not later:
+        for f in frames[:2]:
+            bpy.context.scene.frame_set(f)
+        in_evaluation = InEvaluation(variants["dq_skin"], arm, grid)
+        variants["in_evaluation"] = in_evaluation.obj
     phases = Phases()
     phases.install()
     try:
-        row = alternate({k: [v] for k, v in variants.items()}, (5, 12, 19, 26, 33), 2 if quick else 5, 5 if quick else 9, phases)
+        row = alternate({k: [v] for k, v in variants.items()}, frames, 2 if quick else 5, 5 if quick else 9, phases)
+        if in_evaluation is not None:
+            show_only(grid, in_evaluation.obj)
+            bpy.context.scene.frame_set(frames[-1])
+            dg = bpy.context.evaluated_depsgraph_get()
+            row["in_evaluation_max_deviation"] = float(np.abs(positions_of(in_evaluation.obj, dg) - positions_of(grid, dg)).max())
+            row["in_evaluation_speedup"] = row["armature_ms"] / row["in_evaluation_ms"]
     finally:
         phases.remove()
+        if in_evaluation is not None:
+            in_evaluation.remove()
     show_only(variants["dq_skin"])
     row.update(kernel_ms(variants["dq_skin"], 5 if quick else 15))
     row.update(
@@ -412,12 +428,13 @@ def case_rigify(quick: bool) -> dict:
 
 class InEvaluation:
     """A measured alternative to DQ Skin's second evaluation, for one DQ Skin object whose
-    modifier is live (a B-Bone or envelope binding): a copy of its mesh whose only modifier is
-    a Mesh Cache reading a PC2 file on tmpfs, and a Python driver on that modifier (after every
-    deforming bone in Blender's graph: one variable per bone) that skins with the DQ Skin
-    modifier's own job and writes the file, inside Blender's first evaluation. Not a product
-    path: it needs Python drivers (blocked in untrusted files unless the function is known to
-    Blender's secure-expression check) and a file per object."""
+    modifier is live: a copy of its mesh whose only modifier is a Mesh Cache reading a PC2 file
+    on tmpfs, and a Python driver on that modifier (after every deforming bone in Blender's
+    graph: one variable per bone) that skins with the DQ Skin modifier's own job and writes the
+    file, inside Blender's first evaluation. The frame's bones come as the handler takes them:
+    from memory with every B-Bone's joints (envelopes, B-Bones), else the bound bones' channel
+    matrices. Not a product path: it needs Python drivers (blocked in untrusted files unless the
+    function is known to Blender's secure-expression check) and a file per object."""
 
     def __init__(self, dq, rig, body):
         import struct
@@ -426,7 +443,7 @@ class InEvaluation:
         addon = sys.modules[ADDON]
         mod = addon.modifier.dq_skin_modifiers(dq)[0]
         st = addon.modifier.state_of(dq, mod)
-        assert st.status.live and st.needs_effective and st.output.job is not None, st.status.message
+        assert st.status.live and st.output.job is not None, st.status.message
         self.obj = body.copy()
         self.obj.data = body.data.copy()
         self.obj.name = f"{body.name} in-evaluation"
@@ -435,7 +452,7 @@ class InEvaluation:
             self.obj.modifiers.remove(m)
         n = len(body.data.vertices)
         folder = "/dev/shm" if os.path.isdir("/dev/shm") else tempfile.gettempdir()
-        self.path = os.path.join(folder, f"dqskin-bench-{os.getpid()}.pc2")
+        self.path = os.path.join(folder, f"dqskin-bench-{os.getpid()}-{self.obj.session_uid}.pc2")
         self.header = b"POINTCACHE2\0" + struct.pack("<iiffi", 1, n, 0.0, 1.0, 1)
         with open(self.path, "wb") as f:
             f.write(self.header + np.zeros(n * 3, np.float32).tobytes())
@@ -448,17 +465,25 @@ class InEvaluation:
         namespace = bpy.app.driver_namespace
         self.calls = 0
         frame, skin_many = addon.pose.frame, addon.dqskin.skin_many  # (before `HandlerParts` wraps them)
+        pose_matrices, live = addon.rig.pose_matrices, st.needs_effective
+        indices = binding.bone_indices
+        all_bones = len(indices) == len(rig.pose.bones)
 
         def skin(*_):
             self.calls += 1
             arm_eval = rig.evaluated_get(namespace["depsgraph"])
             job = st.output.job
-            job.deform = frame(arm_eval, binding, segments).deform
+            if live:
+                job.deform = frame(arm_eval, binding, segments).deform
+            else:
+                deform = pose_matrices(arm_eval)
+                job.deform = deform if all_bones else np.ascontiguousarray(deform[indices])
             skin_many([job])
             os.pwrite(self.fd, memoryview(st.output.buffer).cast("B"), len(self.header))
             return 1.0
 
-        namespace["dqskin_bench_skin"] = skin
+        self.name = f"dqskin_bench_skin_{self.obj.session_uid}"
+        namespace[self.name] = skin
         driver = m.driver_add("factor").driver
         driver.type = "SCRIPTED"
         for i, name in enumerate(binding.bone_names):
@@ -468,10 +493,10 @@ class InEvaluation:
             # A B-Bone property links the driver after the bone's segments, any other after the bone.
             prop = "bbone_easein" if rig.data.bones[name].bbone_segments > 1 else "matrix"
             v.targets[0].data_path = f'pose.bones["{name}"].{prop}'
-        driver.expression = "dqskin_bench_skin()"
+        driver.expression = f"{self.name}()"
 
     def remove(self):
-        bpy.app.driver_namespace.pop("dqskin_bench_skin", None)
+        bpy.app.driver_namespace.pop(self.name, None)
         os.close(self.fd)
         os.unlink(self.path)
 
@@ -602,12 +627,25 @@ def case_crowd(count: int, quick: bool) -> dict:
     with bpy.context.temp_override(active_object=rest[0], selected_objects=rest):
         assert bpy.ops.object.dq_skin_add(method="DUAL_QUATERNION", all_selected=True) == {"FINISHED"}
     add_rest_s = time.perf_counter() - t
+    # The in-evaluation alternative, one Mesh Cache and driver per character (its own copies).
+    show_only(*dq)
+    for f in (3, 9):
+        bpy.context.scene.frame_set(f)
+    in_evaluation = [InEvaluation(c, a, m) for c, (m, a) in zip(dq, pairs)]
     phases = Phases()
     phases.install()
     try:
-        row = alternate({"armature": meshes, "dq_skin": dq}, (3, 9, 15, 21), 2 if quick else 4, 5 if quick else 9, phases)
+        variants = {"armature": meshes, "dq_skin": dq, "in_evaluation": [e.obj for e in in_evaluation]}
+        row = alternate(variants, (3, 9, 15, 21), 2 if quick else 4, 5 if quick else 9, phases)
+        row["in_evaluation_speedup"] = row["armature_ms"] / row["in_evaluation_ms"]
+        calls = sum(e.calls for e in in_evaluation)
     finally:
         phases.remove()
+        for e in in_evaluation:
+            e.remove()
+        for e in in_evaluation:
+            bpy.data.objects.remove(e.obj)
+    row["in_evaluation_driver_calls_per_character"] = calls / len(in_evaluation)
     # An edit elsewhere: move an Empty, in each scene.
     empty = bpy.data.objects.new("Elsewhere", None)
     bpy.context.scene.collection.objects.link(empty)

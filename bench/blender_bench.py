@@ -12,7 +12,8 @@ skinning modifier, Linear and Dual Quaternion; `dq_skin_add` to the first skinne
 weight change; 200 characters of 3,273 vertices (CesiumMan) and an edit elsewhere in that scene;
 a 3k-vertex mesh; a 100k grid on 16 B-Bones of 8 segments (Straight and Curved mapping); a
 generated Rigify character (`tests/blender/characters.py`), where the skinning share of a frame
-is the frame minus the rig alone. For DQ Skin it also reports where the time of a frame goes:
+is the frame minus the rig alone, and Rigify's Re-Generate Rig with two DQ Skin characters on
+it, with the extension enabled and disabled. For DQ Skin it also reports where the time of a frame goes:
 Blender's first evaluation (animation, pose), DQ Skin's frame handler (for B-Bones split into
 reading the pose, the influences, the kernel and writing the result), and Blender's second
 evaluation (DQ Skin result, modifiers after it).
@@ -515,6 +516,62 @@ class InEvaluation:
         os.unlink(self.path)
 
 
+def case_regenerate(quick: bool) -> dict:
+    """Rigify's *Re-Generate Rig* with two DQ Skin characters on the rig, then the next frame,
+    with the extension enabled and disabled (the same scene, as a file opened without it: the
+    companions deform), alternating in one session."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    addon_utils.enable("rigify", default_set=True)
+    body, rig, metarig = characters.build_rigify_character()
+    addon_utils.enable("rigify", default_set=True)  # (build_rigify_character restores its state)
+    second = body.copy()
+    second.data = body.data.copy()
+    bpy.context.scene.collection.objects.link(second)
+    for o in (body, second):
+        add_dq_skin(o, "DUAL_QUATERNION")
+    bpy.context.scene.frame_set(8)
+
+    def regenerate(frame: int) -> float:
+        bpy.data.orphans_purge(do_recursive=True)  # what the last rebuild left (its old widgets)
+        characters.select_only_object(metarig)
+        t = time.perf_counter()
+        assert bpy.ops.pose.rigify_generate() == {"FINISHED"}
+        bpy.context.scene.frame_set(frame)
+        for o in (body, second):
+            o.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+        return time.perf_counter() - t
+
+    def live() -> bool:
+        addon = sys.modules[ADDON]
+        return all(addon.modifier.state_of(o, addon.modifier.dq_skin_modifiers(o)[0]).status.live for o in (body, second))
+
+    times = {"with_extension": [], "without_extension": []}
+    skinned = []
+    # Rebuilds drift (Rigify's data grows), so the order is balanced: with, without, without,
+    # with, with, without.
+    order = ("with_extension", "without_extension") * (1 if quick else 3)
+    order = [name for k in range(0, len(order), 2) for name in (order[k : k + 2] if k % 4 == 0 else order[k : k + 2][::-1])]
+    try:
+        for k, name in enumerate(order):
+            if name == "with_extension":
+                times[name].append(regenerate(9 + k))
+                skinned.append(live())  # DQ Skin deformed the frame after the rebuild
+                continue
+            addon_utils.disable(ADDON, default_set=True)
+            try:
+                times[name].append(regenerate(9 + k))
+            finally:
+                addon_utils.enable(ADDON, default_set=True)
+                bpy.context.scene.frame_set(8)
+    finally:
+        addon_utils.disable("rigify", default_set=True)
+    row = {f"{k}_s": float(np.median(v)) for k, v in times.items()}
+    row.update({f"{k}_each_s": [round(x, 3) for x in v] for k, v in times.items()})
+    row.update(case="Rigify Re-Generate Rig, two DQ Skin characters on the rig, and the next frame", rounds=len(times["with_extension"]), dq_skin_live_after_each=all(skinned))
+    row["ratio"] = row["with_extension_s"] / row["without_extension_s"]
+    return row
+
+
 def case_binding(vertices: int) -> dict:
     """`dq_skin_add` until the first skinned frame is evaluated."""
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -705,11 +762,11 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "target" / "bench-blender.json")
     parser.add_argument("--quick", action="store_true", help="smaller meshes, fewer rounds")
-    parser.add_argument("--only", nargs="*", default=None, help="case groups: grid, later, binding, weights, crowd, small, centers, bbones, rigify")
+    parser.add_argument("--only", nargs="*", default=None, help="case groups: grid, later, binding, weights, crowd, small, centers, bbones, rigify, regenerate")
     args = parser.parse_args()
     if addon_utils.enable(ADDON, default_set=True) is None:
         raise SystemExit("the DQ Skin extension is not installed: run make setup")
-    only = set(args.only) if args.only else {"grid", "later", "binding", "weights", "crowd", "small", "centers", "bbones", "rigify"}
+    only = set(args.only) if args.only else {"grid", "later", "binding", "weights", "crowd", "small", "centers", "bbones", "rigify", "regenerate"}
     q = args.quick
     big = [250_000] if q else [250_000, 1_000_000]
     rows = []
@@ -745,6 +802,8 @@ def main() -> int:
                 report(case_bbone_grid(100_000, mapping, method, q))
     if "rigify" in only:
         report(case_rigify(q))
+    if "regenerate" in only:
+        report(case_regenerate(q))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"blender": bpy.app.version_string, "threads": os.cpu_count(), "rows": rows}, indent=2))
     print(f"wrote {args.out}")

@@ -304,13 +304,23 @@ def test_ctrl_c_stops_a_long_precompute():
     start = time.perf_counter()
     dqskin.centers_of_rotation(positions[:2000], tris[:3000] % 2000, dqskin.Influences(influences.offsets[:2001], influences.bones[: influences.offsets[2000]], influences.weights[: influences.offsets[2000]], 30))
     small = time.perf_counter() - start
+    # The interrupt (at 0.2 s) must come while the precompute runs: on a fast machine a longer
+    # tube (the precompute's time grows with the vertices; 33,600 of them once took under 0.2 s).
+    rings = 700
+    while small * rings * 48 / 2000 < 0.6 and rings < 700 * 16:
+        rings *= 2
+    if rings != 700:
+        positions, tris, influences, _ = tube(rings=rings, segments=48, bones=30, seed=2, length=30.0)
     timer = threading.Timer(0.2, _thread.interrupt_main)
     timer.start()
     start = time.perf_counter()
     try:
         with pytest.raises(KeyboardInterrupt):
             dqskin.centers_of_rotation(positions, tris, influences)
-            time.sleep(5)  # finished before the interrupt (a very fast machine): let it arrive
+            # Finished before the interrupt all the same: let it arrive (a simulated interrupt
+            # does not wake a long sleep, so short ones).
+            for _ in range(500):
+                time.sleep(0.01)
     finally:
         timer.cancel()
     assert time.perf_counter() - start < 0.2 + 1.0 + 20 * small

@@ -313,31 +313,41 @@ fn centers_of_rotation<'py>(
             }
             _ => None,
         };
-        // Between parts of the work the GIL is taken back: Ctrl-C, then the callback.
-        let mut stopped: Option<PyErr> = None;
+        // Between parts of the work the GIL is taken back: Ctrl-C, then the callback; between
+        // the stages of the setup (before the callback's total is known), Ctrl-C only.
+        let stopped: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
+        let interrupted = || {
+            Python::attach(|py| match py.check_signals() {
+                Err(e) => {
+                    *stopped.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+                    true
+                }
+                Ok(()) => false,
+            })
+        };
         let result = py.detach(|| {
-            dqskin_core::centers_of_rotation_with_progress(points, &tris, infl, sigma, &mut |done, total| {
+            let mut progress = |done, total| {
+                if interrupted() {
+                    return false;
+                }
                 Python::attach(|py| {
-                    if let Err(e) = py.check_signals() {
-                        stopped = Some(e);
-                        return false;
-                    }
                     let Some(cb) = &callback else { return true };
                     match cb.bind(py).call1((done, total)) {
                         Ok(r) if r.is_instance_of::<pyo3::types::PyBool>() && !r.is_truthy().unwrap_or(true) => {
-                            stopped = Some(Cancelled::new_err("centers_of_rotation was cancelled by its progress callback"));
+                            *stopped.lock().unwrap_or_else(|p| p.into_inner()) = Some(Cancelled::new_err("centers_of_rotation was cancelled by its progress callback"));
                             false
                         }
                         Ok(_) => true,
                         Err(e) => {
-                            stopped = Some(e);
+                            *stopped.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
                             false
                         }
                     }
                 })
-            })
+            };
+            dqskin_core::centers_of_rotation_interruptible(points, &tris, infl, sigma, &mut progress, &mut || interrupted())
         });
-        if let Some(e) = stopped {
+        if let Some(e) = stopped.into_inner().unwrap_or_else(|p| p.into_inner()) {
             return Err(e);
         }
         let centers = result.map_err(skin_error)?;

@@ -177,11 +177,12 @@ impl VectorOps for Avx2 {
         }
     }
 
-    /// Two rows or more: accumulated per lane, a few lanes at a time (rows in pairs, one
-    /// register each; four lanes for up to four rows, two for up to eight: at most eight
-    /// accumulators), and transposed once at the end, which needs per influence only loads (the
-    /// bone index, the weight broadcast, the rows) and FMAs. One row: from transposed records,
-    /// fewer instructions there.
+    /// Two rows or more: accumulated per lane, lanes `l` and `l + 4` together (rows in pairs,
+    /// one register each; all four lane pairs at once for two rows, two for three, one for four
+    /// or more: at most eight accumulators), each finished lane pair combined into its rows,
+    /// and transposed at the end, which needs per influence only loads (the bone index, the
+    /// weight broadcast, the rows) and FMAs. One row: from transposed records, fewer
+    /// instructions there.
     #[inline(always)]
     unsafe fn window_sums<T, const ROWS: usize>(
         self,
@@ -207,6 +208,8 @@ impl VectorOps for Avx2 {
         // each finished pair goes straight to its rows: the accumulators of only one group
         // are live at a time.
         let per_lane = ROWS.div_ceil(2);
+        // Four rows: the sixteen row registers kept, so one lane pair at a time (two spilled
+        // and ran slower, measured).
         let pairs_per_group = if ROWS == 4 { 1 } else { 4 / per_lane.min(4) };
         // SAFETY: AVX as in `instructions!`; the loads as below.
         unsafe {

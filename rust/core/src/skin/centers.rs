@@ -85,10 +85,26 @@ pub fn centers_of_rotation_with_progress(
     sigma: f32,
     progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<Centers, SkinError> {
-    centers_with(Simd::detect(), positions, triangles, influences, sigma, progress)
+    centers_of_rotation_interruptible(positions, triangles, influences, sigma, progress, &mut || false)
+}
+
+/// [`centers_of_rotation_with_progress`] that also asks `interrupted()` between the stages of
+/// the setup, before the amount of work (and so `progress`'s total) is known: the setup takes
+/// seconds on a mesh of half a million vertices. `true` stops the computation with
+/// [`SkinError::Cancelled`] (the Python module checks for Ctrl-C there).
+pub fn centers_of_rotation_interruptible(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+    interrupted: &mut dyn FnMut() -> bool,
+) -> Result<Centers, SkinError> {
+    centers_counted(Simd::detect(), Some(cells::TOLERANCE), positions, triangles, influences, sigma, progress, interrupted).map(|(c, _)| c)
 }
 
 /// [`centers_of_rotation_with_progress`] on a given compiled copy of the inner loop.
+#[cfg(test)]
 pub(super) fn centers_with(
     simd: Simd,
     positions: &[[f32; 3]],
@@ -97,11 +113,13 @@ pub(super) fn centers_with(
     sigma: f32,
     progress: &mut dyn FnMut(usize, usize) -> bool,
 ) -> Result<Centers, SkinError> {
-    centers_counted(simd, Some(cells::TOLERANCE), positions, triangles, influences, sigma, progress).map(|(c, _)| c)
+    centers_counted(simd, Some(cells::TOLERANCE), positions, triangles, influences, sigma, progress, &mut || false).map(|(c, _)| c)
 }
 
-/// [`centers_with`] with the fast path's tolerance on `E/D̃` (see `cells.rs`; `None`: exact sums
-/// only), also returning how many distinct weight vectors took the fast path.
+/// The precompute on a given compiled copy of the inner loop, with the fast path's tolerance on
+/// `E/D̃` (see `cells.rs`; `None`: exact sums only), also returning how many distinct weight
+/// vectors took the fast path. `interrupted` is asked between the setup's stages.
+#[allow(clippy::too_many_arguments)] // the inputs, the two knobs tests turn, the two callbacks
 pub(super) fn centers_counted(
     simd: Simd,
     tolerance: Option<f64>,
@@ -110,6 +128,7 @@ pub(super) fn centers_counted(
     influences: &Influences,
     sigma: f32,
     progress: &mut dyn FnMut(usize, usize) -> bool,
+    interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<(Centers, usize), SkinError> {
     let n = influences.vertex_count();
     if positions.len() != n {
@@ -122,13 +141,18 @@ pub(super) fn centers_counted(
         return Err(SkinError::NotFinite { what: "positions", index });
     }
     super::check_triangles(triangles, n)?;
+    let mut check = || if interrupted() { Err(SkinError::Cancelled) } else { Ok(()) };
+    check()?;
     let weights = WeightVectors::new(influences);
+    check()?;
     let classes = VertexClasses::new(&weights);
-    let index = PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance);
+    check()?;
+    let index = PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance, &mut check)?;
     let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
 
     // Parts of roughly equal work, so progress advances evenly and cancelling is quick.
     let work: Vec<usize> = crate::pool::run(|| classes.members.par_iter().map(|c| index.work(&weights, c.first)).collect());
+    check()?;
     let total: usize = work.iter().sum();
     let part_work = (total / 100).max(1 << 16);
     let mut parts = vec![0usize];
@@ -332,7 +356,15 @@ struct Entry {
 }
 
 impl PairIndex {
-    fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]], weights: &WeightVectors, sigma: f64, tolerance: Option<f64>) -> Self {
+    /// The index, or `check`'s error between its stages.
+    fn new(
+        positions: &[[f32; 3]],
+        triangles: &[[u32; 3]],
+        weights: &WeightVectors,
+        sigma: f64,
+        tolerance: Option<f64>,
+        check: &mut dyn FnMut() -> Result<(), SkinError>,
+    ) -> Result<Self, SkinError> {
         let inv_sigma2 = 1.0 / (sigma * sigma);
         // Per triangle (in parallel): its weight vector, area and area × centroid.
         let each: Vec<(WeightKey, f64, [f64; 3])> = crate::pool::run(|| {
@@ -360,10 +392,12 @@ impl PairIndex {
                 .flatten()
                 .collect()
         });
+        check()?;
         // Triangles merged by weight vector: Σ A and Σ A·c (a stable sort keeps the sums in
         // triangle order, so the result does not depend on the threads).
         let mut each = each;
         crate::pool::run(|| each.par_sort_by(|a, b| a.0.cmp(&b.0)));
+        check()?;
         let merged: Vec<(WeightKey, (f64, [f64; 3]))> = each
             .chunk_by(|a, b| a.0 == b.0)
             .map(|group| {
@@ -378,6 +412,7 @@ impl PairIndex {
             })
             .collect();
         drop(each);
+        check()?;
         // Lists per bone pair.
         let mut ids: HashMap<(u32, u32), usize> = HashMap::new();
         let mut lists: Vec<Vec<Entry>> = Vec::new();
@@ -395,6 +430,7 @@ impl PairIndex {
             }
         }
         drop(merged);
+        check()?;
         // Equal (bⱼ, bₖ) in one list merged; padded to WIDTH; split into cells.
         let fast = tolerance.is_some() && inv_sigma2 <= SHIFT_THRESHOLD;
         let mut index = Self { ids, exact: Soa::new(), raw: Soa::new(), cell_starts: vec![0], cells: Vec::new(), fast, tolerance: tolerance.unwrap_or(0.0) };
@@ -419,13 +455,14 @@ impl PairIndex {
                 })
                 .collect()
         });
+        check()?;
         for (list, raw, cells) in prepared {
             index.exact.push(&list);
             index.raw.push(&raw);
             index.cells.extend(cells);
             index.cell_starts.push(index.cells.len());
         }
-        index
+        Ok(index)
     }
 
     /// The bone pairs of vertex `v` with their id and weights `(aⱼ, aₖ)`.

@@ -36,7 +36,7 @@ mod pose;
 
 pub use armature::{ArmaturePose, BBoneCache, PoseChannel};
 pub use bbone::{bbone_joint_starts, bbone_segment_matrices, bbones_from_rest, bsp_depth, curved_segment, BBone, Mapping, SegmentBoundary, MAX_BBONE_SEGMENTS};
-pub use centers::{centers_of_rotation, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA};
+pub use centers::{centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA};
 pub use envelope::{distance_factor, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
 pub use influences::{Influence, Influences, MAX_INFLUENCES_PER_VERTEX};

@@ -143,12 +143,12 @@ fn the_fast_path_is_within_its_certified_bound_where_it_is_used() {
     let c = Creature::new(15_000).unwrap();
     let diag = diagonal(&c.positions);
     let (p, t, i) = (&c.positions, &c.triangles, &c.influences);
-    let (exact, none) = centers_counted(Simd::detect(), None, p, t, i, DEFAULT_SIGMA, &mut |_, _| true).unwrap();
+    let (exact, none) = centers_counted(Simd::detect(), None, p, t, i, DEFAULT_SIGMA, &mut |_, _| true, &mut || false).unwrap();
     assert_eq!(none, 0);
     // The certificate allows 1e-7 × diagonal; f32 rounding of the centers adds ~1e-7 of their size.
     let tolerance = 1e-6 * diag;
     for simd in Simd::available() {
-        let (fast, count) = centers_counted(simd, Some(cells::TOLERANCE), p, t, i, DEFAULT_SIGMA, &mut |_, _| true).unwrap();
+        let (fast, count) = centers_counted(simd, Some(cells::TOLERANCE), p, t, i, DEFAULT_SIGMA, &mut |_, _| true, &mut || false).unwrap();
         // Nearly every vertex has its own weights; most should take the fast path.
         assert!(count * 10 >= 8 * p.len(), "{simd:?}: only {count} of {} on the fast path", p.len());
         assert_eq!(fast.has_center, exact.has_center);
@@ -160,7 +160,7 @@ fn the_fast_path_is_within_its_certified_bound_where_it_is_used() {
         assert!(worst <= tolerance, "{simd:?}: {worst} > {tolerance}");
     }
     // A tolerance tight enough that some vertices fall back to the exact sums.
-    let (mixed, count) = centers_counted(Simd::detect(), Some(1e-10), p, t, i, DEFAULT_SIGMA, &mut |_, _| true).unwrap();
+    let (mixed, count) = centers_counted(Simd::detect(), Some(1e-10), p, t, i, DEFAULT_SIGMA, &mut |_, _| true, &mut || false).unwrap();
     assert!(count > 0 && count * 10 < 9 * p.len(), "{count} of {} on the fast path", p.len());
     for (a, b) in mixed.centers.iter().zip(&exact.centers) {
         assert!((Vec3::from_array(*a).as_dvec3() - Vec3::from_array(*b).as_dvec3()).length() <= tolerance);
@@ -240,6 +240,44 @@ fn progress_is_reported_and_cancelling_stops() {
     });
     assert_eq!(err, Err(SkinError::Cancelled));
     assert_eq!(seen, 2, "stops at the first refusal");
+}
+
+/// The setup (seconds on a mesh of half a million vertices, before `progress`'s total is known)
+/// asks `interrupted` between its stages, so Ctrl-C stops it there too; asked to stop at any of
+/// them, nothing is reported and the result is `Cancelled`.
+#[test]
+fn the_setup_can_be_interrupted_at_each_stage() {
+    let c = Creature::new(3000).unwrap();
+    // (result, checks before the first progress report if there was one, checks in all)
+    let run = |stop_at: usize| {
+        let asked = std::cell::Cell::new(0usize);
+        let mut first = None;
+        let result = centers_of_rotation_interruptible(
+            &c.positions,
+            &c.triangles,
+            &c.influences,
+            0.1,
+            &mut |_, _| {
+                first.get_or_insert(asked.get());
+                true
+            },
+            &mut || {
+                asked.set(asked.get() + 1);
+                asked.get() == stop_at
+            },
+        );
+        (result, first, asked.get())
+    };
+    let (done, first, all) = run(usize::MAX);
+    assert!(done.is_ok());
+    let before_work = first.expect("progress was reported");
+    assert!(before_work >= 6, "the setup asked {before_work} times");
+    assert_eq!(all, before_work, "asked during the setup only (progress covers the rest)");
+    for stop_at in 1..=before_work {
+        let (result, first, _) = run(stop_at);
+        assert_eq!(result.unwrap_err(), SkinError::Cancelled, "stopped at check {stop_at}");
+        assert!(first.is_none(), "no progress reported when stopped at check {stop_at}");
+    }
 }
 
 #[test]

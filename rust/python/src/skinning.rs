@@ -316,36 +316,32 @@ fn centers_of_rotation<'py>(
         // Between parts of the work the GIL is taken back: Ctrl-C, then the callback; between
         // the stages of the setup (before the callback's total is known), Ctrl-C only.
         let stopped: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
-        let interrupted = || {
-            Python::attach(|py| match py.check_signals() {
-                Err(e) => {
-                    *stopped.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
-                    true
-                }
-                Ok(()) => false,
-            })
+        // Records why the computation stops; false, the answer that stops it.
+        let stop = |e: PyErr| {
+            *stopped.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+            false
+        };
+        let signalled = |py: Python<'_>| match py.check_signals() {
+            Err(e) => !stop(e),
+            Ok(()) => false,
         };
         let result = py.detach(|| {
             let mut progress = |done, total| {
-                if interrupted() {
-                    return false;
-                }
                 Python::attach(|py| {
+                    if signalled(py) {
+                        return false;
+                    }
                     let Some(cb) = &callback else { return true };
                     match cb.bind(py).call1((done, total)) {
                         Ok(r) if r.is_instance_of::<pyo3::types::PyBool>() && !r.is_truthy().unwrap_or(true) => {
-                            *stopped.lock().unwrap_or_else(|p| p.into_inner()) = Some(Cancelled::new_err("centers_of_rotation was cancelled by its progress callback"));
-                            false
+                            stop(Cancelled::new_err("centers_of_rotation was cancelled by its progress callback"))
                         }
                         Ok(_) => true,
-                        Err(e) => {
-                            *stopped.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
-                            false
-                        }
+                        Err(e) => stop(e),
                     }
                 })
             };
-            dqskin_core::centers_of_rotation_interruptible(points, &tris, infl, sigma, &mut progress, &mut || interrupted())
+            dqskin_core::centers_of_rotation_interruptible(points, &tris, infl, sigma, &mut progress, &mut || Python::attach(signalled))
         });
         if let Some(e) = stopped.into_inner().unwrap_or_else(|p| p.into_inner()) {
             return Err(e);

@@ -39,27 +39,30 @@ unsafe fn load_columns<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [
     transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
 }
 
+/// The 4×4 transposes within each 128-bit block of four rows: block `b` of output `e` holds
+/// float `e` of block `b` of rows 0–3.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn transpose_blocks(r: [__m512; 4]) -> [__m512; 4] {
+    let t0 = _mm512_unpacklo_ps(r[0], r[1]);
+    let t1 = _mm512_unpackhi_ps(r[0], r[1]);
+    let t2 = _mm512_unpacklo_ps(r[2], r[3]);
+    let t3 = _mm512_unpackhi_ps(r[2], r[3]);
+    [
+        _mm512_shuffle_ps::<0x44>(t0, t2),
+        _mm512_shuffle_ps::<0xEE>(t0, t2),
+        _mm512_shuffle_ps::<0x44>(t1, t3),
+        _mm512_shuffle_ps::<0xEE>(t1, t3),
+    ]
+}
+
 /// Transposes eight rows `[record l | record l + 8]` (8 floats each) into eight 16-lane
 /// component vectors.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 fn transpose(r: [__m512; 8]) -> [__m512; 8] {
-    let t0 = _mm512_unpacklo_ps(r[0], r[1]);
-    let t1 = _mm512_unpackhi_ps(r[0], r[1]);
-    let t2 = _mm512_unpacklo_ps(r[2], r[3]);
-    let t3 = _mm512_unpackhi_ps(r[2], r[3]);
-    let t4 = _mm512_unpacklo_ps(r[4], r[5]);
-    let t5 = _mm512_unpackhi_ps(r[4], r[5]);
-    let t6 = _mm512_unpacklo_ps(r[6], r[7]);
-    let t7 = _mm512_unpackhi_ps(r[6], r[7]);
-    let u0 = _mm512_shuffle_ps::<0x44>(t0, t2);
-    let u1 = _mm512_shuffle_ps::<0xEE>(t0, t2);
-    let u2 = _mm512_shuffle_ps::<0x44>(t1, t3);
-    let u3 = _mm512_shuffle_ps::<0xEE>(t1, t3);
-    let u4 = _mm512_shuffle_ps::<0x44>(t4, t6);
-    let u5 = _mm512_shuffle_ps::<0xEE>(t4, t6);
-    let u6 = _mm512_shuffle_ps::<0x44>(t5, t7);
-    let u7 = _mm512_shuffle_ps::<0xEE>(t5, t7);
+    let [u0, u1, u2, u3] = transpose_blocks([r[0], r[1], r[2], r[3]]);
+    let [u4, u5, u6, u7] = transpose_blocks([r[4], r[5], r[6], r[7]]);
     // 128-bit blocks: low components from blocks 0 and 2, high ones from blocks 1 and 3.
     let lo = _mm512_setr_epi32(0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27);
     let hi = _mm512_setr_epi32(4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14, 15, 28, 29, 30, 31);
@@ -353,19 +356,8 @@ unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], _
 #[target_feature(enable = "avx512f")]
 fn transpose_rows(r: &[__m512; LANES]) -> [__m512; 12] {
     // u[g][e]: block b holds float 4b + e of lanes 4g .. 4g + 4.
-    let u: [[__m512; 4]; 4] = core::array::from_fn(|g| {
-        let r = &r[4 * g..4 * g + 4];
-        let t0 = _mm512_unpacklo_ps(r[0], r[1]);
-        let t1 = _mm512_unpackhi_ps(r[0], r[1]);
-        let t2 = _mm512_unpacklo_ps(r[2], r[3]);
-        let t3 = _mm512_unpackhi_ps(r[2], r[3]);
-        [
-            _mm512_shuffle_ps::<0x44>(t0, t2),
-            _mm512_shuffle_ps::<0xEE>(t0, t2),
-            _mm512_shuffle_ps::<0x44>(t1, t3),
-            _mm512_shuffle_ps::<0xEE>(t1, t3),
-        ]
-    });
+    let group = |g: usize| transpose_blocks([r[4 * g], r[4 * g + 1], r[4 * g + 2], r[4 * g + 3]]);
+    let u = [group(0), group(1), group(2), group(3)];
     let mut out = [_mm512_setzero_ps(); 12];
     for e in 0..4 {
         // Blocks 0–1 (low) and 2–3 (high) of groups 0 and 1, and of groups 2 and 3.

@@ -103,19 +103,6 @@ pub fn centers_of_rotation_interruptible(
     centers_counted(Simd::detect(), Some(cells::TOLERANCE), positions, triangles, influences, sigma, progress, interrupted).map(|(c, _)| c)
 }
 
-/// [`centers_of_rotation_with_progress`] on a given compiled copy of the inner loop.
-#[cfg(test)]
-pub(super) fn centers_with(
-    simd: Simd,
-    positions: &[[f32; 3]],
-    triangles: &[[u32; 3]],
-    influences: &Influences,
-    sigma: f32,
-    progress: &mut dyn FnMut(usize, usize) -> bool,
-) -> Result<Centers, SkinError> {
-    centers_counted(simd, Some(cells::TOLERANCE), positions, triangles, influences, sigma, progress, &mut || false).map(|(c, _)| c)
-}
-
 /// The precompute on a given compiled copy of the inner loop, with the fast path's tolerance on
 /// `E/D̃` (see `cells.rs`; `None`: exact sums only), also returning how many distinct weight
 /// vectors took the fast path. `interrupted` is asked between the setup's stages.

@@ -86,7 +86,7 @@ fn check_against_naive(positions: &[[f32; 3]], triangles: &[[u32; 3]], influence
     let diag = diagonal(positions).max(1e-30);
     let mut results = Vec::new();
     for simd in Simd::available() {
-        let got = centers_with(simd, positions, triangles, influences, sigma, &mut |_, _| true).unwrap();
+        let (got, _) = centers_counted(simd, Some(cells::TOLERANCE), positions, triangles, influences, sigma, &mut |_, _| true, &mut || false).unwrap();
         for (v, (w, (c, has))) in want.iter().zip(got.centers.iter().zip(&got.has_center)).enumerate() {
             match w {
                 Some(w) => {

@@ -16,7 +16,10 @@ is the frame minus the rig alone, and Rigify's Re-Generate Rig with two DQ Skin 
 it, with the extension enabled and disabled. For DQ Skin it also reports where the time of a frame goes:
 Blender's first evaluation (animation, pose), DQ Skin's frame handler (for B-Bones split into
 reading the pose, the influences, the kernel and writing the result), and Blender's second
-evaluation (DQ Skin result, modifiers after it).
+evaluation (DQ Skin result, modifiers after it). On the 3k grid, the crowd and Rigify it also
+measures what Blender costs before any skinning (`Floors`, `reevaluation_ms`): a second
+evaluation of the scene, a Mesh Cache ordered after the bones with and without Python, the
+Armature modifier with nothing bound.
 
 Usage: python bench/blender_bench.py [--out FILE] [--quick] [--only NAME...]
 """
@@ -260,6 +263,27 @@ class HandlerParts:
         return {f"{prefix}_handler_{k}_ms": 1e3 * float(np.median(v)) for k, v in self.totals.items() if v}
 
 
+def reevaluation_ms(template, runs: int = 40) -> float:
+    """Blender's own cost of evaluating the scene again after a change to one mesh that nothing
+    depends on (a copy of `template`'s mesh on an object without modifiers, visible with what
+    is shown now): the least any second evaluation costs in this scene, whatever it evaluates.
+    Median ms of tagging that mesh and updating the view layer."""
+    mesh = template.data.copy()
+    o = bpy.data.objects.new(f"{template.name} re-evaluation", mesh)
+    bpy.context.scene.collection.objects.link(o)
+    bpy.context.view_layer.update()
+    ts = []
+    for _ in range(runs):
+        t = time.perf_counter()
+        mesh.update_tag()
+        bpy.context.view_layer.update()
+        ts.append(time.perf_counter() - t)
+    bpy.data.objects.remove(o)
+    bpy.data.meshes.remove(mesh)
+    bpy.context.view_layer.update()
+    return 1e3 * float(np.median(ts))
+
+
 def kernel_ms(obj, runs: int) -> dict:
     """`dqskin.skin_many` alone on the job the modifier last ran (its inputs, spaces and
     output), Linear and Dual Quaternion."""
@@ -292,6 +316,8 @@ def case_grid(vertices: int, later: str, method: str, quick: bool) -> dict:
             bpy.context.scene.frame_set(f)
         in_evaluation = InEvaluation(variants["dq_skin"], arm, grid)
         variants["in_evaluation"] = in_evaluation.obj
+        floors = Floors(arm, grid, in_evaluation.bone_names)
+        variants.update(floors.objects)
     phases = Phases()
     phases.install()
     try:
@@ -306,7 +332,9 @@ def case_grid(vertices: int, later: str, method: str, quick: bool) -> dict:
         phases.remove()
         if in_evaluation is not None:
             in_evaluation.remove()
+            floors.remove()
     show_only(variants["dq_skin"])
+    row["reevaluation_floor_ms"] = reevaluation_ms(grid)
     row.update(kernel_ms(variants["dq_skin"], 5 if quick else 15))
     row.update(
         case=f"grid {len(grid.data.vertices) // 1000}k{' + ' + later if later else ''} {method.lower()}",
@@ -396,6 +424,8 @@ def case_rigify(quick: bool) -> dict:
         bpy.context.scene.frame_set(f)
     in_evaluation = InEvaluation(variants["dq_skin_linear"], rig, body)
     variants["in_evaluation_linear"] = in_evaluation.obj
+    floors = Floors(rig, body, in_evaluation.bone_names)
+    variants.update(floors.objects)
     phases, parts = Phases(), HandlerParts()
     phases.install()
     parts.install()
@@ -408,10 +438,12 @@ def case_rigify(quick: bool) -> dict:
         row["in_evaluation_linear_max_deviation"] = float(np.abs(positions_of(in_evaluation.obj, dg) - positions_of(body, dg)).max())
         row["in_evaluation_driver_calls"] = in_evaluation.calls
         row["in_evaluation_driver_variables"] = in_evaluation.variables
+        row["floor_simple_expression"] = floors.simple["floor_mesh_cache"]
     finally:
         phases.remove()
         parts.remove()
         in_evaluation.remove()
+        floors.remove()
     row.update(parts.medians("dq_skin"))
     deforming = [b for b in rig.data.bones if b.use_deform]
     row.update(
@@ -425,6 +457,10 @@ def case_rigify(quick: bool) -> dict:
         row[f"{reference}_share_ms"] = row[f"{reference}_ms"] - row["none_ms"]
         row[f"{skin}_share_ms"] = row[f"{skin}_ms"] - row["none_ms"]
         row[f"{skin}_share_speedup"] = row[f"{reference}_share_ms"] / max(row[f"{skin}_share_ms"], 1e-6)
+    for kind in floors.objects:
+        row[f"{kind}_share_ms"] = row[f"{kind}_ms"] - row["none_ms"]
+    show_only(variants["dq_skin_linear"])
+    row["reevaluation_floor_ms"] = reevaluation_ms(body)
     return row
 
 
@@ -464,6 +500,7 @@ class InEvaluation:
         m.time_mode, m.play_mode, m.eval_frame = "FRAME", "CUSTOM", 0.0
         m.deform_mode, m.interpolation = "OVERWRITE", "NONE"
         binding, segments = st.binding.binding, st.binding.segments
+        self.bone_names = list(binding.bone_names)
         namespace = bpy.app.driver_namespace
         self.calls = 0
         frame, skin_many = addon.pose.frame, addon.dqskin.skin_many  # (before `HandlerParts` wraps them)
@@ -486,33 +523,90 @@ class InEvaluation:
 
         self.name = f"dqskin_bench_skin_{self.obj.session_uid}"
         namespace[self.name] = skin
-        driver = m.driver_add("factor").driver
-        driver.type = "SCRIPTED"
-        # A Python driver costs about 0.6 µs per variable and evaluation, so only as many as order
-        # it after every bone the job reads: each B-Bone's segments (a B-Bone property links the
-        # driver after them), and the bones with no bound descendant (a bone is done before its
-        # children, so after those every bound bone is).
-        bound = set(binding.bone_names)
-        below = set()
-        for b in rig.data.bones:
-            if b.name in bound:
-                p = b.parent
-                while p is not None:
-                    below.add(p.name)
-                    p = p.parent
-        targets = [(n, "bbone_easein") for n in binding.bone_names if rig.data.bones[n].bbone_segments > 1]
-        targets += [(n, "matrix") for n in binding.bone_names if rig.data.bones[n].bbone_segments <= 1 and n not in below]
-        self.variables = len(targets)
-        for i, (name, prop) in enumerate(targets):
-            v = driver.variables.new()
-            v.name, v.type = f"b{i}", "SINGLE_PROP"
-            v.targets[0].id = rig
-            v.targets[0].data_path = f'pose.bones["{name}"].{prop}'
-        driver.expression = f"{self.name}()"
+        self.variables = add_bone_driver(m, rig, binding.bone_names, f"{self.name}()")
 
     def remove(self):
         bpy.app.driver_namespace.pop(self.name, None)
         os.close(self.fd)
+        os.unlink(self.path)
+
+
+def add_bone_driver(modifier, rig, bone_names, expression: str) -> int:
+    """A driver on `modifier`'s Factor ordered after every bone of `bone_names` in Blender's
+    graph; returns its variable count. A Python driver costs about 0.6 µs per variable and
+    evaluation, so only as many as order it after every bone the job reads: each B-Bone's
+    segments (a B-Bone property links the driver after them), and the bones with no bound
+    descendant (a bone is done before its children, so after those every bound bone is)."""
+    driver = modifier.driver_add("factor").driver
+    driver.type = "SCRIPTED"
+    bound = set(bone_names)
+    below = set()
+    for b in rig.data.bones:
+        if b.name in bound:
+            p = b.parent
+            while p is not None:
+                below.add(p.name)
+                p = p.parent
+    targets = [(n, "bbone_easein") for n in bone_names if rig.data.bones[n].bbone_segments > 1]
+    targets += [(n, "matrix") for n in bone_names if rig.data.bones[n].bbone_segments <= 1 and n not in below]
+    for i, (name, prop) in enumerate(targets):
+        v = driver.variables.new()
+        v.name, v.type = f"b{i}", "SINGLE_PROP"
+        v.targets[0].id = rig
+        v.targets[0].data_path = f'pose.bones["{name}"].{prop}'
+    driver.expression = expression
+    return len(targets)
+
+
+class Floors:
+    """What Blender costs before any skinning, each on its own copy of `body` (which carries the
+    Armature modifier on `rig`): `floor_mesh_cache`, a Mesh Cache modifier reading a fixed PC2
+    file with a driver ordered after the bound bones whose expression Blender evaluates without
+    Python (`is_simple_expression`): the mesh evaluated again after the pose, doing nothing;
+    `floor_python_driver`, the same with a Python driver calling a function that does nothing
+    (what entering Python from the evaluation costs); `floor_armature_idle`, the Armature modifier
+    with vertex groups and envelopes off (Blender's own modifier visiting the vertices with no
+    bone to add)."""
+
+    def __init__(self, rig, body, bone_names):
+        import struct
+        import tempfile
+
+        self.objects = {}
+        folder = "/dev/shm" if os.path.isdir("/dev/shm") else tempfile.gettempdir()
+        n = len(body.data.vertices)
+        self.path = os.path.join(folder, f"dqskin-bench-floor-{os.getpid()}-{body.session_uid}.pc2")
+        rest = np.empty(n * 3, np.float32)
+        body.data.vertices.foreach_get("co", rest)
+        with open(self.path, "wb") as f:
+            f.write(b"POINTCACHE2\0" + struct.pack("<iiffi", 1, n, 0.0, 1.0, 1) + rest.tobytes())
+        self.name = f"dqskin_bench_nothing_{body.session_uid}"
+        bpy.app.driver_namespace[self.name] = lambda *_: 1.0
+        self.simple = {}
+        for kind in ("floor_mesh_cache", "floor_python_driver", "floor_armature_idle"):
+            o = body.copy()
+            o.data = body.data.copy()
+            o.name = f"{body.name} {kind}"
+            bpy.context.scene.collection.objects.link(o)
+            self.objects[kind] = o
+            if kind == "floor_armature_idle":
+                a = o.modifiers["Armature"]
+                a.use_vertex_groups = a.use_bone_envelopes = False
+                continue
+            for m in list(o.modifiers):
+                o.modifiers.remove(m)
+            m = o.modifiers.new("Floor", "MESH_CACHE")
+            m.cache_format, m.filepath = "PC2", self.path
+            m.time_mode, m.play_mode, m.eval_frame = "FRAME", "CUSTOM", 0.0
+            m.deform_mode, m.interpolation = "OVERWRITE", "NONE"
+            expression = "1.0" if kind == "floor_mesh_cache" else f"{self.name}()"
+            add_bone_driver(m, rig, bone_names, expression)
+            self.simple[kind] = o.animation_data.drivers[0].driver.is_simple_expression
+
+    def remove(self):
+        bpy.app.driver_namespace.pop(self.name, None)
+        for o in self.objects.values():
+            bpy.data.objects.remove(o)
         os.unlink(self.path)
 
 
@@ -703,10 +797,13 @@ def case_crowd(count: int, quick: bool) -> dict:
     for f in (3, 9):
         bpy.context.scene.frame_set(f)
     in_evaluation = [InEvaluation(c, a, m) for c, (m, a) in zip(dq, pairs)]
+    floors = [Floors(a, m, e.bone_names) for e, (m, a) in zip(in_evaluation, pairs)]
     phases = Phases()
     phases.install()
     try:
         variants = {"armature": meshes, "dq_skin": dq, "in_evaluation": [e.obj for e in in_evaluation]}
+        for kind in floors[0].objects:
+            variants[kind] = [f.objects[kind] for f in floors]
         row = alternate(variants, (3, 9, 15, 21), 2 if quick else 4, 5 if quick else 9, phases)
         row["in_evaluation_speedup"] = row["armature_ms"] / row["in_evaluation_ms"]
         calls = sum(e.calls for e in in_evaluation)
@@ -716,7 +813,11 @@ def case_crowd(count: int, quick: bool) -> dict:
             e.remove()
         for e in in_evaluation:
             bpy.data.objects.remove(e.obj)
+        for f in floors:
+            f.remove()
     row["in_evaluation_driver_calls_per_character"] = calls / len(in_evaluation)
+    show_only(*dq)
+    row["reevaluation_floor_ms"] = reevaluation_ms(meshes[0])
     # An edit elsewhere: move an Empty, in each scene.
     empty = bpy.data.objects.new("Elsewhere", None)
     bpy.context.scene.collection.objects.link(empty)

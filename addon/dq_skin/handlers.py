@@ -26,7 +26,7 @@ import traceback
 import bpy
 from bpy.app.handlers import persistent
 
-from . import exports, nodes
+from . import exports, feed, nodes
 from .registry import REGISTRY
 
 _busy = False
@@ -136,3 +136,4 @@ def unregister():
     # results are let go (never saved).
     _guarded(REGISTRY.deactivate_all, True)
     REGISTRY.reset()
+    feed.forget_all()

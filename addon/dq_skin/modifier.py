@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import centers, companion, compat, consumers, dqskin, exports, meshdata, nodes, pose, results, rig, settings
+from . import centers, companion, compat, consumers, dqskin, exports, feed, meshdata, nodes, pose, results, rig, settings
 from .state import STATES, BindingKey, FrameKey, Mode, ModifierState
 
 
@@ -545,6 +545,10 @@ def finish(plan: Plan) -> None:
     results.write_positions(result, out.buffer)
     results.set_mode(result, kind)
     out.result, out.kind, out.written = result, kind, plan.key
+    if _feedable(plan, kind, data):
+        feed.ensure(result, st, plan.s.armature, st.binding.binding, out.buffer)
+    elif feed.fed(result) is not None:
+        feed.remove(result)
     settle_companion(obj, mod, st, plan.s, plan.deforms, render=plan.render)
     binding = st.binding.binding
     status = st.status
@@ -554,6 +558,22 @@ def finish(plan: Plan) -> None:
     status.bones = len(binding.bone_names)
     status.influences = len(binding.influences)
     status.seconds = time.perf_counter() - plan.start
+
+
+def _feedable(plan: Plan, kind: int, data) -> bool:
+    """Whether the result can be skinned inside Blender's first evaluation (see `feed`): a
+    whole-mesh result of the mesh itself (no shape keys), its frames' bones read from memory
+    (envelopes, B-Bones), in the viewport."""
+    st = plan.st
+    return (
+        kind == nodes.RESULT_REPLACE
+        and st.needs_effective
+        and st.status.source == "mesh"
+        and data.keys is None
+        and not plan.render
+        and isinstance(plan.key.pose, tuple)
+        and plan.key.pose[:1] == ("memory",)
+    )
 
 
 # -- what reaches the modifier ------------------------------------------------------------------

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import companion, compat, meshdata, modifier, nodes, results
+from . import companion, compat, feed, meshdata, modifier, nodes, results
 from .state import STATES, Mode
 
 
@@ -78,6 +78,7 @@ class Registry:
         self.counts.clear()
         self.structure += 1
         STATES.clear()
+        feed.prune()
         meshdata.forget()
         nodes.forget_socket_ids()
 
@@ -202,12 +203,18 @@ class Registry:
 
     def _armature_changed(self, arm_data_uid: int) -> None:
         """Bones may have changed (deform flags, segments, rest pose): every object bound to
-        them takes the full path, which compares the bones, at its next evaluation."""
+        them takes the full path, which compares the bones, at its next evaluation (forced, so
+        that no steady-playback shortcut skips it). Objects whose every modifier reads its
+        bones from memory (envelopes, B-Bones) take the full path anyway, and its keys hold the
+        bones and the pose: they are not forced, since Rigify's armature data is updated on
+        every frame and a forced evaluation would write again what a feed made (see `feed`)."""
         for obj_uid in self.watch.get(arm_data_uid, ()):
             rec = self.records.get(obj_uid)
             if rec is not None:
                 rec.steady = None
-                rec.pending = True
+                states = [STATES.find(obj_uid, m) for m in rec.mods]
+                if not states or not all(st is not None and st.needs_effective for st in states):
+                    rec.pending = True
 
     def _other_object_changed(self, obj) -> None:
         """Another object's geometry was updated: if its modifiers or constraints changed, what
@@ -325,8 +332,15 @@ class Registry:
             if not rec.volatile:
                 continue
             for _uid, st in STATES.of_object(rec.obj.session_uid):
-                # (A modifier reading what reaches it needs that evaluated in the first pass.)
-                if st.status.mode is Mode.LIVE and st.output.result is not None and st.output.kind == nodes.RESULT_REPLACE and not st.capture_on:
+                # (A modifier reading what reaches it needs that evaluated in the first pass; a
+                # fed result is this frame's there, see `feed`.)
+                if (
+                    st.status.mode is Mode.LIVE
+                    and st.output.result is not None
+                    and st.output.kind == nodes.RESULT_REPLACE
+                    and not st.capture_on
+                    and feed.fed(st.output.result) is None
+                ):
                     try:
                         results.set_mode(st.output.result, nodes.RESULT_PENDING)
                         rec.pending = True
@@ -421,11 +435,12 @@ class Registry:
                     yield obj, mod
 
 
-def inside_python_operator() -> bool:
+def inside_python_operator(frame=None) -> bool:
     """Whether a Python operator is running (its `execute`, `invoke` or `modal` is on the
-    stack): Blender evaluates the scene after each `bpy.ops` step it takes. (A script calling
-    operators itself is not deferred: it may read the result right after.)"""
-    f = sys._getframe(1)
+    stack, the caller's or from `frame` up): Blender evaluates the scene after each `bpy.ops`
+    step it takes. (A script calling operators itself is not deferred: it may read the result
+    right after.)"""
+    f = frame if frame is not None else sys._getframe(1)
     while f is not None:
         code = f.f_code
         if code.co_name in ("execute", "invoke", "modal") and code.co_varnames[:1] == ("self",):

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import compat, nodes
+from . import compat, feed, nodes
 
 TAG = "dq_skin_result"
 OWNER_OBJECT = "dq_skin_owner_object"
@@ -59,6 +59,7 @@ def remove(result) -> None:
     """Deletes a result object and its mesh."""
     if not is_result(result) or result.library is not None:
         return
+    feed.remove(result)
     mesh = result.data
     bpy.data.objects.remove(result)
     if mesh is not None and mesh.users == 0:
@@ -138,6 +139,7 @@ def write_positions(result, positions) -> None:
     invalidates them and tells the dependency graph."""
     mesh = result.data
     mesh.attributes["position"].data.foreach_set("vector", positions.ravel())
+    feed.write(result, positions)
     if len(mesh.vertices):
         v = mesh.vertices[0]
         v.co = v.co

@@ -545,25 +545,8 @@ def add_bone_driver(modifier, rig, bone_names, expression: str) -> int:
 
 
 def order_after_bones(driver, rig, bone_names, prefix: str = "b") -> int:
-    """Adds the variables that order `driver` after every bone of `bone_names` (see
-    `add_bone_driver`); returns how many."""
-    bound = set(bone_names)
-    below = set()
-    for b in rig.data.bones:
-        if b.name in bound:
-            p = b.parent
-            while p is not None:
-                below.add(p.name)
-                p = p.parent
-    targets = [(n, "bbone_easein") for n in bone_names if rig.data.bones[n].bbone_segments > 1]
-    targets += [(n, "matrix") for n in bone_names if rig.data.bones[n].bbone_segments <= 1 and n not in below]
-    start = len(driver.variables)
-    for i, (name, prop) in enumerate(targets):
-        v = driver.variables.new()
-        v.name, v.type = f"{prefix}{start + i}", "SINGLE_PROP"
-        v.targets[0].id = rig
-        v.targets[0].data_path = f'pose.bones["{name}"].{prop}'
-    return len(targets)
+    """The add-on's own ordering of a driver after the bound bones (`feed.order_after_bones`)."""
+    return sys.modules[ADDON].feed.order_after_bones(driver, rig, list(bone_names), prefix)
 
 
 class BatchedInEvaluation:

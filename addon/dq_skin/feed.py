@@ -92,17 +92,18 @@ def ensure(result, st, armature, binding, positions: np.ndarray) -> None:
     m.deform_mode, m.interpolation = "OVERWRITE", "NONE"
     driver = m.driver_add("factor").driver
     driver.type = "SCRIPTED"
-    _order_after_bones(driver, armature, names)
+    order_after_bones(driver, armature, names)
     # Set last: Blender compiles the expression now, while the function is known to it (with
     # Auto Run Python Scripts off it refuses names it does not know at compile time).
     bpy.app.driver_namespace[FUNCTION] = _run
     driver.expression = f"{FUNCTION}({result.session_uid})"
 
 
-def _order_after_bones(driver, armature, names) -> None:
-    """Variables that make Blender evaluate `driver` after every bone of `names`: each B-Bone's
-    segments (a B-Bone property links to them), and the bones with no bound descendant (a bone
-    is done after its parent, so after those every bound bone is). About 1 µs each per frame."""
+def order_after_bones(driver, armature, names, prefix: str = "b") -> int:
+    """Adds the variables that make Blender evaluate `driver` after every bone of `names`: each
+    B-Bone's segments (a B-Bone property links to them), and the bones with no bound descendant
+    (a bone is done after its parent, so after those every bound bone is). About 1 µs each per
+    frame. Returns how many (named `prefix` and a number, after those `driver` has)."""
     above = set()
     bones = armature.data.bones
     for name in names:
@@ -120,11 +121,13 @@ def _order_after_bones(driver, armature, names) -> None:
             targets.append((name, "bbone_easein"))
         elif name not in above:
             targets.append((name, "matrix"))
+    start = len(driver.variables)
     for i, (name, prop) in enumerate(targets):
         v = driver.variables.new()
-        v.name, v.type = f"b{i}", "SINGLE_PROP"
+        v.name, v.type = f"{prefix}{start + i}", "SINGLE_PROP"
         v.targets[0].id = armature
         v.targets[0].data_path = f"pose.bones[{_quoted(name)}].{prop}"
+    return len(targets)
 
 
 def _quoted(name: str) -> str:

@@ -7,7 +7,8 @@ rig builders, and `conftest`).
 - Comparing evaluated meshes: `evaluated_positions`, `deviation` (relative to the bounding-box
   diagonal), `assert_same`, `check_frames`, `moved` (a test that moves nothing proves nothing).
 - Building scenes: `add_dq_skin`, `import_character`, `animate`, `animated_tube`, `select_only`.
-- Reading DQ Skin: `dq_skin_mods`, `get_input`, `get_attribute`, `method`, `status`, `draw_panel`.
+- Reading DQ Skin: `dq_skin_mods`, `get_input`, `get_attribute`, `method`, `status`, `draw_panel`,
+  `assert_fed`.
 """
 
 from __future__ import annotations
@@ -220,6 +221,15 @@ def select_only(*objs):
 def status(dq_skin, obj, mod=None):
     """What DQ Skin's panel knows about a modifier (`state.Status`)."""
     return dq_skin.modifier.status_of(obj, mod or dq_skin_mods(obj)[0])
+
+
+def assert_fed(dq_skin, obj) -> None:
+    """Every DQ Skin of `obj` is skinned by the feed, inside Blender's first evaluation (B-Bone and
+    envelope characters), after one frame change."""
+    bpy.context.scene.frame_set(bpy.context.scene.frame_current)
+    for mod in dq_skin_mods(obj):
+        result = dq_skin.modifier.state_of(obj, mod).output.result
+        assert dq_skin.feed.fed(result) is not None, f"{obj.name}: not fed ({status(dq_skin, obj, mod).message})"
 
 
 class _Recorder:

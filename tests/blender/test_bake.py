@@ -10,16 +10,21 @@ import bpy
 import numpy as np
 import pytest
 
-from dqtest import add_dq_skin, evaluated_positions, import_character
+from dqtest import add_dq_skin, assert_fed, evaluated_positions, import_character
+from scenes import RIGS, make_rig
 
 PLAYBACK_TOL = 1e-6  # of the bounding-box diagonal: float32 positions stored and read back
 
 
-def test_mesh_cache_playback_reproduces_the_live_result(dq_skin, assets, tmp_path):
+@pytest.mark.parametrize("rig", RIGS)
+def test_mesh_cache_playback_reproduces_the_live_result(dq_skin, assets, tmp_path, rig):
     from bl_ext.user_default.dq_skin.dqskin import pc2
 
     obj, arm_mod = import_character(assets / "CesiumMan.glb")
+    make_rig(arm_mod.object, rig)  # B-Bones: the feed skins the live frames, the bake's own steps run the handler
     mod = add_dq_skin(obj, "DUAL_QUATERNION")
+    if rig == "B-Bones":
+        assert_fed(dq_skin, obj)
     action = arm_mod.object.animation_data.action
     start, end = (int(round(f)) for f in action.frame_range)
     scene = bpy.context.scene

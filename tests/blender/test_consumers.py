@@ -1,7 +1,8 @@
 """Everything that reads a DQ Skin character's deformed mesh, each compared with the same scene
 built with Blender's own Armature modifier on its own objects (the *reference* character: a copy
 of the armature and the mesh, side by side, playing the same action), Linear and Dual
-Quaternion: simulations on and around the character, hair, modifiers and constraints targeting
+Quaternion, with CesiumMan's bones as they are (vertex groups: the frame handler skins) and
+made B-Bones (the feed skins inside Blender's first evaluation): simulations on and around the character, hair, modifiers and constraints targeting
 it, brushes on the posed mesh, exporters, Apply as Shape Key, bakes and ray casts (see the
 README's inventory).
 
@@ -17,7 +18,8 @@ import numpy as np
 import pytest
 from mathutils import Vector
 
-from dqtest import METHODS, REL_TOL, add_dq_skin, deviation, dq_skin_mods, evaluated_positions, import_character, perturbed, status
+from dqtest import METHODS, REL_TOL, add_dq_skin, assert_fed, deviation, dq_skin_mods, evaluated_positions, import_character, perturbed, status
+from scenes import RIGS, make_rig
 
 # Where the reference character stands: at the same place (simulations in world space round
 # differently elsewhere; nothing here makes the two characters interact).
@@ -25,11 +27,13 @@ OFFSET = Vector((0.0, 0.0, 0.0))
 SHRINKWRAP_TOL = 1e-4
 
 
-def characters(assets, method: str):
+def characters(dq_skin, assets, method: str, rig: str):
     """CesiumMan with DQ Skin (at the origin) and its reference with Blender's Armature modifier
-    (offset by OFFSET, its own armature object sharing the action)."""
+    (offset by OFFSET, its own armature object sharing the action); with `rig` "B-Bones" every
+    deforming bone of both is a B-Bone, so DQ Skin's feed skins it inside the first evaluation."""
     body, arm_mod = import_character(assets / "CesiumMan.glb")
     arm = arm_mod.object
+    make_rig(arm, rig)
     ref_arm = arm.copy()
     ref_arm.data = arm.data.copy()
     ref_arm.location = arm.location + OFFSET
@@ -42,6 +46,8 @@ def characters(assets, method: str):
     ref_mod.object = ref_arm
     ref_mod.use_deform_preserve_volume = method != "LINEAR"
     add_dq_skin(body, method)
+    if rig == "B-Bones":
+        assert_fed(dq_skin, body)
     return body, ref
 
 
@@ -120,9 +126,10 @@ def upper_body_group(obj, name="Pin", below: float = 0.9) -> None:
 
 # -- simulations ---------------------------------------------------------------------------------
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_cloth_after_dq_skin_follows_the_skinned_pins(dq_skin, assets, method):
-    body, ref = characters(assets, method)
+def test_cloth_after_dq_skin_follows_the_skinned_pins(dq_skin, assets, method, rig):
+    body, ref = characters(dq_skin, assets, method, rig)
     for obj in (body, ref):
         upper_body_group(obj, below=0.75)
         cloth = obj.modifiers.new("Cloth", "CLOTH")
@@ -136,9 +143,10 @@ def test_cloth_after_dq_skin_follows_the_skinned_pins(dq_skin, assets, method):
     assert moves((1, 30), body) > 0.05
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_a_cloth_collides_with_the_character(dq_skin, assets, method):
-    body, ref = characters(assets, method)
+def test_a_cloth_collides_with_the_character(dq_skin, assets, method, rig):
+    body, ref = characters(dq_skin, assets, method, rig)
     sheets = []
     # Both sheets at one height (from the reference: the two posed characters' boxes may differ
     # in the last bit, which the falling cloth would amplify).
@@ -159,9 +167,10 @@ def test_a_cloth_collides_with_the_character(dq_skin, assets, method):
     assert moves((1, 30), sheets[0]) > 0.1
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_particle_hair_on_the_character(dq_skin, assets, method):
-    body, ref = characters(assets, method)
+def test_particle_hair_on_the_character(dq_skin, assets, method, rig):
+    body, ref = characters(dq_skin, assets, method, rig)
     for obj in (body, ref):
         obj.modifiers.new("Hair", "PARTICLE_SYSTEM")
         p = obj.particle_systems[0].settings
@@ -179,12 +188,13 @@ def test_particle_hair_on_the_character(dq_skin, assets, method):
 
 # -- modifiers and constraints targeting the character ------------------------------------------
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_shrinkwrap_onto_the_character(dq_skin, assets, method):
+def test_shrinkwrap_onto_the_character(dq_skin, assets, method, rig):
     """Within 1e-4 of the Armature scene, or of twice what Shrinkwrap makes of a 2e-7 perturbation
     of its target under Blender's own Armature modifier, where that is more (projections onto the
     nearest surface jump at folds: on Blender 4.2 up to 1.2e-4)."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     noisy = perturbed(ref)
     wraps = []
     centre = sum((ref.matrix_world @ Vector(c) for c in ref.bound_box), Vector()) / 8  # one place for all
@@ -218,10 +228,11 @@ def crazyspace(obj, vertices) -> np.ndarray:
         obj.crazyspace_eval_clear()
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("mode", ["SCULPT", "WEIGHT_PAINT", "VERTEX_PAINT", "TEXTURE_PAINT", "EDIT"])
-def test_brushes_map_through_the_deformation_as_through_the_armature_modifier(dq_skin, assets, method, mode):
-    body, ref = characters(assets, method)
+def test_brushes_map_through_the_deformation_as_through_the_armature_modifier(dq_skin, assets, method, rig, mode):
+    body, ref = characters(dq_skin, assets, method, rig)
     bpy.context.scene.frame_set(17)
     vertices = list(range(0, len(body.data.vertices), 97))
     expected = crazyspace(ref, vertices)
@@ -279,9 +290,9 @@ def reimported(path, importer) -> dict:
     return out
 
 
-def export_both(tmp_path, assets, method, exporter, suffix, **options):
+def export_both(dq_skin, tmp_path, assets, method, rig, exporter, suffix, **options):
     """The DQ Skin character and the reference, each exported alone (at the same place)."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     ref_arm = ref.parent
     bpy.context.scene.frame_set(17)  # posed: the exported rest mesh must not be this pose
     paths = []
@@ -311,17 +322,19 @@ def compare_exports(name, ours, theirs):
             assert np.abs(a["weights"][g] - b["weights"][g]).max() <= 1e-6, g
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("apply_modifiers", [True, False])
-def test_fbx_export_is_the_same_skinned_character(dq_skin, assets, tmp_path, method, apply_modifiers):
-    name, (ours, theirs) = export_both(tmp_path, assets, method, bpy.ops.export_scene.fbx, ".fbx", use_mesh_modifiers=apply_modifiers)
+def test_fbx_export_is_the_same_skinned_character(dq_skin, assets, tmp_path, method, rig, apply_modifiers):
+    name, (ours, theirs) = export_both(dq_skin, tmp_path, assets, method, rig, bpy.ops.export_scene.fbx, ".fbx", use_mesh_modifiers=apply_modifiers)
     compare_exports(name, reimported(ours, bpy.ops.import_scene.fbx), reimported(theirs, bpy.ops.import_scene.fbx))
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("apply_modifiers", [True, False])
-def test_gltf_export_is_the_same_skinned_character(dq_skin, assets, tmp_path, method, apply_modifiers):
-    name, (ours, theirs) = export_both(tmp_path, assets, method, bpy.ops.export_scene.gltf, ".glb", export_apply=apply_modifiers)
+def test_gltf_export_is_the_same_skinned_character(dq_skin, assets, tmp_path, method, rig, apply_modifiers):
+    name, (ours, theirs) = export_both(dq_skin, tmp_path, assets, method, rig, bpy.ops.export_scene.gltf, ".glb", export_apply=apply_modifiers)
     compare_exports(name, reimported(ours, bpy.ops.import_scene.gltf), reimported(theirs, bpy.ops.import_scene.gltf))
 
 
@@ -346,10 +359,11 @@ def _fluid_effector(obj):
     m.fluid_type = "EFFECTOR"
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("what", ["Dynamic Paint", "Fluid"])
-def test_other_simulations_on_the_character(dq_skin, assets, method, what):
-    body, ref = characters(assets, method)
+def test_other_simulations_on_the_character(dq_skin, assets, method, rig, what):
+    body, ref = characters(dq_skin, assets, method, rig)
     setup = {"Dynamic Paint": _dynamic_paint, "Fluid": _fluid_effector}[what]
     for obj in (body, ref):
         setup(obj)
@@ -358,13 +372,14 @@ def test_other_simulations_on_the_character(dq_skin, assets, method, what):
     assert st.mode.value == "handed over" and what in st.message, st.message
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_soft_body_on_the_skinned_mesh_through_a_bake(dq_skin, assets, tmp_path, method):
+def test_soft_body_on_the_skinned_mesh_through_a_bake(dq_skin, assets, tmp_path, method, rig):
     """Blender keeps a Soft Body before every modifier that is not deform-only, so on a DQ Skin
     character it simulates the undeformed mesh: the panel says so and how to get the Armature
     modifier's setup (Soft Body after the skinning): bake DQ Skin to a cache, which is
     deform-only and goes first."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     for obj in (body, ref):
         _soft_body(obj)
     bpy.context.view_layer.update()
@@ -385,12 +400,13 @@ def test_soft_body_on_the_skinned_mesh_through_a_bake(dq_skin, assets, tmp_path,
     play((1, 6, 12), lambda f: same(world_positions(body), world_positions(ref), f"the Soft Body's input at frame {f}"))
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_a_garment_bound_by_surface_deform(dq_skin, assets, method):
+def test_a_garment_bound_by_surface_deform(dq_skin, assets, method, rig):
     """Surface Deform clothing follows DQ Skin itself (nothing caches): DQ Skin stays live. With
     a Cloth after the Surface Deform, the garment simulates on the character in Blender's first
     evaluation of a frame: DQ Skin hands over."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     garments = []
     bpy.context.scene.frame_set(1)
     with rest_position(body, ref):
@@ -416,12 +432,13 @@ def test_a_garment_bound_by_surface_deform(dq_skin, assets, method):
 
 # -- objects that read the character ---------------------------------------------------------------
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_objects_reading_the_character(dq_skin, assets, method):
+def test_objects_reading_the_character(dq_skin, assets, method, rig):
     """A prop parented to three vertices, an Empty with a Shrinkwrap constraint, a Geometry
     Nodes object that takes the character's geometry (Object Info), and ray casts (what snapping
     uses) all see DQ Skin's deformation, as they see the Armature modifier's."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     readers = []
     for obj in (body, ref):
         prop = link(bpy.data.objects.new(f"Prop {obj.name}", None))
@@ -506,12 +523,13 @@ def curve_points(hair) -> np.ndarray:
     return co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_hair_curves_on_the_surface(dq_skin, assets, method):
+def test_hair_curves_on_the_surface(dq_skin, assets, method, rig):
     """Hair curves attached to the character (Deform Curves on Surface) follow it. From Blender
     5.2 new hair also simulates (a Hair Dynamics modifier with a simulation zone): DQ Skin then
     hands over, as for any simulation on it."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     bpy.context.scene.frame_set(1)
     with rest_position(body, ref):
         curves = [hair_curves(obj) for obj in (body, ref)]
@@ -524,11 +542,12 @@ def test_hair_curves_on_the_surface(dq_skin, assets, method):
     assert np.abs(curve_points(curves[0]) - a).max() > 0.01
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_data_transfer_from_the_character(dq_skin, assets, method):
+def test_data_transfer_from_the_character(dq_skin, assets, method, rig):
     """Vertex-group weights transferred from the posed character by nearest face (the mapping
     follows its deformed surface)."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     targets = []
     centre = sum((ref.matrix_world @ Vector(c) for c in ref.bound_box), Vector()) / 8  # one place for both
     for obj in (body, ref):
@@ -569,12 +588,13 @@ def test_data_transfer_from_the_character(dq_skin, assets, method):
     assert status(dq_skin, body).live
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("keep", [True, False])
-def test_apply_as_shape_key(dq_skin, assets, method, keep):
+def test_apply_as_shape_key(dq_skin, assets, method, rig, keep):
     """DQ Skin's own Apply / Save as Shape Key (Blender's only takes deform-only modifiers)
     gives the shape key Blender's gives for its Armature modifier."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     bpy.context.scene.frame_set(17)
     with bpy.context.temp_override(object=ref, active_object=ref):
         assert bpy.ops.object.modifier_apply_as_shapekey(modifier=next(m.name for m in ref.modifiers if m.type == "ARMATURE"), keep_modifier=keep) == {"FINISHED"}
@@ -612,13 +632,14 @@ FILE_EXPORTS = {
 }
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("fmt", list(FILE_EXPORTS))
-def test_file_exports_hold_the_posed_mesh(dq_skin, assets, tmp_path, method, fmt):
+def test_file_exports_hold_the_posed_mesh(dq_skin, assets, tmp_path, method, rig, fmt):
     """Exporters that write the evaluated mesh (modifiers applied, their default) write DQ
     Skin's posed mesh, as they write the Armature modifier's."""
     suffix, export, import_ = FILE_EXPORTS[fmt]
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     bpy.context.scene.frame_set(17)
     paths = []
     for obj in (body, ref):
@@ -634,13 +655,14 @@ def test_file_exports_hold_the_posed_mesh(dq_skin, assets, tmp_path, method, fmt
     assert deviation(ours, theirs) <= REL_TOL, f"{fmt}: {deviation(ours, theirs):.3e}"
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_usd_export_with_its_defaults_holds_the_posed_mesh(dq_skin, assets, tmp_path, method):
+def test_usd_export_with_its_defaults_holds_the_posed_mesh(dq_skin, assets, tmp_path, method, rig):
     """USD's skeleton export (on by default) takes the skin from an enabled Armature modifier and
     has no extension point before it writes: a DQ Skin character is written with DQ Skin's
     deformation in its mesh (every frame, with animation), as Alembic writes it; the pose is the
     Armature modifier's (see the README's inventory)."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     bpy.context.scene.frame_set(17)
     expected = world_positions(ref)
     for o in bpy.context.view_layer.objects:
@@ -653,11 +675,12 @@ def test_usd_export_with_its_defaults_holds_the_posed_mesh(dq_skin, assets, tmp_
     assert deviation(world_positions(mesh), expected) <= REL_TOL
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_texture_bake_from_the_posed_mesh(dq_skin, assets, tmp_path, method):
+def test_texture_bake_from_the_posed_mesh(dq_skin, assets, tmp_path, method, rig):
     """Cycles bakes from the evaluated (posed) mesh: an object-space normal map of DQ Skin's
     pose equals the Armature modifier's."""
-    body, ref = characters(assets, method)
+    body, ref = characters(dq_skin, assets, method, rig)
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.samples = 1

@@ -36,7 +36,7 @@ from dqtest import (
     status,
     twin,
 )
-from scenes import chain_weights, tube
+from scenes import RIGS, chain_weights, tube
 
 
 # -- files ----------------------------------------------------------------------------------------
@@ -185,8 +185,9 @@ def test_modifiers_copied_to_another_character(dq_skin, assets, how):
     assert get_input(dq_skin_mods(a)[0], "Result") != get_input(dq_skin_mods(b)[0], "Result")
 
 
-def test_a_modifier_duplicated_within_its_stack_gets_its_own_result(dq_skin):
-    obj, arm, _ = animated_tube()
+@pytest.mark.parametrize("rig", RIGS)
+def test_a_modifier_duplicated_within_its_stack_gets_its_own_result(dq_skin, rig):
+    obj, arm, _ = animated_tube(rig=rig)
     mod = add_dq_skin(obj, "LINEAR")
     with bpy.context.temp_override(object=obj, active_object=obj):
         assert bpy.ops.object.modifier_copy(modifier=mod.name) == {"FINISHED"}
@@ -206,9 +207,10 @@ def test_a_modifier_duplicated_within_its_stack_gets_its_own_result(dq_skin):
 
 # -- DQ Skin and its Armature modifier ---------------------------------------------------------
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_switching_dq_skin_off_shows_blenders_deformation(dq_skin, tmp_path, method):
-    obj, arm, _ = animated_tube()
+def test_switching_dq_skin_off_shows_blenders_deformation(dq_skin, tmp_path, method, rig):
+    obj, arm, _ = animated_tube(rig=rig)
     mod = add_dq_skin(obj, method)
     tw = twin(obj, share_mesh=False)
     c = obj.modifiers["Armature"]
@@ -247,10 +249,11 @@ def test_renders_follow_the_render_toggles(dq_skin, tmp_path):
 
 # -- scripts that edit bones --------------------------------------------------------------------
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("edit", ["deform off", "B-Bone segments", "rest pose", "envelope"])
-def test_scripts_editing_bones_then_changing_frames(dq_skin, method, edit):
-    obj, arm, _ = animated_tube(bones=3)
+def test_scripts_editing_bones_then_changing_frames(dq_skin, method, rig, edit):
+    obj, arm, _ = animated_tube(bones=3, rig=rig)
     add_dq_skin(obj, method)
     tw = twin(obj, share_mesh=False)
     scene = bpy.context.scene

@@ -1,6 +1,7 @@
 """DQ Skin in the scenes artists and pipelines actually have, each compared with the same scene
 under Blender's own Armature modifier (its *twin*, see `dqtest.twin`), frame by frame, Linear and
-Dual Quaternion: duplicates, crowds, append, library overrides, linked instances, files opened
+Dual Quaternion, most of them on a vertex-group rig and on a B-Bone rig (`scenes.RIGS`: the
+frame handler skins the one, the feed the other): duplicates, crowds, append, library overrides, linked instances, files opened
 without the add-on, Apply, several DQ Skins, any modifier after DQ Skin, viewport off and render
 on, and the panel's status in each case.
 
@@ -25,6 +26,7 @@ from dqtest import (
     add_dq_skin,
     animate,
     animated_tube,
+    assert_fed,
     assert_same,
     check_frames,
     deviation,
@@ -39,18 +41,21 @@ from dqtest import (
     status,
     twin,
 )
-from scenes import armature_chain, chain_weights, rig_tube, tube
+from scenes import RIGS, armature_chain, chain_weights, rig_tube, tube
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 # -- duplicates and crowds ------------------------------------------------------------------------
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("how", ["mesh and armature (Shift+D)", "mesh and armature (Alt+D)", "mesh only (Shift+D)"])
-def test_duplicates_follow_their_own_armature(dq_skin, method, how):
-    obj, arm, _ = animated_tube()
+def test_duplicates_follow_their_own_armature(dq_skin, method, rig, how):
+    obj, arm, _ = animated_tube(rig=rig)
     add_dq_skin(obj, method)
+    if rig == "B-Bones":
+        assert_fed(dq_skin, obj)
     bpy.context.scene.frame_set(5)
     linked = "Alt+D" in how
     if "armature" in how:
@@ -90,11 +95,14 @@ def test_copy_modifiers_to_selected(dq_skin):
     assert get_input(dq_skin_mods(other)[0], "Result") != get_input(dq_skin_mods(obj)[0], "Result")
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method):
+def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method, rig):
     """One mesh, many objects, each deformed by its own armature (a crowd)."""
-    obj, arm, _ = animated_tube()
+    obj, arm, _ = animated_tube(rig=rig)
     add_dq_skin(obj, method)
+    if rig == "B-Bones":
+        assert_fed(dq_skin, obj)
     pairs = [(obj, twin(obj))]
     for i in range(1, 5):
         a = arm.copy()
@@ -117,11 +125,11 @@ def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method):
 
 # -- files: append, link, override, without the add-on ------------------------------------------
 
-def character_file(path: Path, method: str = "DUAL_QUATERNION", frame: int = 7) -> None:
+def character_file(path: Path, method: str = "DUAL_QUATERNION", frame: int = 7, rig: str = "vertex groups") -> None:
     """A library file with one character in the collection "Character", DQ Skin on, saved at
     `frame`."""
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    obj, arm, _ = animated_tube()
+    obj, arm, _ = animated_tube(rig=rig)
     coll = bpy.data.collections.new("Character")
     bpy.context.scene.collection.children.link(coll)
     for o in (obj, arm):
@@ -133,9 +141,10 @@ def character_file(path: Path, method: str = "DUAL_QUATERNION", frame: int = 7) 
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
 
 
-def test_appended_character(dq_skin, tmp_path):
+@pytest.mark.parametrize("rig", RIGS)
+def test_appended_character(dq_skin, rig, tmp_path):
     lib = tmp_path / "char.blend"
-    character_file(lib)
+    character_file(lib, rig=rig)
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     with bpy.data.libraries.load(str(lib), link=False) as (src, dst):
         dst.collections = ["Character"]
@@ -162,10 +171,11 @@ def override(lib: Path, name: str = "Character"):
     return body, skel
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_library_overrides_one_and_two_with_different_actions_saved_and_reopened(dq_skin, tmp_path, method):
+def test_library_overrides_one_and_two_with_different_actions_saved_and_reopened(dq_skin, tmp_path, method, rig):
     lib = tmp_path / "char.blend"
-    character_file(lib, method)
+    character_file(lib, method, rig=rig)
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     a_body, a_skel = override(lib, "A")
     b_body, b_skel = override(lib, "B")
@@ -262,17 +272,20 @@ def farm_env(tmp_path: Path) -> dict:
     return env
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_file_opened_without_the_add_on_shows_blenders_deformation_every_frame(dq_skin, tmp_path, method):
+def test_file_opened_without_the_add_on_shows_blenders_deformation_every_frame(dq_skin, tmp_path, method, rig):
     """A render node without DQ Skin: every frame is Blender's own deformation (not the pose
     of the frame the file was saved on), and the modifier says DQ Skin is not running."""
     import json
 
     path = tmp_path / "shot.blend"
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    obj, arm, _ = animated_tube()
+    obj, arm, _ = animated_tube(rig=rig)
     obj.name = "Body"
     add_dq_skin(obj, method)
+    if rig == "B-Bones":
+        assert_fed(dq_skin, obj)
     tw = twin(obj, "Twin")
     bpy.context.scene.frame_set(7)
     check_frames([(obj, tw)], frames=(7,))
@@ -313,10 +326,13 @@ def test_saved_file_has_no_results_and_active_companions(dq_skin, tmp_path):
     assert status(dq_skin, obj).live and not obj.modifiers["Armature"].show_viewport
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_undo_and_redo_stay_exact_and_leave_no_orphans(dq_skin, method):
-    obj, arm, _ = animated_tube()
+def test_undo_and_redo_stay_exact_and_leave_no_orphans(dq_skin, method, rig):
+    obj, arm, _ = animated_tube(rig=rig)
     add_dq_skin(obj, method)
+    if rig == "B-Bones":
+        assert_fed(dq_skin, obj)
     ref = twin(obj, "twin", share_mesh=False)
     names = (obj.name, ref.name, arm.name)
     bpy.context.scene.frame_set(4)
@@ -337,15 +353,18 @@ def test_undo_and_redo_stay_exact_and_leave_no_orphans(dq_skin, method):
 
 # -- Apply, remove, several DQ Skins ------------------------------------------------------------
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_apply_gives_the_builtin_applied_mesh_and_leaves_nothing_behind(dq_skin, method):
-    obj, arm, _ = animated_tube()
+def test_apply_gives_the_builtin_applied_mesh_and_leaves_nothing_behind(dq_skin, method, rig):
+    obj, arm, _ = animated_tube(rig=rig)
     obj.modifiers.new("Subdivision", "SUBSURF")
     ref = obj.copy()
     ref.data = obj.data.copy()
     bpy.context.scene.collection.objects.link(ref)
     ref.modifiers["Armature"].use_deform_preserve_volume = method == "DUAL_QUATERNION"
     mod = add_dq_skin(obj, method)
+    if rig == "B-Bones":
+        assert_fed(dq_skin, obj)
     bpy.context.scene.frame_set(13)
     with bpy.context.temp_override(object=obj, active_object=obj):
         assert bpy.ops.object.modifier_apply(modifier=mod.name) == {"FINISHED"}
@@ -471,12 +490,15 @@ def later_modifier(obj, kind: str):
 LATER = ["SUBSURF", "SOLIDIFY", "MIRROR", "DECIMATE", "WELD", "EDGE_SPLIT", "TRIANGULATE", "NODES", "CORRECTIVE_SMOOTH", "SMOOTH", "DISPLACE"]
 
 
+@pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("kind", LATER)
-def test_any_modifier_after_dq_skin(dq_skin, kind, method):
-    obj, arm, _ = animated_tube(rings=16, segments=12)
+def test_any_modifier_after_dq_skin(dq_skin, kind, method, rig):
+    obj, arm, _ = animated_tube(rings=16, segments=12, rig=rig)
     later_modifier(obj, kind)
     add_dq_skin(obj, method)
+    if rig == "B-Bones":
+        assert_fed(dq_skin, obj)
     names = [m.type for m in obj.modifiers]
     assert names[0] == "NODES" and names[1] == "ARMATURE"
     tw = twin(obj)

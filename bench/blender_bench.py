@@ -206,16 +206,25 @@ def frames_ms(objs, frames, runs: int, phases: Phases | None = None) -> tuple[fl
     return 1e3 * float(np.median(times)), out
 
 
-def alternate(variants: dict, frames, rounds: int, per_round: int, phases: Phases) -> dict:
-    """Rounds alternating the variants; median per variant over all rounds."""
+def alternate(variants: dict, frames, rounds: int, per_round: int, phases: Phases, hooks: dict | None = None) -> dict:
+    """Rounds alternating the variants; median per variant over all rounds. `hooks`: variant
+    name -> (enter, leave), called around each of its rounds (outside the timing)."""
     all_times = {k: [] for k in variants}
     parts = {}
+    hooks = hooks or {}
     for _ in range(rounds):
         for name, objs in variants.items():
+            enter, leave = hooks.get(name, (None, None))
+            if enter:
+                enter()
             show_only(*objs)
             bpy.context.scene.frame_set(frames[0])  # warm up after the switch
             bpy.context.scene.frame_set(frames[1])
-            ms, p = frames_ms(objs, frames, per_round, phases if name.startswith("dq_skin") else None)
+            try:
+                ms, p = frames_ms(objs, frames, per_round, phases if name.startswith("dq_skin") else None)
+            finally:
+                if leave:
+                    leave()
             all_times[name].append(ms)
             if p:
                 parts.setdefault(name, []).append(p)
@@ -556,9 +565,15 @@ class BatchedInEvaluation:
     skins them all in one `skin_many` call and writes one PC2 file each; each character's copy
     has a Mesh Cache reading its file, whose driver (evaluated without Python) reads that
     property, so it runs after the batch. `dq`: DQ Skin objects whose modifiers are live on
-    vertex groups, `pairs`: (body, rig) for each."""
+    vertex groups, `pairs`: (body, rig) for each.
 
-    def __init__(self, dq, pairs):
+    `on_results`: the Mesh Caches go on DQ Skin's own result objects instead of on bare copies,
+    so the DQ Skin objects themselves show the batch through their node groups: the add-on's
+    structure (a result object and a node group per character) fed this way, with the add-on's
+    handlers taken out while it is measured (`Unhandled`), the least a batched feed built into
+    the add-on could cost before its handler checks anything."""
+
+    def __init__(self, dq, pairs, on_results: bool = False):
         import struct
         import tempfile
 
@@ -580,12 +595,15 @@ class BatchedInEvaluation:
             indices = binding.bone_indices
             plans.append((rig, None if len(indices) == len(rig.pose.bones) else indices))
             self.variables += order_after_bones(batch, rig, list(binding.bone_names), prefix=f"c{k}_")
-            o = body.copy()
-            o.data = body.data.copy()
-            o.name = f"{body.name} batched"
-            bpy.context.scene.collection.objects.link(o)
-            for m in list(o.modifiers):
-                o.modifiers.remove(m)
+            if on_results:
+                o = st.output.result
+            else:
+                o = body.copy()
+                o.data = body.data.copy()
+                o.name = f"{body.name} batched"
+                bpy.context.scene.collection.objects.link(o)
+                for m in list(o.modifiers):
+                    o.modifiers.remove(m)
             n = len(body.data.vertices)
             path = os.path.join(folder, f"dqskin-bench-batch-{os.getpid()}-{o.session_uid}.pc2")
             header = b"POINTCACHE2\0" + struct.pack("<iiffi", 1, n, 0.0, 1.0, 1)
@@ -606,7 +624,11 @@ class BatchedInEvaluation:
             v.targets[0].data_path = '["go"]'
             drv.expression = "go"
             self.objects.append(o)
+        self.on_results = on_results
         self.simple = all(o.animation_data.drivers[0].driver.is_simple_expression for o in self.objects)
+        if on_results:
+            self.objects = list(dq)  # what shows the batch: the DQ Skin objects
+            self.results = [st.output.result for st in states]
         self.calls = 0
         namespace = bpy.app.driver_namespace
         skin_many, pose_matrices = addon.dqskin.skin_many, addon.rig.pose_matrices
@@ -631,12 +653,40 @@ class BatchedInEvaluation:
 
     def remove(self):
         bpy.app.driver_namespace.pop(self.name, None)
-        for o in self.objects:
-            bpy.data.objects.remove(o)
+        if self.on_results:
+            for r in self.results:
+                r.driver_remove('modifiers["DQ Skin batched"].factor')
+                r.modifiers.remove(r.modifiers["DQ Skin batched"])
+        else:
+            for o in self.objects:
+                bpy.data.objects.remove(o)
         bpy.data.objects.remove(self.carrier)
         for fd, path in zip(self.fds, self.paths):
             os.close(fd)
             os.unlink(path)
+
+
+class Unhandled:
+    """DQ Skin's handlers taken out of Blender's handler lists (and put back where they were)."""
+
+    NAMES = ("on_frame_change_pre", "on_frame_change_post", "on_depsgraph_update_post")
+
+    def __init__(self):
+        self.taken = []
+
+    def __enter__(self):
+        h = bpy.app.handlers
+        for lst in (h.frame_change_pre, h.frame_change_post, h.depsgraph_update_post):
+            for i, fn in reversed(list(enumerate(lst))):
+                if getattr(fn, "__name__", "") in self.NAMES and getattr(fn, "__module__", "").startswith(ADDON):
+                    self.taken.append((lst, i, fn))
+                    lst.remove(fn)
+        return self
+
+    def __exit__(self, *exc):
+        for lst, i, fn in reversed(self.taken):
+            lst.insert(i, fn)
+        self.taken.clear()
 
 
 class Floors:
@@ -880,15 +930,50 @@ def case_crowd(count: int, quick: bool) -> dict:
     in_evaluation = [InEvaluation(c, a, m) for c, (m, a) in zip(dq, pairs)]
     floors = [Floors(a, m, e.bone_names) for e, (m, a) in zip(in_evaluation, pairs)]
     batched = BatchedInEvaluation(dq, pairs)
+    # The same batch feeding DQ Skin's own results (built and taken down around each of its
+    # rounds, with DQ Skin's handlers out meanwhile).
+    on_results = {}
+
+    def enter_on_results():
+        on_results["unhandled"] = Unhandled().__enter__()
+        on_results["batch"] = BatchedInEvaluation(dq, pairs, on_results=True)
+
+    def leave_on_results():
+        b = on_results.pop("batch")
+        if "max_deviation" not in on_results:
+            # What the DQ Skin objects showed is the batch's (as DQ Skin, Dual Quaternion).
+            show_only(*dq, *meshes)
+            armatures = [next(x for x in m.modifiers if x.type == "ARMATURE") for m in meshes]
+            for a in armatures:
+                a.use_deform_preserve_volume = True
+            bpy.context.scene.frame_set(15)
+            dg = bpy.context.evaluated_depsgraph_get()
+            on_results["max_deviation"] = max(float(np.abs(positions_of(d, dg) - positions_of(m, dg)).max()) for d, m in zip(dq, meshes))
+            for a in armatures:
+                a.use_deform_preserve_volume = False
+        on_results["calls"] = on_results.get("calls", 0) + b.calls
+        b.remove()
+        on_results.pop("unhandled").__exit__()
+
     phases = Phases()
     phases.install()
     try:
-        variants = {"armature": meshes, "dq_skin": dq, "in_evaluation": [e.obj for e in in_evaluation], "in_evaluation_batched": batched.objects}
+        variants = {
+            "armature": meshes,
+            "dq_skin": dq,
+            "in_evaluation": [e.obj for e in in_evaluation],
+            "in_evaluation_batched": batched.objects,
+            "in_evaluation_batched_on_results": dq,
+        }
         for kind in floors[0].objects:
             variants[kind] = [f.objects[kind] for f in floors]
-        row = alternate(variants, (3, 9, 15, 21), 2 if quick else 4, 5 if quick else 9, phases)
+        hooks = {"in_evaluation_batched_on_results": (enter_on_results, leave_on_results)}
+        row = alternate(variants, (3, 9, 15, 21), 2 if quick else 4, 5 if quick else 9, phases, hooks)
         row["in_evaluation_speedup"] = row["armature_ms"] / row["in_evaluation_ms"]
         row["in_evaluation_batched_speedup"] = row["armature_ms"] / row["in_evaluation_batched_ms"]
+        row["in_evaluation_batched_on_results_speedup"] = row["armature_ms"] / row["in_evaluation_batched_on_results_ms"]
+        row["in_evaluation_batched_on_results_calls"] = on_results.get("calls", 0)
+        row["in_evaluation_batched_on_results_max_deviation"] = on_results.get("max_deviation")
         calls = sum(e.calls for e in in_evaluation)
         # The batch deforms as DQ Skin does (the same jobs): checked against the Armature
         # modifier with Preserve Volume, as the characters' DQ Skin is Dual Quaternion.

@@ -54,9 +54,11 @@ class _Feed:
     file: object  # the open point-cache file
     points: int  # the point count its header says
     runs: int = 0  # frames the driver skinned (tests and the benchmark read it)
+    skinned: tuple = (0, 0)  # (frame change, depsgraph address) of the driver's last skinning
 
 
 _FEEDS: dict[int, _Feed] = {}  # result session uid -> its feed
+_frame_change = [0]  # counts frame changes (`new_frame`): whether the driver skinned in this one
 # A render's graph may run a driver on its own thread while the viewport's runs one: one skins
 # and writes at a time (the kernel releases the GIL).
 _LOCK = threading.Lock()
@@ -205,6 +207,18 @@ def forget_all() -> None:
     # namespace while Blender 4.2 exits crashes it (`addon/install.py` under bpy 4.2.23).
 
 
+def new_frame() -> None:
+    """A frame change starts (`frame_change_pre`)."""
+    _frame_change[0] += 1
+
+
+def skinned_now(result, depsgraph) -> bool:
+    """Whether the driver skinned `result` in this frame change's evaluation of `depsgraph`
+    (the handler then checks what the driver could not know, see `modifier.fed_frame_stands`)."""
+    feed = fed(result)
+    return feed is not None and feed.skinned == (_frame_change[0], depsgraph.as_pointer())
+
+
 def runs(result) -> int:
     feed = fed(result)
     return feed.runs if feed is not None else 0
@@ -267,3 +281,4 @@ def _skin(feed: _Feed, depsgraph) -> None:
     out.written = FrameKey(old.settings, old.source, key, old.spaces, old.result, old.mesh_version)
     out.generation += 1
     feed.runs += 1
+    feed.skinned = (_frame_change[0], depsgraph.as_pointer())

@@ -344,6 +344,51 @@ def _quick(obj, mod, st: ModifierState, ctx: Context):
     return Plan(obj, mod, st, s, out.result, out.kind, key, job, deforms, time.perf_counter(), quick=True, render=ctx.render)
 
 
+def fed_frame_stands(obj, ctx: Context) -> bool:
+    """Whether the frame the feed skinned for `obj`'s one DQ Skin in this evaluation is what the
+    full path would write, checked cheaply (a Rigify character's full path reads the whole pose
+    again: 0.4 ms). The driver knew the pose and that the bones' binding signature is the last
+    full evaluation's (it skins only then); checked here is what it could not know: the
+    settings, the mesh and its vertex groups, the stack before DQ Skin, the object's and the
+    armature's transforms, the scene's structure (what hands over), the toggles and the
+    companion. The feed's result is always re-evaluated, so the object always looks updated
+    to the frame handler: these checks replace the steady path's "not updated"."""
+    if ctx.render or exports.active() or obj.mode == "EDIT" or obj.session_uid not in ctx.unmoved:
+        return False
+    mods = dq_skin_modifiers(obj)
+    if len(mods) != 1:
+        return False
+    mod = mods[0]
+    for m in obj.modifiers:
+        if m == mod:
+            break
+        if m.show_viewport:
+            return False  # something reaches DQ Skin before it: the full path decides
+    st = state_of(obj, mod)
+    out = st.output
+    old = out.written
+    if (
+        st.status.mode is not Mode.LIVE
+        or st.status.source != "mesh"
+        or out.result is None
+        or old is None
+        or out.kind != nodes.RESULT_REPLACE
+        or st.decided_structure != ctx.structure
+        or not mod.show_viewport
+        or not feed.skinned_now(out.result, ctx.depsgraph)
+    ):
+        return False
+    s = settings.cached(mod, st.settings)
+    arm = s.armature
+    if arm is None or s.key() != old.settings or arm.session_uid not in ctx.unmoved or arm.mode == "EDIT":
+        return False
+    data = meshdata.get(obj)  # (compares the vertex group names)
+    if data.keys is not None or (data.version, meshdata.revision(obj.data)) != old.mesh_version:
+        return False
+    _follow_the_users_companion(obj, mod, st)
+    return mod.show_viewport
+
+
 def run_batch(plans: list) -> None:
     """Skins every queued plan in one call (in parallel across objects) and writes the results."""
     if not plans:

@@ -328,6 +328,7 @@ class Registry:
         """Before a frame change: objects Blender will evaluate anyway before the frame handler
         (their shape keys, transforms or earlier modifiers are animated) output nothing in that
         evaluation, so that the modifiers after DQ Skin run once per frame, not twice."""
+        feed.new_frame()
         for rec in self.records.values():
             if not rec.volatile:
                 continue
@@ -404,6 +405,8 @@ class Registry:
                 if plan is not False:
                     ctx.batch.append(plan)
                     continue
+            if not force and modifier.fed_frame_stands(rec.obj, ctx):
+                continue  # the feed made this frame inside Blender's evaluation
             self.evaluate(rec, depsgraph, force, ctx)
         modifier.run_batch(ctx.batch)
 

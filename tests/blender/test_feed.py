@@ -100,6 +100,59 @@ def test_what_the_pose_alone_does_not_say_is_caught(dq_skin):
     assert dq_skin.feed.fed(result_of(dq_skin, obj)) is not None
 
 
+def test_what_the_object_alone_says_is_caught(dq_skin):
+    """The frame handler takes the driver's frame without the full evaluation when the driver
+    skinned it (`modifier.fed_frame_stands`): each edit of the object a script makes right
+    before a frame change (weights, a renamed group, a modifier before DQ Skin, the companion
+    switched on, DQ Skin switched off in the viewport) must still show."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = bpy.context.scene
+    mod = dq_skin_mods(obj)[0]
+    for o in (obj, reference):
+        o.vertex_groups["Bone2"].add(list(range(0, 200, 3)), 0.9, "REPLACE")
+    scene.frame_set(6)
+    assert_same(obj, reference, "after weights changed")
+    for o in (obj, reference):
+        o.vertex_groups["Bone1"].name = "Renamed"
+    scene.frame_set(8)
+    assert_same(obj, reference, "after a bone's group was renamed")
+    for o in (obj, reference):
+        o.vertex_groups["Renamed"].name = "Bone1"
+    scene.frame_set(9)
+    assert_same(obj, reference, "after it was named back")
+    assert dq_skin.feed.fed(result_of(dq_skin, obj)) is not None
+    for o in (obj, reference):
+        d = o.modifiers.new("Displace", "DISPLACE")
+        d.strength = 0.2
+        d.show_viewport = False
+        bpy.ops.object.select_all(action="DESELECT")
+        with bpy.context.temp_override(object=o, active_object=o):
+            bpy.ops.object.modifier_move_to_index(modifier="Displace", index=0)
+    scene.frame_set(10)
+    assert_same(obj, reference, "with a switched-off modifier before")
+    for o in (obj, reference):
+        o.modifiers["Displace"].show_viewport = True
+    scene.frame_set(11)
+    assert_same(obj, reference, "after the modifier before DQ Skin was switched on")
+    for o in (obj, reference):
+        o.modifiers.remove(o.modifiers["Displace"])
+    scene.frame_set(12)
+    assert_same(obj, reference, "after it was removed")
+    c = obj.modifiers[dq_skin.nodes.get_companion(mod)["name"]]
+    c.show_viewport = True  # the user asks for Blender's deformation
+    scene.frame_set(13)
+    assert not mod.show_viewport and status(dq_skin, obj).mode.value != "live"
+    assert_same(obj, reference, "with the companion switched on")
+    mod.show_viewport = True
+    scene.frame_set(14)
+    assert status(dq_skin, obj).live and not c.show_viewport
+    assert_same(obj, reference, "with DQ Skin back on")
+    mod.show_viewport = False
+    scene.frame_set(15)
+    assert c.show_viewport and not status(dq_skin, obj).live
+    assert_same(obj, reference, "with DQ Skin off in the viewport")
+
+
 def test_an_edit_without_a_frame_change_shows(dq_skin):
     """Posing in the interface: a bone rotated, then the view layer updated."""
     obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")

@@ -30,7 +30,8 @@ def read(arm_eval, cache: dict | None = None) -> "dqskin.PoseData | None":
     once: a full evaluation needs the pose for the binding's signature and for the frame."""
     global last_error
     if cache is not None:
-        key = arm_eval.session_uid
+        # (An evaluated object's `session_uid` is 0: its address tells armatures apart.)
+        key = arm_eval.as_pointer()
         if key not in cache:
             cache[key] = (read(arm_eval), last_error)
         data, last_error = cache[key]

@@ -28,6 +28,14 @@ import numpy as np
 from . import centers, companion, compat, consumers, dqskin, exports, feed, meshdata, nodes, pose, results, rig, settings
 from .state import STATES, BindingKey, FrameKey, Mode, ModifierState
 
+# The feed (`feed`) saves Blender's second evaluation, whose cost grows with the scene's graph
+# (a Rigify rig: about 1.25 ms), and costs more per vertex than the frame handler's route (its
+# Mesh Cache reads the file one vertex at a time: about 18 ns a vertex more). Measured on
+# Rigify's 706 bones it wins up to about 60-90 vertices per pose bone (14,824 vertices: 0.5-0.9
+# ms a frame faster), and on a 16-bone, 100k-vertex B-Bone grid it loses 2.2 ms: a mesh is fed
+# up to this many vertices per pose bone of its armature (see the README's figures).
+FEED_VERTICES_PER_BONE = 50
+
 
 class SkinError(Exception):
     """A problem the user can fix, shown on the panel and in operator reports."""
@@ -608,7 +616,7 @@ def finish(plan: Plan) -> None:
 def _feedable(plan: Plan, kind: int, data) -> bool:
     """Whether the result can be skinned inside Blender's first evaluation (see `feed`): a
     whole-mesh result of the mesh itself (no shape keys), its frames' bones read from memory
-    (envelopes, B-Bones), in the viewport."""
+    (envelopes, B-Bones), in the viewport, and worth it (`feeds_faster`)."""
     st = plan.st
     return (
         kind == nodes.RESULT_REPLACE
@@ -618,7 +626,14 @@ def _feedable(plan: Plan, kind: int, data) -> bool:
         and not plan.render
         and isinstance(plan.key.pose, tuple)
         and plan.key.pose[:1] == ("memory",)
+        and feeds_faster(data.vertex_count, plan.s.armature)
     )
+
+
+def feeds_faster(vertices: int, armature) -> bool:
+    """Whether the feed is expected to beat the frame handler's route for a mesh of `vertices`
+    on `armature` (see FEED_VERTICES_PER_BONE)."""
+    return vertices <= FEED_VERTICES_PER_BONE * len(armature.data.bones)
 
 
 # -- what reaches the modifier ------------------------------------------------------------------

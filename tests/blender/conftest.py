@@ -68,6 +68,22 @@ def empty_scene(dq_skin):
     yield
 
 
+def feed_every_size(dq_skin, monkeypatch) -> None:
+    """The feed takes meshes of every size on every rig (by default only where it is faster
+    than the frame handler, `modifier.feeds_faster`: Rigify-sized rigs), so that the small test
+    characters exercise it."""
+    monkeypatch.setattr(dq_skin.modifier, "FEED_VERTICES_PER_BONE", 1 << 40)
+
+
+@pytest.fixture(autouse=True)
+def _feed_for_fed_rigs(request, dq_skin, monkeypatch):
+    """Tests parametrized with `rig` "B-Bones fed" (`scenes.RIGS`) run with `feed_every_size`."""
+    callspec = getattr(request.node, "callspec", None)
+    if callspec is not None and callspec.params.get("rig") == "B-Bones fed":
+        feed_every_size(dq_skin, monkeypatch)
+    yield
+
+
 @pytest.fixture
 def assets() -> Path:
     if not ASSETS.is_dir():

@@ -223,13 +223,15 @@ def status(dq_skin, obj, mod=None):
     return dq_skin.modifier.status_of(obj, mod or dq_skin_mods(obj)[0])
 
 
-def assert_fed(dq_skin, obj) -> None:
-    """Every DQ Skin of `obj` is skinned by the feed, inside Blender's first evaluation (B-Bone and
-    envelope characters), after one frame change."""
+def assert_fed(dq_skin, obj, fed: bool = True) -> None:
+    """Every DQ Skin of `obj` is (`fed`) or is not skinned by the feed, inside Blender's first
+    evaluation (B-Bone and envelope characters), after one frame change."""
     bpy.context.scene.frame_set(bpy.context.scene.frame_current)
     for mod in dq_skin_mods(obj):
         result = dq_skin.modifier.state_of(obj, mod).output.result
-        assert dq_skin.feed.fed(result) is not None, f"{obj.name}: not fed ({status(dq_skin, obj, mod).message})"
+        st = status(dq_skin, obj, mod)
+        assert st.live, f"{obj.name}: {st.message}"
+        assert (dq_skin.feed.fed(result) is not None) == fed, f"{obj.name}: {'not ' if fed else ''}fed"
 
 
 class _Recorder:

@@ -1,10 +1,10 @@
 """Everything that reads a DQ Skin character's deformed mesh, each compared with the same scene
 built with Blender's own Armature modifier on its own objects (the *reference* character: a copy
 of the armature and the mesh, side by side, playing the same action), Linear and Dual
-Quaternion, with CesiumMan's bones as they are (vertex groups: the frame handler skins) and
-made B-Bones (the feed skins inside Blender's first evaluation): simulations on and around the character, hair, modifiers and constraints targeting
-it, brushes on the posed mesh, exporters, Apply as Shape Key, bakes and ray casts (see the
-README's inventory).
+Quaternion, with CesiumMan's bones as they are (vertex groups) and made B-Bones, skinned by the
+frame handler and by the feed (`scenes.RIGS`): simulations on and around the character, hair,
+modifiers and constraints targeting it, brushes on the posed mesh, exporters, Apply as Shape
+Key, bakes and ray casts (see the README's inventory).
 
 Bar: <= 1e-5 of the bounding-box diagonal, every frame (Shrinkwrap: 1e-4).
 """
@@ -29,8 +29,8 @@ SHRINKWRAP_TOL = 1e-4
 
 def characters(dq_skin, assets, method: str, rig: str):
     """CesiumMan with DQ Skin (at the origin) and its reference with Blender's Armature modifier
-    (offset by OFFSET, its own armature object sharing the action); with `rig` "B-Bones" every
-    deforming bone of both is a B-Bone, so DQ Skin's feed skins it inside the first evaluation."""
+    (offset by OFFSET, its own armature object sharing the action); with `rig` "B-Bones" or
+    "B-Bones fed" every deforming bone of both is a B-Bone (see `scenes.RIGS`)."""
     body, arm_mod = import_character(assets / "CesiumMan.glb")
     arm = arm_mod.object
     make_rig(arm, rig)
@@ -46,8 +46,8 @@ def characters(dq_skin, assets, method: str, rig: str):
     ref_mod.object = ref_arm
     ref_mod.use_deform_preserve_volume = method != "LINEAR"
     add_dq_skin(body, method)
-    if rig == "B-Bones":
-        assert_fed(dq_skin, body)
+    if rig != "vertex groups":
+        assert_fed(dq_skin, body, rig == "B-Bones fed")
     return body, ref
 
 

@@ -23,6 +23,7 @@ from dqtest import (
     REL_TOL,
     add_dq_skin,
     animated_tube,
+    assert_fed,
     assert_same,
     check_frames,
     deviation,
@@ -391,6 +392,8 @@ def test_rigify_character_in_every_method(dq_skin, rigify_folder, method):
     add_dq_skin(body, method)
     st = status(dq_skin, body)
     if method in METHODS:
+        # A Rigify character is where the feed pays (`modifier.feeds_faster`): it skins it.
+        assert_fed(dq_skin, body)
         check_frames([(body, ref)], frames=(1, 6, 12, 19, 24))
         assert st.live
     elif method == "BLEND":

@@ -17,9 +17,15 @@ import bpy
 import pytest
 
 from dqtest import add_dq_skin, animate, assert_same, dq_skin_mods, reference_copy, select_only, status
+from conftest import feed_every_size
 from dqtest import get_input
 from test_pose_memory import bbone_rig
 from test_render import SAME_IMAGE, changed, render_frame, setup_scene
+
+
+@pytest.fixture(autouse=True)
+def _feed_these_small_characters(dq_skin, monkeypatch):
+    feed_every_size(dq_skin, monkeypatch)
 
 
 def fed_character(dq_skin, method: str):

@@ -18,6 +18,7 @@ from mathutils import Quaternion, Vector
 
 from characters import rigify_character
 from scenes import armature_chain, armature_modifier, chain_weights, link, tube
+from conftest import feed_every_size
 from dqtest import REL_TOL, add_dq_skin, evaluated_positions, reference_copy
 from dqtest import deviation as relative_deviation
 
@@ -389,6 +390,7 @@ def test_a_frame_reads_each_armature_once(memory_only, monkeypatch):
     skin (here: as if an operator were running), the handler's full evaluation needs the pose
     for the binding's signature and for the frame, and two characters on one rig need the same
     pose: one read per armature and frame (each read of a Rigify rig costs about 0.1-0.2 ms)."""
+    feed_every_size(memory_only, monkeypatch)
     obj, arm, _ = bbone_rig(segments=8, mapping="CURVED")
     other = link(obj.copy())
     other.data = obj.data.copy()

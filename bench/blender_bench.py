@@ -405,6 +405,21 @@ def positions_of(obj, depsgraph) -> np.ndarray:
     return out
 
 
+def deviation_from_preserve_volume(objs, meshes, frame: int) -> float:
+    """The largest distance at `frame` between each of `objs` and its mesh of `meshes` with its
+    Armature modifier's Preserve Volume on (as the crowd's DQ Skin is Dual Quaternion)."""
+    armatures = [next(x for x in m.modifiers if x.type == "ARMATURE") for m in meshes]
+    for a in armatures:
+        a.use_deform_preserve_volume = True
+    try:
+        bpy.context.scene.frame_set(frame)
+        dg = bpy.context.evaluated_depsgraph_get()
+        return max(float(np.abs(positions_of(o, dg) - positions_of(m, dg)).max()) for o, m in zip(objs, meshes))
+    finally:
+        for a in armatures:
+            a.use_deform_preserve_volume = False
+
+
 def case_rigify(quick: bool) -> dict:
     """The Rigify character: the Armature modifier (Preserve Volume off and on) and DQ Skin
     (Linear and Dual Quaternion), each on its own copy of the mesh, and the rig alone (a copy
@@ -943,14 +958,7 @@ def case_crowd(count: int, quick: bool) -> dict:
         if "max_deviation" not in on_results:
             # What the DQ Skin objects showed is the batch's (as DQ Skin, Dual Quaternion).
             show_only(*dq, *meshes)
-            armatures = [next(x for x in m.modifiers if x.type == "ARMATURE") for m in meshes]
-            for a in armatures:
-                a.use_deform_preserve_volume = True
-            bpy.context.scene.frame_set(15)
-            dg = bpy.context.evaluated_depsgraph_get()
-            on_results["max_deviation"] = max(float(np.abs(positions_of(d, dg) - positions_of(m, dg)).max()) for d, m in zip(dq, meshes))
-            for a in armatures:
-                a.use_deform_preserve_volume = False
+            on_results["max_deviation"] = deviation_from_preserve_volume(dq, meshes, 15)
         on_results["calls"] = on_results.get("calls", 0) + b.calls
         b.remove()
         on_results.pop("unhandled").__exit__()
@@ -978,17 +986,8 @@ def case_crowd(count: int, quick: bool) -> dict:
         # The batch deforms as DQ Skin does (the same jobs): checked against the Armature
         # modifier with Preserve Volume, as the characters' DQ Skin is Dual Quaternion.
         show_only(*batched.objects, *meshes)
-        armatures = [next(x for x in m.modifiers if x.type == "ARMATURE") for m in meshes]
-        for a in armatures:
-            a.use_deform_preserve_volume = True
         batched.calls = 0
-        bpy.context.scene.frame_set(15)
-        dg = bpy.context.evaluated_depsgraph_get()
-        row["in_evaluation_batched_max_deviation"] = max(
-            float(np.abs(positions_of(b, dg) - positions_of(m, dg)).max()) for b, m in zip(batched.objects, meshes)
-        )
-        for a in armatures:
-            a.use_deform_preserve_volume = False
+        row["in_evaluation_batched_max_deviation"] = deviation_from_preserve_volume(batched.objects, meshes, 15)
         row["in_evaluation_batched_calls_per_frame"] = batched.calls
         row["in_evaluation_batched_variables"] = batched.variables
         row["in_evaluation_batched_simple_expressions"] = batched.simple

@@ -303,26 +303,13 @@ def _quick(obj, mod, st: ModifierState, ctx: Context):
     full path)."""
     s = st.settings.value
     out = st.output
-    if (
-        s is None
-        or st.status.mode is not Mode.LIVE
-        or st.status.source != "mesh"
-        or st.needs_effective
-        or st.binding.binding is None
-        or out.result is None
-        or out.spaces is None
-        or out.written is None
-        or st.decided_structure != ctx.structure
-        or obj.session_uid not in ctx.unchanged
-        or obj.session_uid not in ctx.unmoved
-        or exports.active()
-    ):
+    if s is None or st.needs_effective or st.binding.binding is None or out.spaces is None or obj.session_uid not in ctx.unchanged:
         return False
     arm = s.armature
     try:
-        uid = arm.session_uid
-        if uid not in ctx.unmoved or arm.mode == "EDIT":
+        if not _live_and_in_place(obj, st, arm, ctx):
             return False
+        uid = arm.session_uid
         data = meshdata.peek(obj)
         if data is None or data.keys is not None:
             return False
@@ -352,6 +339,25 @@ def _quick(obj, mod, st: ModifierState, ctx: Context):
     return Plan(obj, mod, st, s, out.result, out.kind, key, job, deforms, time.perf_counter(), quick=True, render=ctx.render)
 
 
+def _live_and_in_place(obj, st: ModifierState, arm, ctx: Context) -> bool:
+    """What both ways past the full path (`_quick`, `fed_frame_stands`) need: a live DQ Skin on
+    the mesh's own coordinates with a result written, the scene's structure as last decided, no
+    export running, neither the object nor its armature moved, the armature not in Edit Mode."""
+    out = st.output
+    return (
+        st.status.mode is Mode.LIVE
+        and st.status.source == "mesh"
+        and out.result is not None
+        and out.written is not None
+        and st.decided_structure == ctx.structure
+        and obj.session_uid in ctx.unmoved
+        and not exports.active()
+        and arm is not None
+        and arm.session_uid in ctx.unmoved
+        and arm.mode != "EDIT"
+    )
+
+
 def fed_frame_stands(obj, ctx: Context) -> bool:
     """Whether the frame the feed skinned for `obj`'s one DQ Skin in this evaluation is what the
     full path would write, checked cheaply (a Rigify character's full path reads the whole pose
@@ -361,7 +367,7 @@ def fed_frame_stands(obj, ctx: Context) -> bool:
     armature's transforms, the scene's structure (what hands over), the toggles and the
     companion. The feed's result is always re-evaluated, so the object always looks updated
     to the frame handler: these checks replace the steady path's "not updated"."""
-    if ctx.render or exports.active() or obj.mode == "EDIT" or obj.session_uid not in ctx.unmoved:
+    if ctx.render or obj.mode == "EDIT":
         return False
     mods = dq_skin_modifiers(obj)
     if len(mods) != 1:
@@ -374,24 +380,16 @@ def fed_frame_stands(obj, ctx: Context) -> bool:
             return False  # something reaches DQ Skin before it: the full path decides
     st = state_of(obj, mod)
     out = st.output
-    old = out.written
-    if (
-        st.status.mode is not Mode.LIVE
-        or st.status.source != "mesh"
-        or out.result is None
-        or old is None
-        or out.kind != nodes.RESULT_REPLACE
-        or st.decided_structure != ctx.structure
-        or not mod.show_viewport
-        or not feed.skinned_now(out.result, ctx.depsgraph)
-    ):
+    if out.kind != nodes.RESULT_REPLACE or not mod.show_viewport or out.result is None or not feed.skinned_now(out.result, ctx.depsgraph):
         return False
     s = settings.cached(mod, st.settings)
-    arm = s.armature
-    if arm is None or s.key() != old.settings or arm.session_uid not in ctx.unmoved or arm.mode == "EDIT":
+    try:
+        if not _live_and_in_place(obj, st, s.armature, ctx) or s.key() != out.written.settings:
+            return False
+    except ReferenceError:  # (the armature was deleted: the full path says so)
         return False
     data = meshdata.get(obj)  # (compares the vertex group names)
-    if data.keys is not None or (data.version, meshdata.revision(obj.data)) != old.mesh_version:
+    if data.keys is not None or (data.version, meshdata.revision(obj.data)) != out.written.mesh_version:
         return False
     _follow_the_users_companion(obj, mod, st)
     return mod.show_viewport

@@ -1,7 +1,11 @@
 //! Throughput of the skinning kernels in million vertices per second, beside a memory-bandwidth
 //! reference measured in the same run: a pass that reads exactly the bytes a kernel reads
-//! (positions, CSR offsets, influence pairs) and writes exactly the bytes it writes (positions
-//! out), doing nothing else.
+//! (positions, the lane-ordered influences and, for the centers of rotation, the centers) and
+//! writes exactly the bytes it writes (positions out), doing nothing else.
+//!
+//! Sizes: 100k and 1M vertices (4 and 8 influences), and [`BEYOND_CACHES`] (4 influences): 1M
+//! vertices are 56 MB, which some CPUs' last-level cache holds (then the reference measures the
+//! cache, not memory); 16M are 0.9 GB, which none does.
 //!
 //! Also times the precompute of the centers of rotation on the procedural creature
 //! (`rigs::Creature`, 40 bones, 4 smooth influences per vertex) at about 50k and 250k vertices.
@@ -21,6 +25,8 @@ use dqskin_core::{centers_of_rotation, kernel_copy, pool, skin, Influences, Meth
 use rayon::prelude::*;
 
 const BONES: usize = 64;
+/// A mesh larger than any CPU's caches, so that kernels and reference stream from memory.
+const BEYOND_CACHES: usize = 16_000_000;
 
 /// A small deterministic generator (xorshift64*), so runs are comparable.
 struct Rng(u64);
@@ -102,9 +108,10 @@ fn once(f: &mut dyn FnMut()) -> f64 {
     s.elapsed().as_secs_f64()
 }
 
-/// Reads the positions and the influences' lane-ordered slots and writes the output, as a kernel
-/// does, with no math: the same bytes in, the same bytes out.
-fn bandwidth_reference(s: &Scene, out: &mut [[f32; 3]]) {
+/// Reads the positions and the influences' lane-ordered slots (and the centers, for the kernels
+/// that read them) and writes the output, as a kernel does, with no math: the same bytes in, the
+/// same bytes out.
+fn bandwidth_reference(s: &Scene, out: &mut [[f32; 3]], with_centers: bool) {
     const CHUNK: usize = 4096;
     const LANES: usize = 16;
     let (starts, words) = s.influences.kernel_words();
@@ -118,7 +125,10 @@ fn bandwidth_reference(s: &Scene, out: &mut [[f32; 3]]) {
                 dst.copy_from_slice(&s.positions[start..end]);
                 let (b0, b1) = (start / LANES, end.div_ceil(LANES));
                 let slots = &words[starts[b0] as usize * words_per_slot..starts[b1] as usize * words_per_slot];
-                starts[b0..=b1].iter().chain(slots).fold(0u32, |x, w| x ^ w)
+                let centers: &[[f32; 3]] = if with_centers { &s.centers[start..end] } else { &[] };
+                // Two plain folds (one over a chain of both would not vectorize).
+                let centers = centers.as_flattened().iter().fold(0u32, |x, w| x ^ w.to_bits());
+                starts[b0..=b1].iter().chain(slots).fold(centers, |x, w| x ^ w)
             })
             .reduce(|| 0, |a, b| a ^ b)
     });
@@ -147,9 +157,10 @@ fn main() {
     let sizes: Vec<usize> = match number("--vertices") {
         Some(n) => vec![n],
         None if quick => vec![100_000],
-        None => vec![100_000, 1_000_000],
+        None => vec![100_000, 1_000_000, BEYOND_CACHES],
     };
     let influence_counts: Vec<usize> = number("--influences").map_or(vec![4, 8], |k| vec![k]);
+    let influences_given = number("--influences").is_some();
     let thread_counts: Vec<usize> = number("--threads").map_or(vec![1, all], |t| vec![t]);
     let rounds = number("--rounds");
     let mut rows = Vec::new();
@@ -161,12 +172,15 @@ fn main() {
     );
     for &vertices in &sizes {
         for &per_vertex in &influence_counts {
+            if vertices == BEYOND_CACHES && per_vertex != 4 && !influences_given {
+                continue; // 8 influences there would need 2.5 GB
+            }
             let s = scene(vertices, per_vertex);
             let mut out = vec![[0.0f32; 3]; vertices];
             let bytes = vertices * 12 * 2 + s.influences.byte_size();
             for &threads in &thread_counts {
                 pool::set_num_threads(threads).expect("threads");
-                let runs = rounds.unwrap_or(if quick { 5 } else if vertices >= 1_000_000 { 25 } else { 60 });
+                let runs = rounds.unwrap_or(if quick || vertices >= BEYOND_CACHES { 5 } else if vertices >= 1_000_000 { 25 } else { 60 });
                 let cases: Vec<(&str, Method, &str, &Pose)> = [
                     ("LBS", Method::Linear, "rigid", &s.rigid),
                     ("DQS", Method::DualQuaternion, "rigid", &s.rigid),
@@ -180,11 +194,12 @@ fn main() {
                 .collect();
                 // Rounds alternate the reference and the kernels so that both see the same
                 // conditions on a shared machine; each keeps its best time (after a warm-up round).
-                let mut reference = f64::INFINITY;
+                // [without, with] the centers.
+                let mut reference = [f64::INFINITY; 2];
                 let mut best = vec![f64::INFINITY; cases.len()];
                 let space = glam::Mat4::from_rotation_translation(glam::Quat::from_rotation_z(0.3), glam::Vec3::new(0.5, -1.0, 2.0));
                 for round in 0..=runs {
-                    let r = once(&mut || bandwidth_reference(&s, &mut out));
+                    let r = [false, true].map(|c| once(&mut || bandwidth_reference(&s, &mut out, c)));
                     for (k, (_, method, _, pose)) in cases.iter().enumerate() {
                         // The object and armature spaces every Blender job has (the modifier's
                         // premat and postmat): the Python module once ran them 3x slower than this
@@ -198,10 +213,13 @@ fn main() {
                         }
                     }
                     if round > 0 {
-                        reference = reference.min(r);
+                        reference = [reference[0].min(r[0]), reference[1].min(r[1])];
                     }
                 }
-                for ((name, _, pose_name, _), secs) in cases.iter().zip(best) {
+                for ((name, method, pose_name, _), secs) in cases.iter().zip(best) {
+                    let centers = matches!(method, Method::CentersOfRotation { .. });
+                    let reference = reference[centers as usize];
+                    let bytes = bytes + if centers { vertices * 12 } else { 0 };
                     println!(
                         "{:>9} {:>3} {:>3} {:<6} {:<6} {:>9.3} {:>10.1} {:>8.2} {:>10.1} {:>6.0}%",
                         vertices,

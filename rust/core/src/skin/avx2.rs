@@ -10,7 +10,7 @@
 use core::arch::x86_64::*;
 
 use super::batch::{transposed_window_sums, VectorOps};
-use super::influences::{Slot, LANES};
+use super::influences::{lane_record, Slot, LANES};
 
 /// Proof that the CPU has AVX2 and FMA.
 #[derive(Clone, Copy)]
@@ -123,17 +123,14 @@ impl VectorOps for Avx2 {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u32], offset: usize) -> [__m256; 4] {
-        debug_assert!(bones.len() >= 8 && offset + 4 <= core::mem::size_of::<T>() / 4);
-        let base = table.as_ptr() as *const f32;
-        let stride = core::mem::size_of::<T>() / 4;
+    unsafe fn load_columns4<T>(self, table: &[T], records: &[u32], offset: usize) -> [__m256; 4] {
+        debug_assert!(records.len() >= 8 && offset + 4 <= core::mem::size_of::<T>() / 4);
         // The four floats of the records of lanes `l` (low half) and `l + 4` (high half).
         let pair = |l: usize| {
-            debug_assert!((bones[l] as usize) < table.len() && (bones[l + 4] as usize) < table.len());
-            // SAFETY: the caller guarantees the indices and the offset are in range; AVX as in
+            // SAFETY: the caller guarantees the records and the offset are in range; AVX as in
             // `instructions!`.
             unsafe {
-                let (lo, hi) = (base.add(bones[l] as usize * stride + offset), base.add(bones[l + 4] as usize * stride + offset));
+                let (lo, hi) = (lane_record(table, records[l]).add(offset), lane_record(table, records[l + 4]).add(offset));
                 _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(lo)), _mm_loadu_ps(hi))
             }
         };
@@ -197,7 +194,6 @@ impl VectorOps for Avx2 {
             // SAFETY: the caller's contract.
             return unsafe { transposed_window_sums(self, slots, signed, lane0, table, offset) };
         }
-        let base = table.as_ptr() as *const f32;
         let stride = core::mem::size_of::<T>() / 4;
         // An odd last row is loaded with the four floats after it (ignored): they must lie in
         // the record too. Known at compile time.
@@ -225,10 +221,9 @@ impl VectorOps for Avx2 {
                     for (k, pair) in acc.iter_mut().enumerate().take(pairs_per_group) {
                         for (half, regs) in pair.iter_mut().enumerate() {
                             let lane = lane0 + first + k + 4 * half;
-                            debug_assert!((slot.bones[lane] as usize) < table.len());
                             // SAFETY: the caller's contract: the lane's bone indexes `table`; the
                             // pairs of rows lie inside its record (asserted above).
-                            let record = base.add(slot.bones[lane] as usize * stride + offset);
+                            let record = lane_record(table, slot.records[lane]).add(offset);
                             let w = _mm256_broadcast_ss(&weights[lane]);
                             for (j, reg) in regs.iter_mut().enumerate().take(per_lane) {
                                 *reg = _mm256_fmadd_ps(_mm256_loadu_ps(record.add(8 * j)), w, *reg);

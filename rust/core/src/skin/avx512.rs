@@ -7,7 +7,7 @@
 use core::arch::x86_64::*;
 
 use super::batch::BatchJob;
-use super::influences::{Slot, LANES};
+use super::influences::{lane_record, Slot, LANES};
 use super::kernels::{DqSum, Points};
 use super::kernels::{DUAL_QUATERNION, LINEAR};
 use super::pose::{CorBone, DqBone, LinearBone, PivotBone};
@@ -28,13 +28,10 @@ fn join(a: __m256, b: __m256) -> __m512 {
 /// Every bone index must index `table`, and `offset + 8` floats must lie inside a record.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn load_columns<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [__m512; 8] {
-    let base = table.as_ptr() as *const f32;
-    let stride = core::mem::size_of::<T>() / 4;
+unsafe fn load_columns<T>(table: &[T], records: &[u32; LANES], offset: usize) -> [__m512; 8] {
     let row = |l: usize| {
-        debug_assert!((bones[l] as usize) < table.len());
-        // SAFETY: the caller guarantees the index and the offset are in range.
-        unsafe { _mm256_loadu_ps(base.add(bones[l] as usize * stride + offset)) }
+        // SAFETY: the caller guarantees the record and the offset are in range.
+        unsafe { _mm256_loadu_ps(lane_record(table, records[l]).add(offset)) }
     };
     transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
 }
@@ -147,7 +144,7 @@ unsafe fn rigid_sums(slots: &[Slot], dq: &[DqBone]) -> Sums {
     let mut contrib = _mm512_setzero_ps();
     for slot in slots {
         // SAFETY: indices are in range (validated); a DqBone is 8 floats.
-        let c = unsafe { load_columns(dq, &slot.bones, 0) };
+        let c = unsafe { load_columns(dq, &slot.records, 0) };
         // SAFETY: a slot has 16 weights.
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
         add_signed(&mut real, &mut dual, &c[0..4], &c[4..8], w);
@@ -182,9 +179,9 @@ unsafe fn scaled_sums([x, y, z]: [__m512; 3], slots: &[Slot], pivot: &[PivotBone
     for slot in slots {
         // SAFETY: indices are in range (validated); a PivotBone is 16 floats: rows 0–1, then
         // row 2 and the rotation.
-        let a = unsafe { load_columns(pivot, &slot.bones, 0) };
+        let a = unsafe { load_columns(pivot, &slot.records, 0) };
         // SAFETY: as above.
-        let b = unsafe { load_columns(pivot, &slot.bones, 8) };
+        let b = unsafe { load_columns(pivot, &slot.records, 8) };
         let row = |m0: __m512, m1: __m512, m2: __m512, t: __m512| {
             _mm512_fmadd_ps(m0, x, _mm512_fmadd_ps(m1, y, _mm512_fmadd_ps(m2, z, t)))
         };
@@ -333,14 +330,13 @@ impl Affine {
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], __m512) {
     const { assert!(core::mem::size_of::<LinearBone>() == 64) };
-    let base = linear.as_ptr() as *const f32;
     let mut lanes = [_mm512_setzero_ps(); LANES];
     let mut contrib = _mm512_setzero_ps();
     for slot in slots {
         for (l, lane) in lanes.iter_mut().enumerate() {
             // SAFETY: indices are in range (validated); a LinearBone is 16 floats (rows,
             // zero padding).
-            let record = unsafe { _mm512_loadu_ps(base.add(record_offset(linear, &slot.bones, l))) };
+            let record = unsafe { _mm512_loadu_ps(scalar_record(linear, &slot.records, l)) };
             *lane = _mm512_fmadd_ps(record, _mm512_set1_ps(slot.weights[l]), *lane);
         }
         // SAFETY: a slot has 16 weights.
@@ -489,31 +485,30 @@ fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
     core::array::from_fn(|k| _mm512_fmadd_ps(q[3], a[k], b[k]))
 }
 
-/// Float offset of lane `l`'s bone record in `table`. The index is read as a scalar (a
-/// volatile read keeps the compiler from loading all sixteen as a vector and extracting each
-/// lane, two shuffles a lane on the vector ports the transposes need) right where the record is
-/// loaded, so that no index waits in a register (or a spill slot) for its turn.
+/// Lane `l`'s bone record in `table`. The slot entry is read as a scalar (a volatile read keeps
+/// the compiler from loading all sixteen as a vector and extracting each lane, two shuffles a
+/// lane on the vector ports the transposes need) right where the record is loaded, so that no
+/// entry waits in a register (or a spill slot) for its turn.
 ///
 /// # Safety
-/// `bones[l]` must index `table`.
+/// `records[l]` must name a record of `table` (see [`lane_record`]).
 #[inline(always)]
-unsafe fn record_offset<T>(table: &[T], bones: &[u32; LANES], l: usize) -> usize {
+unsafe fn scalar_record<T>(table: &[T], records: &[u32; LANES], l: usize) -> *const f32 {
     // SAFETY: a valid reference to an initialized u32.
-    let b = unsafe { core::ptr::read_volatile(&bones[l]) } as usize;
-    debug_assert!(b < table.len());
-    b * (core::mem::size_of::<T>() / 4)
+    let r = unsafe { core::ptr::read_volatile(&records[l]) };
+    // SAFETY: the caller's contract.
+    unsafe { lane_record(table, r) }
 }
 
-/// [`load_columns`] with the indices read as scalars (see [`record_offset`]).
+/// [`load_columns`] with the indices read as scalars (see [`scalar_record`]).
 ///
 /// # Safety
 /// As [`load_columns`].
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn load_columns_scalar<T>(table: &[T], bones: &[u32; LANES], offset: usize) -> [__m512; 8] {
-    let base = table.as_ptr() as *const f32;
-    // SAFETY: the caller guarantees the indices and the offset are in range.
-    let row = |l: usize| unsafe { _mm256_loadu_ps(base.add(record_offset(table, bones, l) + offset)) };
+unsafe fn load_columns_scalar<T>(table: &[T], records: &[u32; LANES], offset: usize) -> [__m512; 8] {
+    // SAFETY: the caller guarantees the records and the offset are in range.
+    let row = |l: usize| unsafe { _mm256_loadu_ps(scalar_record(table, records, l).add(offset)) };
     transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
 }
 
@@ -525,11 +520,10 @@ unsafe fn load_columns_scalar<T>(table: &[T], bones: &[u32; LANES], offset: usiz
 /// Every bone index must index `cor`.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn load_s22(cor: &[CorBone], bones: &[u32; LANES]) -> __m512 {
+unsafe fn load_s22(cor: &[CorBone], records: &[u32; LANES]) -> __m512 {
     const { assert!(core::mem::offset_of!(CorBone, s22) == 24 * 4) };
-    let base = cor.as_ptr() as *const f32;
-    // SAFETY: the caller guarantees the offsets are in range.
-    let values: [f32; LANES] = core::array::from_fn(|l| unsafe { *base.add(record_offset(cor, bones, l) + 24) });
+    // SAFETY: the caller guarantees the records are in range.
+    let values: [f32; LANES] = core::array::from_fn(|l| unsafe { *scalar_record(cor, records, l).add(24) });
     // SAFETY: 16 floats.
     unsafe { _mm512_loadu_ps(values.as_ptr()) }
 }
@@ -603,9 +597,9 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         let q = if SCALED {
             // SAFETY: indices are in range (validated); a CorBone's first 24 floats are matrix
             // rows 0–1, row 2 and the rotation, and the first 8 entries of its scale/shear part.
-            let a = unsafe { load_columns_scalar(job.cor, &slot.bones, 0) };
+            let a = unsafe { load_columns_scalar(job.cor, &slot.records, 0) };
             // SAFETY: as above.
-            let b = unsafe { load_columns_scalar(job.cor, &slot.bones, 8) };
+            let b = unsafe { load_columns_scalar(job.cor, &slot.records, 8) };
             let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
             for r in 0..3 {
                 let m = rows[r];
@@ -613,9 +607,9 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
                 anchor[r] = _mm512_fmadd_ps(w, moved, anchor[r]);
             }
             // SAFETY: as above.
-            let s = unsafe { load_columns_scalar(job.cor, &slot.bones, 16) };
-            // SAFETY: as above; fewer than 2²⁶ bones (the pose holds 128 bytes per bone).
-            let s22 = unsafe { load_s22(job.cor, &slot.bones) };
+            let s = unsafe { load_columns_scalar(job.cor, &slot.records, 16) };
+            // SAFETY: as above.
+            let s22 = unsafe { load_s22(job.cor, &slot.records) };
             let rows = [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], s22]];
             for r in 0..3 {
                 let m = rows[r];
@@ -626,7 +620,7 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         } else {
             // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
             // rotation, half the translation and a zero.
-            let r = unsafe { load_columns_scalar(job.cor_rigid, &slot.bones, 0) };
+            let r = unsafe { load_columns_scalar(job.cor_rigid, &slot.records, 0) };
             let moved = rotation_offset(&r[0..4], &r[4..7], &c);
             let w2 = _mm512_add_ps(w, w);
             for k in 0..3 {

@@ -58,13 +58,16 @@ pub(super) trait VectorOps: Copy {
     /// `a` in the lanes where `m` holds, `b` elsewhere.
     fn select(self, m: Self::Mask, a: Self::F, b: Self::F) -> Self::F;
 
-    /// Four floats from float `offset` of each lane's bone record `table[bones[l]]`, transposed:
-    /// vector `k` holds float `offset + k` of every lane's record.
+    /// Four floats from float `offset` of each lane's bone record (`records[l]`, a slot's entries:
+    /// see [`lane_record`]), transposed: vector `k` holds float `offset + k` of every lane's
+    /// record.
     ///
     /// # Safety
-    /// `bones` has at least `WIDTH` entries, each of which indexes `table`; `T` is made of f32
-    /// (`repr(C)`) and `offset + 4` floats lie inside it.
-    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u32], offset: usize) -> [Self::F; 4];
+    /// `records` has at least `WIDTH` entries, each of which names a record of `table`; `T` is
+    /// made of f32 (`repr(C)`) and `offset + 4` floats lie inside it.
+    ///
+    /// [`lane_record`]: super::influences::lane_record
+    unsafe fn load_columns4<T>(self, table: &[T], records: &[u32], offset: usize) -> [Self::F; 4];
 
     /// `WIDTH` points `x y z x y z …` split into coordinate vectors.
     fn load_points(self, points: &[[f32; 3]]) -> [Self::F; 3];
@@ -113,7 +116,7 @@ pub(super) unsafe fn transposed_window_sums<V: VectorOps, T, const ROWS: usize>(
         let w = v.load(&signed.map_or(&slot.weights, |w| &w[s])[lane0..]);
         for (r, row) in acc.iter_mut().enumerate() {
             // SAFETY: the caller's contract.
-            let c = unsafe { v.load_columns4(table, &slot.bones[lane0..], offset + 4 * r) };
+            let c = unsafe { v.load_columns4(table, &slot.records[lane0..], offset + 4 * r) };
             for k in 0..4 {
                 row[k] = v.mul_add(c[k], w, row[k]);
             }
@@ -309,7 +312,7 @@ unsafe fn sign_pass<V: VectorOps, T>(
         for (p, real) in real.iter_mut().enumerate().take(LANES / V::WIDTH) {
             let lane0 = p * V::WIDTH;
             // SAFETY: the caller's contract.
-            let q = unsafe { v.load_columns4(table, &slot.bones[lane0..], offset) };
+            let q = unsafe { v.load_columns4(table, &slot.records[lane0..], offset) };
             let w = v.load(&slot.weights[lane0..]);
             let ws = v.select(v.lt(dot4(v, &q, real), v.splat(0.0)), v.neg(w), w);
             for c in 0..4 {

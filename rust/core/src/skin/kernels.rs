@@ -13,7 +13,7 @@ use glam::{Affine3A, Mat4, Vec4};
 use rayon::prelude::*;
 
 use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
-use super::influences::{Slot, LANES};
+use super::influences::{lane_record, Slot, LANES};
 use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
 use super::{Influences, Pose, MIN_TOTAL_WEIGHT};
 
@@ -308,9 +308,9 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
     for (k, out) in out.chunks_mut(LANES).enumerate() {
         let first = start + k * LANES;
         let n = out.len();
-        prefetch_batch(job, first / LANES + PREFETCH_AHEAD);
+        let slots = job.influences.batch(first / LANES);
+        prefetch_ahead(job, first, slots);
         if ISA != ISA_BASELINE {
-            let slots = job.influences.batch(first / LANES);
             if n == LANES {
                 fn full<T>(a: &[T], first: usize) -> &[T; LANES] {
                     a[first..first + LANES].try_into().expect("a full batch")
@@ -370,7 +370,7 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
             Some(m) => original.transform::<ISA>(m),
             None => original,
         };
-        let batch = Batch { first, n, original, co, strength, slots: job.influences.batch(first / LANES) };
+        let batch = Batch { first, n, original, co, strength, slots };
         // The sums' contract: the job's influences and pose fit together (`Job::new`), so every
         // bone index of the batch's slots indexes every table the method reads.
         if let (CENTERS, Some(centers)) = (KIND, job.centers) {
@@ -394,31 +394,32 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
     }
 }
 
-/// How many batches ahead [`prefetch_batch`] asks for (4–16 measured the same; 2 and 32 less).
+/// How many batches ahead [`prefetch_ahead`] asks for (4–16 measured the same; 2 and 32 less).
 const PREFETCH_AHEAD: usize = 8;
 
-/// Asks the CPU to bring batch `b`'s inputs (its slots, points and per-vertex arrays) into the
-/// cache, a few batches before the kernels read them. The kernels do much work per byte, and
-/// the hardware prefetchers alone did not keep their streams ahead: on meshes larger than the
-/// caches (16M vertices, 4 influences, one thread, Intel) LBS went from 71 % to 90–96 % of the
-/// bandwidth reference and rigid DQS from 61 % to 71–72 %; on meshes that fit the caches it
-/// measured the same. A hint: nothing is read, and past the mesh's end nothing is asked for.
+/// Asks the CPU to bring the inputs of the batch [`PREFETCH_AHEAD`] batches after the one at
+/// vertex `first` (whose slots are `slots`) into the cache before the kernels read them. The
+/// kernels do much work per byte, and the hardware prefetchers alone did not keep their streams
+/// ahead: on meshes larger than the caches (16M vertices, 4 influences, one thread, Intel) LBS
+/// went from 71 % to 90–96 % of the bandwidth reference and rigid DQS from 61 % to 71–72 %; on
+/// meshes that fit the caches it measured the same. The addresses are this batch's moved by the
+/// same distance (batches mostly have as many slots as their neighbours; each batch asks from
+/// its own start, so together they cover every line): no lookup, no bounds check. A hint:
+/// nothing is read, and an address past an array's end asks for nothing harmful.
 #[inline(always)]
-fn prefetch_batch(job: &Job<'_>, b: usize) {
-    let first = b * LANES;
-    if first >= job.positions.len() {
-        return;
-    }
-    let slots = job.influences.batch(b);
-    let lines = |p: *const u8, bytes: usize| (0..bytes.div_ceil(64)).for_each(|l| prefetch(p.wrapping_add(64 * l)));
+fn prefetch_ahead(job: &Job<'_>, first: usize, slots: &[Slot]) {
+    let lines = |p: *const u8, bytes: usize| {
+        let ahead = p.wrapping_add(PREFETCH_AHEAD * bytes);
+        (0..bytes.div_ceil(64)).for_each(|l| prefetch(ahead.wrapping_add(64 * l)))
+    };
     lines(slots.as_ptr().cast(), core::mem::size_of_val(slots));
     let points = LANES * core::mem::size_of::<[f32; 3]>();
-    lines(job.positions[first..].as_ptr().cast(), points);
+    lines(job.positions.as_ptr().wrapping_add(first).cast(), points);
     if let Some(c) = job.centers {
-        lines(c[first..].as_ptr().cast(), points);
+        lines(c.as_ptr().wrapping_add(first).cast(), points);
     }
     for a in [job.mask, job.blend_amount].into_iter().flatten() {
-        lines(a[first..].as_ptr().cast(), LANES * 4);
+        lines(a.as_ptr().wrapping_add(first).cast(), LANES * 4);
     }
 }
 
@@ -579,18 +580,20 @@ fn store_points<const ISA: u8>(p: &Points, out: &mut [[f32; 3]]) {
     }
 }
 
-/// Bone data for one lane of a slot, without a bounds check (the kernels' innermost loads).
+/// Bone data for one lane of a slot (its entry `scaled`, see [`RECORD_UNIT`]), without a bounds
+/// check (the kernels' innermost loads).
 ///
 /// # Safety
-/// `index < table.len()`. For a slot of a [`Job`]'s influences and a table of its pose this
-/// holds: bone indices were validated against the bone count when the influences were built,
-/// `Job::new` checked that the pose has that many bones (and the rest tables the method reads),
-/// and padding lanes use bone 0, which exists whenever there is a slot at all.
+/// `scaled / RECORD_UNIT < table.len()`. For a slot of a [`Job`]'s influences and a table of its
+/// pose this holds: bone indices were validated against the bone count when the influences were
+/// built, `Job::new` checked that the pose has that many bones (and the rest tables the method
+/// reads), and padding lanes use bone 0, which exists whenever there is a slot at all.
+///
+/// [`RECORD_UNIT`]: super::influences::RECORD_UNIT
 #[inline(always)]
-unsafe fn bone<T>(table: &[T], index: u32) -> &T {
-    debug_assert!((index as usize) < table.len());
-    // SAFETY: the caller's contract.
-    unsafe { table.get_unchecked(index as usize) }
+unsafe fn bone<T>(table: &[T], scaled: u32) -> &T {
+    // SAFETY: the caller's contract; the record is a whole, aligned `T` of `table`.
+    unsafe { &*lane_record(table, scaled).cast::<T>() }
 }
 
 /// LBS: `co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)`; `co` where `contrib ≤ 0.0001`.
@@ -607,7 +610,7 @@ unsafe fn linear<const ISA: u8>(co: &Points, slots: &[Slot], linear: &[LinearBon
         let mut contrib = 0.0f32;
         for slot in slots {
             // SAFETY: the caller's contract.
-            let m = unsafe { bone(linear, slot.bones[l]) };
+            let m = unsafe { bone(linear, slot.records[l]) };
             let w = slot.weights[l];
             let ws = Vec4::splat(w);
             for (a, row) in acc.iter_mut().zip(&m.matrix.rows) {
@@ -658,7 +661,7 @@ unsafe fn accumulate_dual_quaternion<const ISA: u8, const SCALED: bool>(
         for l in 0..LANES {
             let (q, d) = if SCALED {
                 // SAFETY: the caller's contract.
-                let p = unsafe { bone(pivot, slot.bones[l]) };
+                let p = unsafe { bone(pivot, slot.records[l]) };
                 let q = [p.real.x, p.real.y, p.real.z, p.real.w];
                 let (x, y, z) = (co.x[l], co.y[l], co.z[l]);
                 let t = |r: usize| {
@@ -676,7 +679,7 @@ unsafe fn accumulate_dual_quaternion<const ISA: u8, const SCALED: bool>(
                 (q, d)
             } else {
                 // SAFETY: the caller's contract.
-                let b = unsafe { bone(dq, slot.bones[l]) };
+                let b = unsafe { bone(dq, slot.records[l]) };
                 ([b.real.x, b.real.y, b.real.z, b.real.w], [b.dual.x, b.dual.y, b.dual.z, b.dual.w])
             };
             let dot = q[0] * s.real[0][l] + q[1] * s.real[1][l] + q[2] * s.real[2][l] + q[3] * s.real[3][l];
@@ -752,7 +755,7 @@ unsafe fn accumulate_centers<const ISA: u8, const SCALED: bool>(
             let (cx, cy, cz) = (center.x[l], center.y[l], center.z[l]);
             let q = if SCALED {
                 // SAFETY: the caller's contract.
-                let b = unsafe { bone(cor, slot.bones[l]) };
+                let b = unsafe { bone(cor, slot.records[l]) };
                 for r in 0..3 {
                     let row = b.matrix.rows[r];
                     let moved = madd::<ISA>(row.x, cx, madd::<ISA>(row.y, cy, madd::<ISA>(row.z, cz, row.w)));
@@ -767,7 +770,7 @@ unsafe fn accumulate_centers<const ISA: u8, const SCALED: bool>(
                 b.real
             } else {
                 // SAFETY: the caller's contract.
-                let r = unsafe { bone(cor_rigid, slot.bones[l]) };
+                let r = unsafe { bone(cor_rigid, slot.records[l]) };
                 let moved = rotation_offset::<ISA>(r.real, r.half_translation, [cx, cy, cz]);
                 let w2 = w + w;
                 for k in 0..3 {

@@ -39,7 +39,7 @@ pub use bbone::{bbone_joint_starts, bbone_segment_matrices, bbones_from_rest, bs
 pub use centers::{centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA};
 pub use envelope::{distance_factor, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
-pub use influences::{Influence, Influences, MAX_INFLUENCES_PER_VERTEX};
+pub use influences::{Influence, Influences, MAX_BONES, MAX_INFLUENCES_PER_VERTEX};
 pub use pose::{affine_problem, Pose};
 use pose::Tables;
 

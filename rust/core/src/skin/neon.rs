@@ -10,7 +10,7 @@
 use core::arch::aarch64::*;
 
 use super::batch::VectorOps;
-use super::influences::{Slot, LANES};
+use super::influences::{lane_record, Slot, LANES};
 
 /// Proof that the CPU has NEON (every aarch64 CPU does).
 #[derive(Clone, Copy)]
@@ -97,15 +97,12 @@ impl VectorOps for Neon {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u32], offset: usize) -> [F; 4] {
-        debug_assert!(bones.len() >= 4 && offset + 4 <= core::mem::size_of::<T>() / 4);
-        let base = table.as_ptr() as *const f32;
-        let stride = core::mem::size_of::<T>() / 4;
+    unsafe fn load_columns4<T>(self, table: &[T], records: &[u32], offset: usize) -> [F; 4] {
+        debug_assert!(records.len() >= 4 && offset + 4 <= core::mem::size_of::<T>() / 4);
         let row = |l: usize| {
-            debug_assert!((bones[l] as usize) < table.len());
-            // SAFETY: the caller guarantees the index and the offset are in range; NEON as in
+            // SAFETY: the caller guarantees the record and the offset are in range; NEON as in
             // `instructions!`.
-            unsafe { vld1q_f32(base.add(bones[l] as usize * stride + offset)) }
+            unsafe { vld1q_f32(lane_record(table, records[l]).add(offset)) }
         };
         transpose4(self, [row(0), row(1), row(2), row(3)])
     }
@@ -136,19 +133,16 @@ impl VectorOps for Neon {
         table: &[T],
         offset: usize,
     ) -> [[F; 4]; ROWS] {
-        let base = table.as_ptr() as *const f32;
-        let stride = core::mem::size_of::<T>() / 4;
-        debug_assert!(offset + 4 * ROWS <= stride && signed.is_none_or(|s| s.len() == slots.len()));
+        debug_assert!(offset + 4 * ROWS <= core::mem::size_of::<T>() / 4 && signed.is_none_or(|s| s.len() == slots.len()));
         let zero = self.splat(0.0);
         let mut acc = [[zero; ROWS]; 4];
         for (s, slot) in slots.iter().enumerate() {
             let w = self.load(&signed.map_or(&slot.weights, |w| &w[s])[lane0..]);
-            let bones = &slot.bones[lane0..lane0 + 4];
+            let records = &slot.records[lane0..lane0 + 4];
             let row = |l: usize, r: usize| {
-                debug_assert!((bones[l] as usize) < table.len());
                 // SAFETY: the caller's contract: the lane's bone indexes `table` and the window
                 // lies inside its record; NEON as in `instructions!`.
-                unsafe { vld1q_f32(base.add(bones[l] as usize * stride + offset + 4 * r)) }
+                unsafe { vld1q_f32(lane_record(table, records[l]).add(offset + 4 * r)) }
             };
             for r in 0..ROWS {
                 // SAFETY: NEON as in `instructions!`.

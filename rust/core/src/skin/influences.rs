@@ -43,7 +43,7 @@ pub const MAX_BONES: usize = (u32::MAX as usize + 1) / RECORD_UNIT;
 pub(crate) unsafe fn lane_record<T>(table: &[T], scaled: u32) -> *const f32 {
     const {
         let scale = core::mem::size_of::<T>() / RECORD_UNIT;
-        assert!(core::mem::size_of::<T>() % RECORD_UNIT == 0 && scale.is_power_of_two() && scale <= 8);
+        assert!(core::mem::size_of::<T>().is_multiple_of(RECORD_UNIT) && scale.is_power_of_two() && scale <= 8);
     };
     debug_assert!((scaled as usize / RECORD_UNIT) < table.len() && (scaled as usize).is_multiple_of(RECORD_UNIT));
     let scale = core::mem::size_of::<T>() / RECORD_UNIT;

@@ -93,9 +93,9 @@ impl VectorOps for Avx2 {
     }
 
     #[inline(always)]
-    fn neg(self, a: __m256) -> __m256 {
+    fn neg_where(self, m: __m256, a: __m256) -> __m256 {
         // SAFETY: as in `instructions!`.
-        unsafe { _mm256_xor_ps(a, _mm256_set1_ps(-0.0)) }
+        unsafe { _mm256_xor_ps(a, _mm256_and_ps(m, _mm256_set1_ps(-0.0))) }
     }
 
     #[inline(always)]

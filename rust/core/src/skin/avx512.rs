@@ -419,36 +419,22 @@ pub(super) unsafe fn batch<const KIND: u8>(
         // SAFETY: as this function's own contract.
         let ([x, y, z, w], [d0, d1, d2, d3], contrib) =
             unsafe { if job.scaled { scaled_sums(p, slots, job.pivot) } else { rigid_sums(slots, job.dq) } };
-        // Blender's order: t0 = dual w, t1..t3 = dual x, y, z.
-        let (t0, t1, t2, t3) = (d3, d0, d1, d2);
+        // Blender's `mul_v3m3_dq` as `p + u·(2a/|q|²)` (see `dual_quaternion` in `batch.rs`).
+        let ([tx, ty, tz], t0) = ([d0, d1, d2], d3);
+        let fma = |a, b, c| _mm512_fmadd_ps(a, b, c);
+        let fnma = |a, b, c| _mm512_fnmadd_ps(a, b, c);
         let mul = |a, b| _mm512_mul_ps(a, b);
-        let add = |a, b| _mm512_add_ps(a, b);
-        let sub = |a, b| _mm512_sub_ps(a, b);
-        let two = _mm512_set1_ps(2.0);
-        let (ww, xx, yy, zz) = (mul(w, w), mul(x, x), mul(y, y), mul(z, z));
-        let len2 = add(add(ww, xx), add(yy, zz));
-        let m00 = sub(add(ww, xx), add(yy, zz));
-        let m11 = sub(add(ww, yy), add(xx, zz));
-        let m22 = sub(add(ww, zz), add(xx, yy));
-        let (xy, xz, yz) = (mul(x, y), mul(x, z), mul(y, z));
-        let (wx, wy, wz) = (mul(w, x), mul(w, y), mul(w, z));
-        // 2·(−t0·x + w·t1 − t2·z + y·t3) and its two siblings.
-        let tx = mul(two, add(sub(mul(w, t1), mul(t0, x)), sub(mul(y, t3), mul(t2, z))));
-        let ty = mul(two, add(sub(mul(t1, z), mul(t0, y)), sub(mul(w, t2), mul(x, t3))));
-        let tz = mul(two, add(sub(mul(x, t2), mul(t0, z)), sub(mul(w, t3), mul(t1, y))));
-        let row = |a: __m512, b: __m512, c: __m512, t: __m512| {
-            _mm512_fmadd_ps(a, p[0], _mm512_fmadd_ps(b, p[1], _mm512_fmadd_ps(c, p[2], t)))
-        };
-        let n = [
-            row(m00, mul(two, sub(xy, wz)), mul(two, add(xz, wy)), tx),
-            row(mul(two, add(xy, wz)), m11, mul(two, sub(yz, wx)), ty),
-            row(mul(two, sub(xz, wy)), mul(two, add(yz, wx)), m22, tz),
+        // b = v × p + t⃗, u = w·b + v × b − t₀·v
+        let b = [fnma(z, p[1], fma(y, p[2], tx)), fnma(x, p[2], fma(z, p[0], ty)), fnma(y, p[0], fma(x, p[1], tz))];
+        let u = [
+            fnma(t0, x, fnma(z, b[1], fma(y, b[2], mul(w, b[0])))),
+            fnma(t0, y, fnma(x, b[2], fma(z, b[0], mul(w, b[1])))),
+            fnma(t0, z, fnma(y, b[0], fma(x, b[1], mul(w, b[2])))),
         ];
+        let len2 = fma(z, z, fma(y, y, fma(x, x, mul(w, w))));
         let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, threshold) & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
-        let f = _mm512_maskz_div_ps(valid, a, len2);
-        let keep = _mm512_mask_sub_ps(one, valid, one, a);
-        // co + a·(n/|q|² − co) = n·(a/|q|²) + co·(1 − a)
-        core::array::from_fn::<__m512, 3, _>(|k| _mm512_fmadd_ps(n[k], f, mul(p[k], keep)))
+        let g = _mm512_maskz_div_ps(valid, _mm512_add_ps(a, a), len2);
+        core::array::from_fn::<__m512, 3, _>(|k| fma(u[k], g, p[k]))
     });
     let moved = match (lbs, dqs) {
         (Some(l), Some(d)) => {
@@ -652,47 +638,36 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         real[k] = _mm512_fmadd_ps(q_prev[k], ws_prev, real[k]);
     }
     let zero = _mm512_setzero_ps();
-    let one = _mm512_set1_ps(1.0);
-    let two = _mm512_set1_ps(2.0);
     let a = match strength {
         // SAFETY: the mask has 16 lanes.
         Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
-        None => one,
+        None => _mm512_set1_ps(1.0),
     };
+    // The rotation through `u` (see `rotation_terms` in `batch.rs`), then the strength, as the
+    // portable `finish_centers` in `kernels.rs`.
     let [x, y, z, w] = real;
+    let fma = |a, b, c| _mm512_fmadd_ps(a, b, c);
+    let fnma = |a, b, c| _mm512_fnmadd_ps(a, b, c);
     let mul = |a, b| _mm512_mul_ps(a, b);
-    let add = |a, b| _mm512_add_ps(a, b);
-    let sub = |a, b| _mm512_sub_ps(a, b);
-    let (ww, xx, yy, zz) = (mul(w, w), mul(x, x), mul(y, y), mul(z, z));
-    let len2 = add(add(ww, xx), add(yy, zz));
-    let m00 = sub(add(ww, xx), add(yy, zz));
-    let m11 = sub(add(ww, yy), add(xx, zz));
-    let m22 = sub(add(ww, zz), add(xx, yy));
-    let (xy, xz, yz) = (mul(x, y), mul(x, z), mul(y, z));
-    let (wx, wy, wz) = (mul(w, x), mul(w, y), mul(w, z));
     let dd = if SCALED { offset } else { d };
-    let row = |m0: __m512, m1: __m512, m2: __m512| _mm512_fmadd_ps(m0, dd[0], _mm512_fmadd_ps(m1, dd[1], mul(m2, dd[2])));
-    let n = [
-        row(m00, mul(two, sub(xy, wz)), mul(two, add(xz, wy))),
-        row(mul(two, add(xy, wz)), m11, mul(two, sub(yz, wx))),
-        row(mul(two, sub(xz, wy)), mul(two, add(yz, wx)), m22),
+    let b = [fnma(z, dd[1], mul(y, dd[2])), fnma(x, dd[2], mul(z, dd[0])), fnma(y, dd[0], mul(x, dd[1]))];
+    let u = [
+        fnma(z, b[1], fma(y, b[2], mul(w, b[0]))),
+        fnma(x, b[2], fma(z, b[0], mul(w, b[1]))),
+        fnma(y, b[0], fma(x, b[1], mul(w, b[2]))),
     ];
+    let len2 = fma(z, z, fma(y, y, fma(x, x, mul(w, w))));
     let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::MIN_TOTAL_WEIGHT))
         & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
-    // One division serves both factors: a/contrib = inv·|q|², a/|q|² = inv·contrib.
+    // One division serves both factors: a/contrib = inv·|q|², 2a/|q|² = 2·inv·contrib.
     let inv = _mm512_maskz_div_ps(valid, a, mul(len2, contrib));
     let fa = mul(inv, len2);
-    let fr = if SCALED { inv } else { mul(inv, contrib) };
-    let base: [__m512; 3] = if SCALED {
-        let keep = _mm512_mask_sub_ps(one, valid, one, a);
-        core::array::from_fn(|k| mul(p[k], keep))
-    } else {
-        // co + a·(c − co): the rigid anchor is Σ wᵢ·(Mᵢ·c − c).
-        let av = _mm512_maskz_mov_ps(valid, a);
-        core::array::from_fn(|k| _mm512_fnmadd_ps(av, d[k], p[k]))
-    };
-    // anchor·(a/contrib) + n·(a/|q|²) + base
-    let moved: [__m512; 3] = core::array::from_fn(|k| _mm512_fmadd_ps(anchor[k], fa, _mm512_fmadd_ps(n[k], fr, base[k])));
+    let inv2 = _mm512_add_ps(inv, inv);
+    let fr = if SCALED { inv2 } else { mul(inv2, contrib) };
+    // The rigid anchor is Σ wᵢ·(Mᵢ·c − c); the scaled one Σ wᵢ·Mᵢ·c, whose share is taken
+    // as (anchor + o − contrib·co).
+    let anchor: [__m512; 3] = if SCALED { core::array::from_fn(|k| fnma(p[k], contrib, _mm512_add_ps(anchor[k], offset[k]))) } else { anchor };
+    let moved: [__m512; 3] = core::array::from_fn(|k| fma(anchor[k], fa, fma(u[k], fr, p[k])));
     // SAFETY: as this function's own contract.
     unsafe { write_batch(job, moved, a, o, out) }
 }

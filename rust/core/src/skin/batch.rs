@@ -1,18 +1,21 @@
 //! The batch kernels written once for every SIMD instruction set that implements [`VectorOps`]
 //! (AVX2+FMA in `avx2.rs`, NEON in `neon.rs`): everything skinning does to a full batch of
-//! [`LANES`] vertices, as `LANES / WIDTH` parts of one vector each. The arithmetic is the
-//! portable copy's in `kernels.rs`; what is summed per influence is arranged for throughput:
+//! [`LANES`] vertices, as `LANES / WIDTH` parts of one vector each, skinned one part after the
+//! other so that a part's sums stay in registers. The arithmetic is the portable copy's in
+//! `kernels.rs`; what is summed per influence is arranged for throughput:
 //!
 //! 1. **Signs.** The quaternion sum whose running value picks each influence's sign (DQS, Blend,
-//!    centers of rotation) is a serial chain per vertex. All parts' chains run in one loop, so
-//!    that they overlap instead of waiting on each other; the signed weights are kept.
+//!    centers of rotation) is a serial chain per vertex, from transposed rotations. Rigid DQS
+//!    sums its dual parts in the same loop (both halves of a record from one index); elsewhere
+//!    the signed weights are kept where a later sum needs them.
 //! 2. **Linear sums.** Everything else is linear in the bones' per-frame records: `Σ wᵢ·Mᵢ`
-//!    (LBS, the centers' anchor), `Σ ±wᵢ·dᵢ` (the rigid dual parts), `Σ ±wᵢ·Pᵢ` (the dual parts of
-//!    bones with scale, see `PivotDualBone`), `Σ wᵢ·Sᵢ` (the scale/shear parts). Each is a sum of
-//!    record windows that an instruction set may accumulate per lane and transpose once per
-//!    vertex ([`VectorOps::window_sums`]), instead of transposing every influence's record.
-//! 3. **Finish** per part: apply the sums to the point (and its center), the strength,
-//!    `postmat`, the untouched lanes, store.
+//!    (LBS, the centers' anchor), `Σ ±wᵢ·Pᵢ` (the dual parts of bones with scale, see
+//!    `PivotDualBone`), `Σ wᵢ·Sᵢ` (the scale/shear parts). Each is a sum of record windows that an
+//!    instruction set may accumulate per lane and transpose once per vertex
+//!    ([`VectorOps::window_sums`]), instead of transposing every influence's record.
+//! 3. **Finish**: apply the sums to the point (and its center) without building a rotation
+//!    matrix (`p + u·(2a/|q|²)`, see [`dual_quaternion`]), the strength, `postmat`, the untouched
+//!    lanes, store.
 
 use glam::Affine3A;
 
@@ -46,7 +49,6 @@ pub(super) trait VectorOps: Copy {
     fn sub(self, a: Self::F, b: Self::F) -> Self::F;
     fn mul(self, a: Self::F, b: Self::F) -> Self::F;
     fn div(self, a: Self::F, b: Self::F) -> Self::F;
-    fn neg(self, a: Self::F) -> Self::F;
     /// `a·b + c`, fused.
     fn mul_add(self, a: Self::F, b: Self::F, c: Self::F) -> Self::F;
     /// `c − a·b`, fused.
@@ -57,6 +59,9 @@ pub(super) trait VectorOps: Copy {
     fn and(self, a: Self::Mask, b: Self::Mask) -> Self::Mask;
     /// `a` in the lanes where `m` holds, `b` elsewhere.
     fn select(self, m: Self::Mask, a: Self::F, b: Self::F) -> Self::F;
+    /// `−a` in the lanes where `m` holds, `a` elsewhere (the sign bit flipped: two cheap bit
+    /// operations where a select may take three).
+    fn neg_where(self, m: Self::Mask, a: Self::F) -> Self::F;
 
     /// Four floats from float `offset` of each lane's bone record (`records[l]`, a slot's entries:
     /// see [`lane_record`]), transposed: vector `k` holds float `offset + k` of every lane's
@@ -125,9 +130,6 @@ pub(super) unsafe fn transposed_window_sums<V: VectorOps, T, const ROWS: usize>(
     acc
 }
 
-/// The most parts a batch has (four for NEON's four lanes).
-const MAX_PARTS: usize = 4;
-
 /// Inputs of the batch kernels that are the same for every batch of a call.
 pub(super) struct BatchJob<'a> {
     pub linear: &'a [LinearBone],
@@ -169,133 +171,155 @@ pub(super) struct FullBatch<'a> {
     pub centers: Option<&'a [[f32; 3]; LANES]>,
 }
 
-/// Skins one full batch with the method `KIND` (`SCALED`: some bone takes Blender's scale path).
+/// Skins one full batch with the method `KIND` (`SCALED`: some bone takes Blender's scale path),
+/// as `PARTS` parts of one vector each (`PARTS · V::WIDTH = LANES`), one after the other: a part's
+/// sums and finish stay in registers (the CPU overlaps one part's sign chain with the previous
+/// part's finish).
 ///
 /// # Safety
 /// Every bone index of the batch's slots indexes the tables of `job` that the method reads
 /// (all of them except for LBS, which reads `linear` only).
 #[inline(always)]
-pub(super) unsafe fn skin_batch<V: VectorOps, const KIND: u8, const SCALED: bool>(
+pub(super) unsafe fn skin_batch<V: VectorOps, const KIND: u8, const SCALED: bool, const PARTS: usize>(
     v: V,
     job: &BatchJob<'_>,
-    batch: FullBatch<'_>,
+    mut batch: FullBatch<'_>,
     scratch: &mut Scratch,
 ) {
-    let parts = LANES / V::WIDTH;
-    debug_assert!(LANES.is_multiple_of(V::WIDTH) && parts <= MAX_PARTS);
-    let slots = batch.slots;
-    let zero = v.splat(0.0);
-    let centers = KIND == CENTERS && batch.centers.is_some();
-    let signed = &mut scratch.signed[..slots.len()];
-    let mut real = [[zero; 4]; MAX_PARTS];
-    // `if`s rather than closures here and below: a closure compiled on its own would not have
-    // the instruction set of the function it is written in, and its vector operations would
-    // become calls.
-    if KIND != LINEAR {
-        // The rotation is floats 12–15 of a CorBone and of a PivotBone, 0–3 of a DqBone.
-        if centers && SCALED {
-            // SAFETY: the caller's contract.
-            unsafe { sign_pass(v, slots, job.cor, 12, &mut real, signed) };
-        } else if !centers && SCALED {
-            // SAFETY: the caller's contract.
-            unsafe { sign_pass(v, slots, job.pivot, 12, &mut real, signed) };
-        } else {
-            // SAFETY: the caller's contract.
-            unsafe { sign_pass(v, slots, job.dq, 0, &mut real, signed) };
-        }
-    }
-    let signed = &*signed;
-    for (p, real) in real.iter().enumerate().take(parts) {
-        let lanes = p * V::WIDTH..(p + 1) * V::WIDTH;
-        let lane0 = lanes.start;
-        let o = v.load_points(&batch.positions[lanes.clone()]);
-        let a = match batch.strength {
-            Some(s) => v.load(&s[lanes.clone()]),
-            None => v.splat(1.0),
-        };
-        let mut contrib = zero;
-        for slot in slots {
-            contrib = v.add(contrib, v.load(&slot.weights[lanes.clone()]));
-        }
-        let p = match job.premat {
-            Some(m) => apply(v, m, o),
-            None => o,
-        };
-        // The windows: a LinearBone's rows (floats 0–11), a DqBone's dual part (4–7), a
-        // PivotDualBone (0–15), a CorBone's rows, rotation and scale/shear part (0–27).
-        let moved = if let (true, Some(c)) = (centers, batch.centers) {
-            let c = v.load_points(&c[lanes.clone()]);
-            let c = match job.premat {
-                Some(m) => apply(v, m, c),
-                None => c,
-            };
-            if SCALED {
-                // One window over the rows, the rotation (its sum unused) and the scale/shear
-                // part: one index and weight per influence for both sums. SAFETY: the caller's
-                // contract.
-                let [m0, m1, m2, _, s0, s1, s2] = unsafe { v.window_sums::<_, 7>(slots, None, lane0, job.cor, 0) };
-                let matrix = [m0, m1, m2];
-                // Σ wᵢ·Sᵢ from the window s00 s01 s02 s10 | s11 s12 s20 s21 | s22 0 0 0.
-                let [[s00, s01, s02, s10], [s11, s12, s20, s21], [s22, ..]] = [s0, s1, s2];
-                let d: [V::F; 3] = each3(|k| v.sub(p[k], c[k]));
-                let row = |a, b, c| v.mul_add(a, d[0], v.mul_add(b, d[1], v.mul(c, d[2])));
-                let offset = [row(s00, s01, s02), row(s10, s11, s12), row(s20, s21, s22)];
-                finish_centers::<V, SCALED>(v, &matrix, real, offset, contrib, p, c, a)
-            } else {
-                // SAFETY: the caller's contract.
-                let matrix = unsafe { v.window_sums::<_, 3>(slots, None, lane0, job.linear, 0) };
-                let d = each3(|k| v.sub(p[k], c[k]));
-                finish_centers::<V, SCALED>(v, &matrix, real, d, contrib, p, c, a)
-            }
-        } else {
-            let lbs = if KIND == LINEAR || KIND == BLEND {
-                // SAFETY: the caller's contract.
-                let matrix = unsafe { v.window_sums::<_, 3>(slots, None, lane0, job.linear, 0) };
-                linear(v, &matrix, contrib, p, a)
-            } else {
-                p
-            };
-            let dqs = if KIND == DUAL_QUATERNION || KIND == BLEND {
-                let dual = if SCALED {
-                    // SAFETY: the caller's contract.
-                    let rows = unsafe { v.window_sums::<_, 4>(slots, Some(signed), lane0, job.pivot_dual, 0) };
-                    each4(|c| affine_row(v, &rows[c], &p))
-                } else {
-                    // SAFETY: the caller's contract.
-                    let [dual] = unsafe { v.window_sums::<_, 1>(slots, Some(signed), lane0, job.dq, 4) };
-                    dual
-                };
-                apply_dual_quaternion(v, *real, dual, contrib, p, a)
-            } else {
-                p
-            };
-            match KIND {
-                LINEAR => lbs,
-                BLEND => {
-                    let factor = v.splat(job.blend_factor);
-                    let alpha = match batch.blend_amount {
-                        Some(amount) => v.mul(factor, v.load(&amount[lanes.clone()])),
-                        None => factor,
-                    };
-                    each3(|k| v.mul_add(alpha, v.sub(dqs[k], lbs[k]), lbs[k]))
-                }
-                _ => dqs,
-            }
-        };
-        let r = match job.postmat {
-            Some(m) => apply(v, m, moved),
-            None => moved,
-        };
-        // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
-        let untouched = v.eq(a, zero);
-        let r = each3(|k| v.select(untouched, o[k], r[k]));
-        v.store_points(r, &mut batch.out[lanes]);
+    const { assert!(PARTS * V::WIDTH == LANES) };
+    let signed = &mut scratch.signed[..batch.slots.len()];
+    for part in 0..PARTS {
+        // SAFETY: the caller's contract.
+        unsafe { skin_part::<V, KIND, SCALED>(v, job, &mut batch, part * V::WIDTH, signed) };
     }
 }
 
-/// Pass 1: the sign-aligned quaternion sums of every part over the slots, the parts' chains
-/// interleaved; each slot's signed weights go to `signed`. The rotation of a lane's bone is
-/// floats `offset .. offset + 4` (x, y, z, w) of its record.
+/// One part of a batch: the lanes `lane0 .. lane0 + V::WIDTH`.
+///
+/// # Safety
+/// As [`skin_batch`].
+#[inline(always)]
+unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
+    v: V,
+    job: &BatchJob<'_>,
+    batch: &mut FullBatch<'_>,
+    lane0: usize,
+    signed: &mut [[f32; LANES]],
+) {
+    let lanes = lane0..lane0 + V::WIDTH;
+    let slots = batch.slots;
+    let o = v.load_points(&batch.positions[lanes.clone()]);
+    let a = match batch.strength {
+        Some(s) => v.load(&s[lanes.clone()]),
+        None => v.splat(1.0),
+    };
+    let p = match job.premat {
+        Some(m) => apply(v, m, o),
+        None => o,
+    };
+    // `if`s rather than closures here and below: a closure compiled on its own would not have
+    // the instruction set of the function it is written in, and its vector operations would
+    // become calls.
+    // The windows: a LinearBone's rows (floats 0–11), a DqBone's rotation and dual part (0–3,
+    // 4–7), a PivotBone's rotation (12–15), a PivotDualBone (0–15), a CorBone's rows, rotation
+    // and scale/shear part (0–27).
+    let moved = if let (true, Some(centers)) = (KIND == CENTERS, batch.centers) {
+        let c = v.load_points(&centers[lanes.clone()]);
+        let c = match job.premat {
+            Some(m) => apply(v, m, c),
+            None => c,
+        };
+        let d: [V::F; 3] = each3(|k| v.sub(p[k], c[k]));
+        if SCALED {
+            // SAFETY: the caller's contract.
+            let (real, contrib) = unsafe { sign_pass(v, slots, job.cor, 12, lane0, None) };
+            // One window over the rows, the rotation (its sum unused) and the scale/shear
+            // part: one index and weight per influence for both sums. SAFETY: the caller's
+            // contract.
+            let [m0, m1, m2, _, s0, s1, s2] = unsafe { v.window_sums::<_, 7>(slots, None, lane0, job.cor, 0) };
+            // Σ wᵢ·Sᵢ from the window s00 s01 s02 s10 | s11 s12 s20 s21 | s22 0 0 0.
+            let [[s00, s01, s02, s10], [s11, s12, s20, s21], [s22, ..]] = [s0, s1, s2];
+            let row = |a, b, c| v.mul_add(a, d[0], v.mul_add(b, d[1], v.mul(c, d[2])));
+            let offset = [row(s00, s01, s02), row(s10, s11, s12), row(s20, s21, s22)];
+            let matrix = [m0, m1, m2];
+            let sum = each3(|k| v.add(affine_row(v, &matrix[k], &c), offset[k]));
+            let u = rotation_terms(v, &real, offset);
+            centers_scaled(v, sum, u, real, contrib, p, a)
+        } else {
+            // SAFETY: the caller's contract.
+            let (real, contrib) = unsafe { sign_pass(v, slots, job.dq, 0, lane0, None) };
+            // SAFETY: the caller's contract.
+            let matrix = unsafe { v.window_sums::<_, 3>(slots, None, lane0, job.linear, 0) };
+            let anchor = each3(|k| affine_row(v, &matrix[k], &c));
+            let u = rotation_terms(v, &real, d);
+            centers_rigid(v, anchor, u, real, contrib, p, c, a)
+        }
+    } else {
+        let mut contrib = v.splat(0.0);
+        let dqs = if KIND == DUAL_QUATERNION || KIND == BLEND {
+            let (real, dual) = if SCALED {
+                // SAFETY: the caller's contract.
+                let (real, sum) = unsafe { sign_pass(v, slots, job.pivot, 12, lane0, Some(&mut *signed)) };
+                contrib = sum;
+                // SAFETY: the caller's contract.
+                let rows = unsafe { v.window_sums::<_, 4>(slots, Some(signed), lane0, job.pivot_dual, 0) };
+                (real, each4(|c| affine_row(v, &rows[c], &p)))
+            } else {
+                // SAFETY: the caller's contract.
+                let (real, dual, sum) = unsafe { rigid_sums(v, slots, job.dq, lane0) };
+                contrib = sum;
+                (real, dual)
+            };
+            dual_quaternion(v, real, dual, contrib, p, a)
+        } else {
+            p
+        };
+        let lbs = if KIND == LINEAR || KIND == BLEND {
+            if KIND == LINEAR {
+                for slot in slots {
+                    contrib = v.add(contrib, v.load(&slot.weights[lanes.clone()]));
+                }
+            }
+            // SAFETY: the caller's contract.
+            let matrix = unsafe { v.window_sums::<_, 3>(slots, None, lane0, job.linear, 0) };
+            linear(v, &matrix, contrib, p, a)
+        } else {
+            p
+        };
+        match KIND {
+            LINEAR => lbs,
+            BLEND => {
+                let factor = v.splat(job.blend_factor);
+                let alpha = match batch.blend_amount {
+                    Some(amount) => v.mul(factor, v.load(&amount[lanes.clone()])),
+                    None => factor,
+                };
+                each3(|k| v.mul_add(alpha, v.sub(dqs[k], lbs[k]), lbs[k]))
+            }
+            _ => dqs,
+        }
+    };
+    let r = match job.postmat {
+        Some(m) => apply(v, m, moved),
+        None => moved,
+    };
+    // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
+    let untouched = v.eq(a, v.splat(0.0));
+    let r = each3(|k| v.select(untouched, o[k], r[k]));
+    v.store_points(r, &mut batch.out[lanes]);
+}
+
+/// `±wᵢ` for the quaternion `q` of an influence with weight `w`, against the running sum
+/// `real` (Blender's `add_weighted_dq_dq`: negated where `q·sum < 0`).
+#[inline(always)]
+fn signed_weight<V: VectorOps>(v: V, q: &[V::F; 4], real: &[V::F; 4], w: V::F) -> V::F {
+    v.neg_where(v.lt(dot4(v, q, real), v.splat(0.0)), w)
+}
+
+/// The sign-aligned quaternion sum of one part's lanes (from `lane0`) over the slots, and the
+/// total weight; each slot's signed weights go to `signed` if given (one entry per slot). The rotation of a lane's bone is
+/// floats `offset .. offset + 4` (x, y, z, w) of its record. The first slot needs no sign: the
+/// sum is still zero there, and Blender keeps the weight.
 ///
 /// # Safety
 /// Every bone index of the slots indexes `table`, whose records hold the rotation there.
@@ -305,22 +329,51 @@ unsafe fn sign_pass<V: VectorOps, T>(
     slots: &[Slot],
     table: &[T],
     offset: usize,
-    real: &mut [[V::F; 4]; MAX_PARTS],
-    signed: &mut [[f32; LANES]],
-) {
-    for (slot, out) in slots.iter().zip(signed.iter_mut()) {
-        for (p, real) in real.iter_mut().enumerate().take(LANES / V::WIDTH) {
-            let lane0 = p * V::WIDTH;
-            // SAFETY: the caller's contract.
-            let q = unsafe { v.load_columns4(table, &slot.records[lane0..], offset) };
-            let w = v.load(&slot.weights[lane0..]);
-            let ws = v.select(v.lt(dot4(v, &q, real), v.splat(0.0)), v.neg(w), w);
-            for c in 0..4 {
-                real[c] = v.mul_add(q[c], ws, real[c]);
-            }
-            v.store(ws, &mut out[lane0..]);
+    lane0: usize,
+    mut signed: Option<&mut [[f32; LANES]]>,
+) -> ([V::F; 4], V::F) {
+    let zero = v.splat(0.0);
+    let (mut real, mut contrib) = ([zero; 4], zero);
+    for (k, slot) in slots.iter().enumerate() {
+        // SAFETY: the caller's contract.
+        let q = unsafe { v.load_columns4(table, &slot.records[lane0..], offset) };
+        let w = v.load(&slot.weights[lane0..]);
+        let ws = if k == 0 { w } else { signed_weight(v, &q, &real, w) };
+        for c in 0..4 {
+            real[c] = v.mul_add(q[c], ws, real[c]);
+        }
+        contrib = v.add(contrib, w);
+        if let Some(signed) = signed.as_deref_mut() {
+            v.store(ws, &mut signed[k][lane0..]);
         }
     }
+    (real, contrib)
+}
+
+/// Rigid DQS sums of one part's lanes (from `lane0`): the sign-aligned rotations and dual parts
+/// of the influences' `DqBone`s, summed as their signs are chosen (both halves of a record from
+/// one index), and the total weight.
+///
+/// # Safety
+/// Every bone index of the slots indexes `dq`.
+#[inline(always)]
+unsafe fn rigid_sums<V: VectorOps>(v: V, slots: &[Slot], dq: &[DqBone], lane0: usize) -> ([V::F; 4], [V::F; 4], V::F) {
+    let zero = v.splat(0.0);
+    let (mut real, mut dual, mut contrib) = ([zero; 4], [zero; 4], zero);
+    for (k, slot) in slots.iter().enumerate() {
+        let records = &slot.records[lane0..];
+        // SAFETY: the caller's contract; a DqBone is the rotation (floats 0–3) and the dual
+        // part (4–7).
+        let (q, d) = unsafe { (v.load_columns4(dq, records, 0), v.load_columns4(dq, records, 4)) };
+        let w = v.load(&slot.weights[lane0..]);
+        let ws = if k == 0 { w } else { signed_weight(v, &q, &real, w) };
+        for c in 0..4 {
+            real[c] = v.mul_add(q[c], ws, real[c]);
+            dual[c] = v.mul_add(d[c], ws, dual[c]);
+        }
+        contrib = v.add(contrib, w);
+    }
+    (real, dual, contrib)
 }
 
 /// `[f(0), f(1), f(2)]`. The kernels build their small arrays with this and [`each4`] rather
@@ -366,88 +419,96 @@ fn linear<V: VectorOps>(v: V, matrix: &[[V::F; 4]; 3], contrib: V::F, p: [V::F; 
     each3(|r| v.mul_add(v.neg_mul_add(p[r], contrib, affine_row(v, &matrix[r], &p)), f, p[r]))
 }
 
-/// Applies summed dual quaternions to `p` (Blender's `mul_v3m3_dq`, dividing by `|q|²` instead
-/// of normalizing), then the strength: `p·(1 − a) + r·a`; `p` where `contrib ≤ 0.0001` or the sum
-/// is zero.
+/// `|q|²` of a quaternion sum.
 #[inline(always)]
-fn apply_dual_quaternion<V: VectorOps>(v: V, real: [V::F; 4], dual: [V::F; 4], contrib: V::F, p: [V::F; 3], a: V::F) -> [V::F; 3] {
+fn length_squared<V: VectorOps>(v: V, [x, y, z, w]: &[V::F; 4]) -> V::F {
+    v.mul_add(*z, *z, v.mul_add(*y, *y, v.mul_add(*x, *x, v.mul(*w, *w))))
+}
+
+/// `w·b + v × b` for the quaternion sum `(v, w)`: with `b = v × d` it is half of `|q|²·(R·d − d)`,
+/// `R` the rotation of the sum (`|q|²·R·d = |q|²·d + 2·(w·(v × d) + v × (v × d))`), which is how
+/// the kernels rotate: no matrix, and the `d` they already hold is added back at the end.
+#[inline(always)]
+fn rotation_terms<V: VectorOps>(v: V, [x, y, z, w]: &[V::F; 4], d: [V::F; 3]) -> [V::F; 3] {
+    let (x, y, z, w) = (*x, *y, *z, *w);
+    // b = v × d
+    let b = [
+        v.neg_mul_add(z, d[1], v.mul(y, d[2])),
+        v.neg_mul_add(x, d[2], v.mul(z, d[0])),
+        v.neg_mul_add(y, d[0], v.mul(x, d[1])),
+    ];
+    [
+        v.neg_mul_add(z, b[1], v.mul_add(y, b[2], v.mul(w, b[0]))),
+        v.neg_mul_add(x, b[2], v.mul_add(z, b[0], v.mul(w, b[1]))),
+        v.neg_mul_add(y, b[0], v.mul_add(x, b[1], v.mul(w, b[2]))),
+    ]
+}
+
+/// Applies summed dual quaternions to `p` (Blender's `mul_v3m3_dq`: `(M·p + t)/|q|²`, `M` the
+/// unnormalized rotation matrix `|q|²·R` and `t = 2·(w·t⃗ − t₀·v + v × t⃗)` for the real part
+/// `(v, w)` and the dual part `(t⃗, t₀)`), then the strength `a`: `p + a·(r − p)`; `p` where
+/// `contrib ≤ 0.0001` or the sum is zero. Written as `p + u·(2a/|q|²)` with
+/// `u = w·b + v × b − t₀·v`, `b = v × p + t⃗` (since `M·p = |q|²·p + 2·(w·(v × p) + v × (v × p))`):
+/// 17 operations per lane instead of the matrix's 40, and `p`'s own term exact.
+#[inline(always)]
+fn dual_quaternion<V: VectorOps>(v: V, real: [V::F; 4], dual: [V::F; 4], contrib: V::F, p: [V::F; 3], a: V::F) -> [V::F; 3] {
     let [x, y, z, w] = real;
-    // Blender's order: t0 = dual w, t1..t3 = dual x, y, z.
-    let (t0, t1, t2, t3) = (dual[3], dual[0], dual[1], dual[2]);
-    let (mul, add, sub) = (|a, b| v.mul(a, b), |a, b| v.add(a, b), |a, b| v.sub(a, b));
-    let two = v.splat(2.0);
-    let q = quaternion_matrix(v, real);
-    // 2·(−t0·x + w·t1 − t2·z + y·t3) and its two siblings.
-    let tx = mul(two, add(sub(mul(w, t1), mul(t0, x)), sub(mul(y, t3), mul(t2, z))));
-    let ty = mul(two, add(sub(mul(t1, z), mul(t0, y)), sub(mul(w, t2), mul(x, t3))));
-    let tz = mul(two, add(sub(mul(x, t2), mul(t0, z)), sub(mul(w, t3), mul(t1, y))));
-    let t = [tx, ty, tz];
-    let n = each3(|r| {
-        let m = &q.rows[r];
-        v.mul_add(m[0], p[0], v.mul_add(m[1], p[1], v.mul_add(m[2], p[2], t[r])))
-    });
-    let valid = v.and(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.gt(q.len2, v.splat(0.0)));
-    let one = v.splat(1.0);
-    let f = v.select(valid, v.div(a, q.len2), v.splat(0.0));
-    let keep = v.select(valid, v.sub(one, a), one);
-    // co + a·(n/|q|² − co) = n·(a/|q|²) + co·(1 − a)
-    each3(|k| v.mul_add(n[k], f, v.mul(p[k], keep)))
+    let [tx, ty, tz, t0] = dual;
+    // b = v × p + t⃗
+    let b = [
+        v.neg_mul_add(z, p[1], v.mul_add(y, p[2], tx)),
+        v.neg_mul_add(x, p[2], v.mul_add(z, p[0], ty)),
+        v.neg_mul_add(y, p[0], v.mul_add(x, p[1], tz)),
+    ];
+    // u = w·b + v × b − t₀·v
+    let u = [
+        v.neg_mul_add(t0, x, v.neg_mul_add(z, b[1], v.mul_add(y, b[2], v.mul(w, b[0])))),
+        v.neg_mul_add(t0, y, v.neg_mul_add(x, b[2], v.mul_add(z, b[0], v.mul(w, b[1])))),
+        v.neg_mul_add(t0, z, v.neg_mul_add(y, b[0], v.mul_add(x, b[1], v.mul(w, b[2])))),
+    ];
+    let len2 = length_squared(v, &real);
+    let valid = v.and(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.gt(len2, v.splat(0.0)));
+    let g = v.select(valid, v.div(v.add(a, a), len2), v.splat(0.0));
+    each3(|k| v.mul_add(u[k], g, p[k]))
 }
 
-/// The unnormalized rotation matrix of a quaternion sum, `|q|²·R` (rows), and `|q|²`.
-struct QuaternionMatrix<F> {
-    rows: [[F; 3]; 3],
-    len2: F,
-}
-
-#[inline(always)]
-fn quaternion_matrix<V: VectorOps>(v: V, [x, y, z, w]: [V::F; 4]) -> QuaternionMatrix<V::F> {
-    let (mul, add, sub) = (|a, b| v.mul(a, b), |a, b| v.add(a, b), |a, b| v.sub(a, b));
-    let two = v.splat(2.0);
-    let (ww, xx, yy, zz) = (mul(w, w), mul(x, x), mul(y, y), mul(z, z));
-    let (xy, xz, yz) = (mul(x, y), mul(x, z), mul(y, z));
-    let (wx, wy, wz) = (mul(w, x), mul(w, y), mul(w, z));
-    QuaternionMatrix {
-        rows: [
-            [sub(add(ww, xx), add(yy, zz)), mul(two, sub(xy, wz)), mul(two, add(xz, wy))],
-            [mul(two, add(xy, wz)), sub(add(ww, yy), add(xx, zz)), mul(two, sub(yz, wx))],
-            [mul(two, sub(xz, wy)), mul(two, add(yz, wx)), sub(add(ww, zz), add(xx, yy))],
-        ],
-        len2: add(add(ww, xx), add(yy, zz)),
-    }
-}
-
-/// Skinning with centers of rotation of one part's points `p` with centers `c` (both in armature
-/// space), from `Σ wᵢ·Mᵢ` (`matrix`), the quaternion sum and the offset `dd`: `co − c` for rigid
-/// bones, `Σ wᵢ·Sᵢ·(co − c)` with scale. `co' = Σ wᵢ·Mᵢ·c/contrib + R·dd` (`dd/contrib` with
-/// scale), `R` the rotation of the quaternion sum; then the strength (see `finish_centers` in
-/// `kernels.rs`, which sums the rigid anchor as `Σ wᵢ·(Mᵢ·c − c)`).
+/// Skinning with centers of rotation and rigid bones, of one part's points `p` with centers `c`
+/// (both in armature space), from `anchor = Σ wᵢ·Mᵢ·c`, `u` ([`rotation_terms`] of `d = p − c`)
+/// and the quaternion sum: `co' = anchor/contrib + R·d = anchor/contrib − c + p + 2u/|q|²`, then
+/// the strength: `p + (anchor − contrib·c)·(a/contrib) + u·(2a/|q|²)`; `p` where
+/// `contrib ≤ 0.0001` or the sum is zero. One division serves both factors.
 #[allow(clippy::too_many_arguments)] // the sums and the part's points, one by one
 #[inline(always)]
-fn finish_centers<V: VectorOps, const SCALED: bool>(
+fn centers_rigid<V: VectorOps>(
     v: V,
-    matrix: &[[V::F; 4]; 3],
-    real: &[V::F; 4],
-    dd: [V::F; 3],
+    anchor: [V::F; 3],
+    u: [V::F; 3],
+    real: [V::F; 4],
     contrib: V::F,
     p: [V::F; 3],
     c: [V::F; 3],
     a: V::F,
 ) -> [V::F; 3] {
-    let zero = v.splat(0.0);
-    let one = v.splat(1.0);
-    let anchor = each3(|r| affine_row(v, &matrix[r], &c));
-    let q = quaternion_matrix(v, *real);
-    let n = each3(|r| {
-        let m = &q.rows[r];
-        v.mul_add(m[0], dd[0], v.mul_add(m[1], dd[1], v.mul(m[2], dd[2])))
-    });
-    let valid = v.and(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.gt(q.len2, zero));
-    // One division serves both factors: a/contrib = inv·|q|², a/|q|² = inv·contrib.
-    let inv = v.select(valid, v.div(a, v.mul(q.len2, contrib)), zero);
-    let fa = v.mul(inv, q.len2);
-    let fr = if SCALED { inv } else { v.mul(inv, contrib) };
-    let keep = v.select(valid, v.sub(one, a), one);
-    // anchor·(a/contrib) + n·fr + co·(1 − a)
-    each3(|k| v.mul_add(anchor[k], fa, v.mul_add(n[k], fr, v.mul(p[k], keep))))
+    let len2 = length_squared(v, &real);
+    let valid = v.and(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.gt(len2, v.splat(0.0)));
+    // a/contrib = inv·|q|², 2a/|q|² = 2·inv·contrib.
+    let inv = v.select(valid, v.div(a, v.mul(len2, contrib)), v.splat(0.0));
+    let fa = v.mul(inv, len2);
+    let fr = v.mul(v.add(inv, inv), contrib);
+    each3(|k| v.mul_add(v.neg_mul_add(c[k], contrib, anchor[k]), fa, v.mul_add(u[k], fr, p[k])))
+}
+
+/// Skinning with centers of rotation and bones with scale, of one part's points `p`, from
+/// `sum = Σ wᵢ·Mᵢ·c + o` with `o = Σ wᵢ·Sᵢ·(p − c)`, `u` ([`rotation_terms`] of `o`) and the
+/// quaternion sum: `co' = Σ wᵢ·Mᵢ·c/contrib + R·o/contrib = sum/contrib + 2u/(|q|²·contrib)`, then
+/// the strength: `p + (sum − contrib·p)·(a/contrib) + u·(2a/(|q|²·contrib))`; `p` where
+/// `contrib ≤ 0.0001` or the sum is zero.
+#[inline(always)]
+fn centers_scaled<V: VectorOps>(v: V, sum: [V::F; 3], u: [V::F; 3], real: [V::F; 4], contrib: V::F, p: [V::F; 3], a: V::F) -> [V::F; 3] {
+    let len2 = length_squared(v, &real);
+    let valid = v.and(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.gt(len2, v.splat(0.0)));
+    let inv = v.select(valid, v.div(a, v.mul(len2, contrib)), v.splat(0.0));
+    let fa = v.mul(inv, len2);
+    let fr = v.add(inv, inv);
+    each3(|k| v.mul_add(v.neg_mul_add(p[k], contrib, sum[k]), fa, v.mul_add(u[k], fr, p[k])))
 }

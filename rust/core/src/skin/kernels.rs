@@ -478,10 +478,10 @@ unsafe fn full_batch<const ISA: u8, const KIND: u8, const SCALED: bool>(
                 // SAFETY: the caller's contract (the AVX-512 copy is only chosen where AVX2 and
                 // FMA are there too, `Simd::available`).
                 #[cfg(target_arch = "x86_64")]
-                ISA_AVX2 | ISA_AVX512 => unsafe { skin_batch::<_, KIND, SCALED>(super::avx2::Avx2::new(), simd_job, batch, scratch) },
+                ISA_AVX2 | ISA_AVX512 => unsafe { skin_batch::<_, KIND, SCALED, 2>(super::avx2::Avx2::new(), simd_job, batch, scratch) },
                 // SAFETY: the caller's contract.
                 #[cfg(target_arch = "aarch64")]
-                ISA_NEON => unsafe { skin_batch::<_, KIND, SCALED>(super::neon::Neon::new(), simd_job, batch, scratch) },
+                ISA_NEON => unsafe { skin_batch::<_, KIND, SCALED, 4>(super::neon::Neon::new(), simd_job, batch, scratch) },
                 _ => unreachable!("no SIMD kernels for copy {ISA}"),
             }
         }
@@ -695,33 +695,56 @@ unsafe fn accumulate_dual_quaternion<const ISA: u8, const SCALED: bool>(
     s
 }
 
-/// Applies the summed dual quaternions (Blender's `mul_v3m3_dq`, dividing by `|q|²` instead of
-/// normalizing), then the strength: `co + a·(r − co) = r·a + co·(1 − a)`; `co` where
-/// `contrib ≤ 0.0001`. Written with selects, not branches, so the lane loop vectorizes.
+/// Applies the summed dual quaternions (Blender's `mul_v3m3_dq`: `(M·co + t)/|q|²`), then the
+/// strength: `co + a·(r − co)`; `co` where `contrib ≤ 0.0001` or the sum is zero. Computed as
+/// `co + u·(2a/|q|²)` without the matrix (see `dual_quaternion` in `batch.rs`, which the SIMD
+/// copies run). Written with selects, not branches, so the lane loop vectorizes.
 #[inline(always)]
 fn finish_dual_quaternion<const ISA: u8>(co: &Points, s: &DqSum, strength: &Lanes) -> Points {
     let mut r = *co;
     for l in 0..LANES {
-        let (x, y, z, w) = (s.real[0][l], s.real[1][l], s.real[2][l], s.real[3][l]);
-        let (t0, t1, t2, t3) = (s.dual[3][l], s.dual[0][l], s.dual[1][l], s.dual[2][l]);
-        let len2 = w * w + x * x + y * y + z * z;
-        let (px, py, pz) = (co.x[l], co.y[l], co.z[l]);
-        let m00 = w * w + x * x - y * y - z * z;
-        let m11 = w * w + y * y - x * x - z * z;
-        let m22 = w * w + z * z - x * x - y * y;
-        let (xy, xz, yz, wx, wy, wz) = (x * y, x * z, y * z, w * x, w * y, w * z);
-        let nx = m00 * px + 2.0 * (xy - wz) * py + 2.0 * (xz + wy) * pz + 2.0 * (-t0 * x + w * t1 - t2 * z + y * t3);
-        let ny = 2.0 * (xy + wz) * px + m11 * py + 2.0 * (yz - wx) * pz + 2.0 * (-t0 * y + t1 * z - x * t3 + w * t2);
-        let nz = 2.0 * (xz - wy) * px + 2.0 * (yz + wx) * py + m22 * pz + 2.0 * (-t0 * z + x * t2 + w * t3 - t1 * y);
+        let q = [s.real[0][l], s.real[1][l], s.real[2][l], s.real[3][l]];
+        let (x, y, z, w) = (q[0], q[1], q[2], q[3]);
+        let (tx, ty, tz, t0) = (s.dual[0][l], s.dual[1][l], s.dual[2][l], s.dual[3][l]);
+        let p = [co.x[l], co.y[l], co.z[l]];
+        // b = v × p + t⃗, u = w·b + v × b − t₀·v
+        let b = [
+            madd::<ISA>(-z, p[1], madd::<ISA>(y, p[2], tx)),
+            madd::<ISA>(-x, p[2], madd::<ISA>(z, p[0], ty)),
+            madd::<ISA>(-y, p[0], madd::<ISA>(x, p[1], tz)),
+        ];
+        let u = [
+            madd::<ISA>(-t0, x, madd::<ISA>(-z, b[1], madd::<ISA>(y, b[2], w * b[0]))),
+            madd::<ISA>(-t0, y, madd::<ISA>(-x, b[2], madd::<ISA>(z, b[0], w * b[1]))),
+            madd::<ISA>(-t0, z, madd::<ISA>(-y, b[0], madd::<ISA>(x, b[1], w * b[2]))),
+        ];
+        let len2 = length_squared::<ISA>(q);
         let valid = s.contrib[l] > MIN_TOTAL_WEIGHT && len2 > 0.0;
         let a = strength[l];
-        let f = if valid { a / len2 } else { 0.0 };
-        let keep = if valid { 1.0 - a } else { 1.0 };
-        r.x[l] = madd::<ISA>(nx, f, px * keep);
-        r.y[l] = madd::<ISA>(ny, f, py * keep);
-        r.z[l] = madd::<ISA>(nz, f, pz * keep);
+        let g = if valid { (a + a) / len2 } else { 0.0 };
+        r.x[l] = madd::<ISA>(u[0], g, p[0]);
+        r.y[l] = madd::<ISA>(u[1], g, p[1]);
+        r.z[l] = madd::<ISA>(u[2], g, p[2]);
     }
     r
+}
+
+/// `|q|²` of a quaternion sum `(x, y, z, w)`, in the SIMD copies' order.
+#[inline(always)]
+fn length_squared<const ISA: u8>([x, y, z, w]: [f32; 4]) -> f32 {
+    madd::<ISA>(z, z, madd::<ISA>(y, y, madd::<ISA>(x, x, w * w)))
+}
+
+/// `w·b + v × b` with `b = v × d` for the quaternion sum `(v, w)`: half of `|q|²·(R·d − d)`, `R`
+/// its rotation (see `rotation_terms` in `batch.rs`).
+#[inline(always)]
+fn rotation_terms<const ISA: u8>([x, y, z, w]: [f32; 4], d: [f32; 3]) -> [f32; 3] {
+    let b = [madd::<ISA>(-z, d[1], y * d[2]), madd::<ISA>(-x, d[2], z * d[0]), madd::<ISA>(-y, d[0], x * d[1])];
+    [
+        madd::<ISA>(-z, b[1], madd::<ISA>(y, b[2], w * b[0])),
+        madd::<ISA>(-x, b[2], madd::<ISA>(z, b[0], w * b[1])),
+        madd::<ISA>(-y, b[0], madd::<ISA>(x, b[1], w * b[2])),
+    ]
 }
 
 /// Per-lane sums for centers of rotation: where LBS puts the center, `Σ wᵢ·Mᵢ·c` (scaled poses)
@@ -811,44 +834,36 @@ fn rotation_offset<const ISA: u8>(q: Vec4, h: Vec4, p: [f32; 3]) -> [f32; 3] {
 }
 
 /// `co' = c + anchor/contrib + R·d` (rigid: `anchor = Σ wᵢ·(Mᵢ·c − c)`, `d = co − c`) or
-/// `co' = anchor/contrib + R·d` (scaled: `anchor = Σ wᵢ·Mᵢ·c`, `d = offset/contrib`), `R` the
-/// rotation of the summed quaternion (its matrix divided by `|q|²`, as `mul_v3m3_dq` does); then
-/// the strength: `co + a·(co' − co)`; `co` where `contrib ≤ 0.0001` or the sum is zero. One
-/// division, `a/(|q|²·contrib)`, serves both factors. Selects, not branches, so the lane loop
-/// vectorizes.
+/// `co' = anchor/contrib + R·o/contrib` (scaled: `anchor = Σ wᵢ·Mᵢ·c`, `o` the offset sum), `R` the
+/// rotation of the summed quaternion, through [`rotation_terms`] `u` of `d` or `o`:
+/// `R·d = d + 2u/|q|²`; then the strength: `co + a·(co' − co)`, that is
+/// `co + anchor·(a/contrib) + u·(2a/|q|²)` (rigid) or
+/// `co + (anchor + o − contrib·co)·(a/contrib) + u·(2a/(|q|²·contrib))` (scaled); `co` where
+/// `contrib ≤ 0.0001` or the sum is zero. One division, `a/(|q|²·contrib)`, serves both factors.
+/// Selects, not branches, so the lane loop vectorizes.
 #[inline(always)]
 fn finish_centers<const ISA: u8, const SCALED: bool>(co: &Points, center: &Points, s: &CorSum, strength: &Lanes) -> Points {
     let mut r = *co;
     for l in 0..LANES {
-        let (x, y, z, w) = (s.real[0][l], s.real[1][l], s.real[2][l], s.real[3][l]);
-        let len2 = w * w + x * x + y * y + z * z;
-        let (px, py, pz) = (co.x[l], co.y[l], co.z[l]);
-        let (cx, cy, cz) = (px - center.x[l], py - center.y[l], pz - center.z[l]);
-        let (dx, dy, dz) = if SCALED { (s.offset[0][l], s.offset[1][l], s.offset[2][l]) } else { (cx, cy, cz) };
-        let m00 = w * w + x * x - y * y - z * z;
-        let m11 = w * w + y * y - x * x - z * z;
-        let m22 = w * w + z * z - x * x - y * y;
-        let (xy, xz, yz, wx, wy, wz) = (x * y, x * z, y * z, w * x, w * y, w * z);
-        let nx = m00 * dx + 2.0 * (xy - wz) * dy + 2.0 * (xz + wy) * dz;
-        let ny = 2.0 * (xy + wz) * dx + m11 * dy + 2.0 * (yz - wx) * dz;
-        let nz = 2.0 * (xz - wy) * dx + 2.0 * (yz + wx) * dy + m22 * dz;
+        let q = [s.real[0][l], s.real[1][l], s.real[2][l], s.real[3][l]];
+        let len2 = length_squared::<ISA>(q);
+        let p = [co.x[l], co.y[l], co.z[l]];
+        let d = if SCALED {
+            [s.offset[0][l], s.offset[1][l], s.offset[2][l]]
+        } else {
+            [p[0] - center.x[l], p[1] - center.y[l], p[2] - center.z[l]]
+        };
+        let u = rotation_terms::<ISA>(q, d);
         let contrib = s.contrib[l];
         let valid = contrib > MIN_TOTAL_WEIGHT && len2 > 0.0;
         let a = strength[l];
         let inv = if valid { a / (len2 * contrib) } else { 0.0 };
         let fa = inv * len2;
-        let fr = if SCALED { inv } else { inv * contrib };
-        let (bx, by, bz) = if SCALED {
-            let keep = if valid { 1.0 - a } else { 1.0 };
-            (px * keep, py * keep, pz * keep)
-        } else {
-            // co + a·(c − co), the `c` the rigid anchor leaves out.
-            let av = if valid { a } else { 0.0 };
-            (madd::<ISA>(-av, cx, px), madd::<ISA>(-av, cy, py), madd::<ISA>(-av, cz, pz))
-        };
-        r.x[l] = madd::<ISA>(s.anchor[0][l], fa, madd::<ISA>(nx, fr, bx));
-        r.y[l] = madd::<ISA>(s.anchor[1][l], fa, madd::<ISA>(ny, fr, by));
-        r.z[l] = madd::<ISA>(s.anchor[2][l], fa, madd::<ISA>(nz, fr, bz));
+        let fr = if SCALED { inv + inv } else { (inv + inv) * contrib };
+        let anchor = |k: usize| if SCALED { madd::<ISA>(-p[k], contrib, s.anchor[k][l] + d[k]) } else { s.anchor[k][l] };
+        r.x[l] = madd::<ISA>(anchor(0), fa, madd::<ISA>(u[0], fr, p[0]));
+        r.y[l] = madd::<ISA>(anchor(1), fa, madd::<ISA>(u[1], fr, p[1]));
+        r.z[l] = madd::<ISA>(anchor(2), fa, madd::<ISA>(u[2], fr, p[2]));
     }
     r
 }

@@ -72,7 +72,6 @@ impl VectorOps for Neon {
         sub(a: F, b: F) -> F = vsubq_f32(a, b);
         mul(a: F, b: F) -> F = vmulq_f32(a, b);
         div(a: F, b: F) -> F = vdivq_f32(a, b);
-        neg(a: F) -> F = vnegq_f32(a);
         mul_add(a: F, b: F, c: F) -> F = vfmaq_f32(c, a, b);
         neg_mul_add(a: F, b: F, c: F) -> F = vfmsq_f32(c, a, b);
         lt(a: F, b: F) -> M = vcltq_f32(a, b);
@@ -80,6 +79,7 @@ impl VectorOps for Neon {
         eq(a: F, b: F) -> M = vceqq_f32(a, b);
         and(a: M, b: M) -> M = vandq_u32(a, b);
         select(m: M, a: F, b: F) -> F = vbslq_f32(m, a, b);
+        neg_where(m: M, a: F) -> F = vreinterpretq_f32_u32(veorq_u32(vreinterpretq_u32_f32(a), vandq_u32(m, vdupq_n_u32(0x8000_0000))));
     }
 
     #[inline(always)]

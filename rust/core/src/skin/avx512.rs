@@ -2,13 +2,12 @@
 //!
 //! Lane `l` and lane `l + 8` share a 512-bit row (their two bone records side by side); the
 //! same in-lane shuffles as the AVX2 transpose then work on both halves together, and a
-//! two-source permute finishes it. Arithmetic as in `kernels.rs`.
+//! two-source permute finishes it. Arithmetic as in `portable.rs`.
 
 use core::arch::x86_64::*;
 
 use super::batch::BatchJob;
 use super::influences::{lane_record, Slot, LANES};
-use super::kernels::{DqSum, Points};
 use super::kernels::{DUAL_QUATERNION, LINEAR};
 use super::pose::{CorBone, DqBone, LinearBone, PivotBone};
 
@@ -105,21 +104,6 @@ fn add_signed(real: &mut [__m512; 4], dual: &mut [__m512; 4], q: &[__m512], d: &
     }
 }
 
-#[inline]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn store(real: [__m512; 4], dual: [__m512; 4], contrib: __m512) -> DqSum {
-    let mut s = DqSum { real: [[0.0; LANES]; 4], dual: [[0.0; LANES]; 4], contrib: [0.0; LANES] };
-    // SAFETY: each destination is an array of 16 floats.
-    unsafe {
-        for c in 0..4 {
-            _mm512_storeu_ps(s.real[c].as_mut_ptr(), real[c]);
-            _mm512_storeu_ps(s.dual[c].as_mut_ptr(), dual[c]);
-        }
-        _mm512_storeu_ps(s.contrib.as_mut_ptr(), contrib);
-    }
-    s
-}
-
 /// The sums in registers: real (x, y, z, w), dual (x, y, z, w), total weight.
 type Sums = ([__m512; 4], [__m512; 4], __m512);
 
@@ -127,15 +111,6 @@ type Sums = ([__m512; 4], [__m512; 4], __m512);
 ///
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA, and every bone index in `slots` must index `dq`.
-#[target_feature(enable = "avx512f,avx2,fma")]
-pub(super) unsafe fn accumulate_rigid(slots: &[Slot], dq: &[DqBone]) -> DqSum {
-    // SAFETY: this function's own contract.
-    let (real, dual, contrib) = unsafe { rigid_sums(slots, dq) };
-    store(real, dual, contrib)
-}
-
-/// # Safety
-/// As [`accumulate_rigid`].
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn rigid_sums(slots: &[Slot], dq: &[DqBone]) -> Sums {
@@ -158,17 +133,6 @@ unsafe fn rigid_sums(slots: &[Slot], dq: &[DqBone]) -> Sums {
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA, and every bone index in `slots` must index
 /// `pivot`.
-#[target_feature(enable = "avx512f,avx2,fma")]
-pub(super) unsafe fn accumulate_scaled(co: &Points, slots: &[Slot], pivot: &[PivotBone]) -> DqSum {
-    // SAFETY: each coordinate array has 16 floats.
-    let p = unsafe { [_mm512_loadu_ps(co.x.as_ptr()), _mm512_loadu_ps(co.y.as_ptr()), _mm512_loadu_ps(co.z.as_ptr())] };
-    // SAFETY: this function's own contract.
-    let (real, dual, contrib) = unsafe { scaled_sums(p, slots, pivot) };
-    store(real, dual, contrib)
-}
-
-/// # Safety
-/// As [`accumulate_scaled`].
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn scaled_sums([x, y, z]: [__m512; 3], slots: &[Slot], pivot: &[PivotBone]) -> Sums {
@@ -260,36 +224,30 @@ fn idx(v: &[i32; 16]) -> __m512i {
 ///
 /// # Safety
 /// The CPU must support AVX-512F.
+#[inline]
 #[target_feature(enable = "avx512f")]
-pub(super) unsafe fn load_points(points: &[[f32; 3]; LANES]) -> Points {
+unsafe fn load_points(points: &[[f32; 3]; LANES]) -> [__m512; 3] {
     let p = points.as_ptr() as *const f32;
     // SAFETY: 16 points are 48 floats.
     let (a, b, c) = unsafe { (_mm512_loadu_ps(p), _mm512_loadu_ps(p.add(16)), _mm512_loadu_ps(p.add(32))) };
-    let mut out = Points { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
-    for (axis, dst) in [&mut out.x, &mut out.y, &mut out.z].into_iter().enumerate() {
+    core::array::from_fn(|axis| {
         let (first, second) = &DEINTERLEAVE[axis];
-        let ab = _mm512_permutex2var_ps(a, idx(first), b);
-        let v = _mm512_permutex2var_ps(ab, idx(second), c);
-        // SAFETY: each axis array has 16 floats.
-        unsafe { _mm512_storeu_ps(dst.as_mut_ptr(), v) };
-    }
-    out
+        _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, idx(first), b), idx(second), c)
+    })
 }
 
 /// Writes coordinate vectors back as 16 points `x y z x y z …`.
 ///
 /// # Safety
 /// The CPU must support AVX-512F.
+#[inline]
 #[target_feature(enable = "avx512f")]
-pub(super) unsafe fn store_points(p: &Points, out: &mut [[f32; 3]; LANES]) {
-    // SAFETY: each axis array has 16 floats; 16 points are 48 floats.
-    unsafe {
-        let (x, y, z) = (_mm512_loadu_ps(p.x.as_ptr()), _mm512_loadu_ps(p.y.as_ptr()), _mm512_loadu_ps(p.z.as_ptr()));
-        let dst = out.as_mut_ptr() as *mut f32;
-        for (part, (first, second)) in INTERLEAVE.iter().enumerate() {
-            let xy = _mm512_permutex2var_ps(x, idx(first), y);
-            _mm512_storeu_ps(dst.add(16 * part), _mm512_permutex2var_ps(xy, idx(second), z));
-        }
+unsafe fn store_points([x, y, z]: [__m512; 3], out: &mut [[f32; 3]; LANES]) {
+    let dst = out.as_mut_ptr() as *mut f32;
+    for (part, (first, second)) in INTERLEAVE.iter().enumerate() {
+        let xy = _mm512_permutex2var_ps(x, idx(first), y);
+        // SAFETY: 16 points are 48 floats.
+        unsafe { _mm512_storeu_ps(dst.add(16 * part), _mm512_permutex2var_ps(xy, idx(second), z)) };
     }
 }
 
@@ -321,11 +279,11 @@ impl Affine {
 /// Summed per lane: each influence adds its weight (a broadcast load) times its bone's whole
 /// 16-float record (one load, folded into the FMA) to its lane's accumulator, and the sixteen
 /// accumulators are transposed once per batch. Transposing every slot's records instead cost
-/// 48 shuffles and 16 inserts per slot, which bounded LBS on the vector ports. The same FMA per
-/// float in the same slot order, so the sums are bit-identical to the portable copy's.
+/// 48 shuffles and 16 inserts per slot, which bounded LBS on the vector ports. One FMA per float,
+/// in slot order.
 ///
 /// # Safety
-/// As [`accumulate_rigid`], for `linear`.
+/// As [`rigid_sums`], for `linear`.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], __m512) {
@@ -370,7 +328,7 @@ fn transpose_rows(r: &[__m512; LANES]) -> [__m512; 12] {
 
 /// Everything skinning does to one full batch of 16 vertices, in registers: load, `premat`,
 /// LBS and/or DQS (Blender's `mul_v3m3_dq`), blend, strength, `postmat`, mask, store. The same
-/// arithmetic as the portable path in `kernels.rs`.
+/// arithmetic as the portable copy (`portable.rs`).
 ///
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index the
@@ -385,11 +343,7 @@ pub(super) unsafe fn batch<const KIND: u8>(
     blend_amount: Option<&[f32; LANES]>,
 ) {
     // SAFETY: 16 points (and below: every array loaded or stored has exactly 16 lanes).
-    let original = unsafe { load_points(positions) };
-    // SAFETY: each coordinate array has 16 floats.
-    let o = unsafe {
-        [_mm512_loadu_ps(original.x.as_ptr()), _mm512_loadu_ps(original.y.as_ptr()), _mm512_loadu_ps(original.z.as_ptr())]
-    };
+    let o = unsafe { load_points(positions) };
     let p = match job.premat {
         Some(m) => Affine::new(m).apply(o),
         None => o,
@@ -454,7 +408,7 @@ pub(super) unsafe fn batch<const KIND: u8>(
 }
 
 /// `½·(R·p + t − p)` for the unit quaternions `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v ×
-/// a + h)` with `a = v × p` (see `rotation_offset` in `kernels.rs`).
+/// a + h)` with `a = v × p` (see `rotation_offset` in `portable.rs`).
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
@@ -530,21 +484,15 @@ unsafe fn write_batch(job: &BatchJob<'_>, moved: [__m512; 3], a: __m512, o: [__m
     for k in 0..3 {
         r[k] = _mm512_mask_mov_ps(r[k], untouched, o[k]);
     }
-    let mut result = Points { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
-    // SAFETY: the arrays have exactly 16 lanes.
-    unsafe {
-        _mm512_storeu_ps(result.x.as_mut_ptr(), r[0]);
-        _mm512_storeu_ps(result.y.as_mut_ptr(), r[1]);
-        _mm512_storeu_ps(result.z.as_mut_ptr(), r[2]);
-        store_points(&result, out);
-    }
+    // SAFETY: the CPU has AVX-512F (this function's contract).
+    unsafe { store_points(r, out) };
 }
 
 /// Everything skinning with centers of rotation does to one full batch of 16 vertices, in
 /// registers: load the points and their centers, `premat` on both, the sums (where each bone
 /// puts the center, the sign-aligned rotations, with `SCALED` the blended scale/shear of the
 /// offset), the rotation of the offset, strength, `postmat`, mask, store. The same arithmetic as
-/// the portable path in `kernels.rs`.
+/// the portable copy (`portable.rs`).
 ///
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `cor`
@@ -558,12 +506,8 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     slots: &[Slot],
     strength: Option<&[f32; LANES]>,
 ) {
-    // SAFETY: each coordinate array has 16 floats.
-    let lanes = |p: &Points| unsafe { [_mm512_loadu_ps(p.x.as_ptr()), _mm512_loadu_ps(p.y.as_ptr()), _mm512_loadu_ps(p.z.as_ptr())] };
-    // SAFETY: 16 points.
-    let o = lanes(&unsafe { load_points(positions) });
-    // SAFETY: 16 centers.
-    let c = lanes(&unsafe { load_points(centers) });
+    // SAFETY: 16 points; 16 centers.
+    let (o, c) = unsafe { (load_points(positions), load_points(centers)) };
     let (p, c) = match job.premat {
         Some(m) => {
             let m = Affine::new(m);
@@ -644,7 +588,7 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         None => _mm512_set1_ps(1.0),
     };
     // The rotation through `u` (see `rotation_terms` in `batch.rs`), then the strength, as the
-    // portable `finish_centers` in `kernels.rs`.
+    // portable `finish_centers` (`portable.rs`).
     let [x, y, z, w] = real;
     let fma = |a, b, c| _mm512_fmadd_ps(a, b, c);
     let fnma = |a, b, c| _mm512_fnmadd_ps(a, b, c);

@@ -2,7 +2,7 @@
 //! (AVX2+FMA in `avx2.rs`, NEON in `neon.rs`): everything skinning does to a full batch of
 //! [`LANES`] vertices, as `LANES / WIDTH` parts of one vector each, skinned one part after the
 //! other so that a part's sums stay in registers. The arithmetic is the portable copy's in
-//! `kernels.rs`; what is summed per influence is arranged for throughput:
+//! `portable.rs`; what is summed per influence is arranged for throughput:
 //!
 //! 1. **Signs.** The quaternion sum whose running value picks each influence's sign (DQS, Blend,
 //!    centers of rotation) is a serial chain per vertex, from transposed rotations. Rigid DQS

@@ -30,6 +30,7 @@ mod envelope;
 mod groups;
 mod influences;
 mod kernels;
+mod portable;
 #[cfg(target_arch = "aarch64")]
 mod neon;
 mod pose;

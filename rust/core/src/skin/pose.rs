@@ -108,7 +108,7 @@ impl CorBone {
 /// A rigid bone for skinning with centers of rotation: its rotation (x, y, z, w) and half its
 /// translation (x, y, z, 0). 8 floats, so SIMD code loads a lane's record in one window; the
 /// kernels rotate the center by `real` rather than read a 3×3 matrix, and add `t/2` inside the
-/// rotation's `½·(R·c − c)` (see `kernels.rs`).
+/// rotation's `½·(R·c − c)` (see `rotation_offset` in `portable.rs`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(32))]
 pub(crate) struct CorRigidBone {

@@ -9,7 +9,7 @@
 
 use core::arch::x86_64::*;
 
-use super::batch::{transposed_window_sums, VectorOps};
+use super::batch::VectorOps;
 use super::influences::{lane_record, Slot, LANES};
 
 /// Proof that the CPU has AVX2 and FMA.
@@ -174,12 +174,11 @@ impl VectorOps for Avx2 {
         }
     }
 
-    /// Two rows or more: accumulated per lane, lanes `l` and `l + 4` together (rows in pairs,
-    /// one register each; all four lane pairs at once for two rows, two for three, one for four
-    /// or more: at most eight accumulators), each finished lane pair combined into its rows,
-    /// and transposed at the end, which needs per influence only loads (the bone index, the
-    /// weight broadcast, the rows) and FMAs. One row: from transposed records, fewer
-    /// instructions there.
+    /// Accumulated per lane, lanes `l` and `l + 4` together (rows in pairs, one register each;
+    /// all four lane pairs at once for two rows, two for three, one for four or more: at most
+    /// eight accumulators), each finished lane pair combined into its rows, and transposed at
+    /// the end, which needs per influence only loads (the bone index, the weight broadcast, the
+    /// rows) and FMAs.
     #[inline(always)]
     unsafe fn window_sums<T, const ROWS: usize>(
         self,
@@ -187,17 +186,16 @@ impl VectorOps for Avx2 {
         signed: Option<&[[f32; LANES]]>,
         lane0: usize,
         table: &[T],
-        offset: usize,
+        offsets: [usize; ROWS],
     ) -> [[__m256; 4]; ROWS] {
         const { assert!(ROWS <= 8) };
-        if ROWS == 1 {
-            // SAFETY: the caller's contract.
-            return unsafe { transposed_window_sums(self, slots, signed, lane0, table, offset) };
-        }
         let stride = core::mem::size_of::<T>() / 4;
-        // An odd last row is loaded with the four floats after it (ignored): they must lie in
-        // the record too. Known at compile time.
-        assert!(offset + 4 * ROWS.next_multiple_of(2) <= stride, "the window's pairs of rows lie inside the record");
+        // Rows are loaded in adjacent pairs; an odd last row with the four floats after it
+        // (ignored), which must lie in the record too. Known at compile time.
+        for j in 0..ROWS.div_ceil(2) {
+            assert!(2 * j + 1 >= ROWS || offsets[2 * j + 1] == offsets[2 * j] + 4, "the window's rows come in adjacent pairs");
+            assert!(offsets[2 * j] + 8 <= stride, "the window's pairs of rows lie inside the record");
+        }
         debug_assert!(signed.is_none_or(|s| s.len() == slots.len()));
         // Lanes `l` and `l + 4` share the registers of a row after the sums, so the lanes are
         // summed in pairs (l, l + 4), as many pairs at a time as eight accumulators hold, and
@@ -223,10 +221,10 @@ impl VectorOps for Avx2 {
                             let lane = lane0 + first + k + 4 * half;
                             // SAFETY: the caller's contract: the lane's bone indexes `table`; the
                             // pairs of rows lie inside its record (asserted above).
-                            let record = lane_record(table, slot.records[lane]).add(offset);
+                            let record = lane_record(table, slot.records[lane]);
                             let w = _mm256_broadcast_ss(&weights[lane]);
                             for (j, reg) in regs.iter_mut().enumerate().take(per_lane) {
-                                *reg = _mm256_fmadd_ps(_mm256_loadu_ps(record.add(8 * j)), w, *reg);
+                                *reg = _mm256_fmadd_ps(_mm256_loadu_ps(record.add(offsets[2 * j])), w, *reg);
                             }
                         }
                     }

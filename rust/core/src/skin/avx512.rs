@@ -452,12 +452,13 @@ unsafe fn load_columns_scalar<T>(table: &[T], records: &[u32; LANES], offset: us
     transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
 }
 
-/// The last entry `s22` of each lane's scale/shear part (see `CorBone`), by scalar loads
-/// through a small buffer: all on the load/store side, none on the vector ports that the
-/// transposes fill (faster here than the gather; a fourth window would cost a whole transpose).
+/// The last entry `s22` of each lane's scale/shear part (float 24 of its `CorBone`, after the
+/// three windows), by scalar loads through a small buffer: all on the load/store side, none on
+/// the vector ports that the transposes fill (faster here than the gather; a fourth window
+/// would cost a whole transpose).
 ///
 /// # Safety
-/// Every bone index must index `cor`.
+/// Every record must be one of `cor`.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn load_s22(cor: &[CorBone], records: &[u32; LANES]) -> __m512 {
@@ -526,11 +527,11 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
         let q = if SCALED {
             // SAFETY: indices are in range (validated); a CorBone's first 24 floats are matrix
-            // rows 0–1, row 2 and the rotation, and the first 8 entries of its scale/shear part.
+            // rows 0–1, the rotation and row 2, and the first 8 entries of its scale/shear part.
             let a = unsafe { load_columns_scalar(job.cor, &slot.records, 0) };
             // SAFETY: as above.
             let b = unsafe { load_columns_scalar(job.cor, &slot.records, 8) };
-            let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[0], b[1], b[2], b[3]]];
+            let rows = [[a[0], a[1], a[2], a[3]], [a[4], a[5], a[6], a[7]], [b[4], b[5], b[6], b[7]]];
             for r in 0..3 {
                 let m = rows[r];
                 let moved = _mm512_fmadd_ps(m[0], c[0], _mm512_fmadd_ps(m[1], c[1], _mm512_fmadd_ps(m[2], c[2], m[3])));
@@ -546,7 +547,7 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
                 let stretched = _mm512_fmadd_ps(m[0], d[0], _mm512_fmadd_ps(m[1], d[1], _mm512_mul_ps(m[2], d[2])));
                 offset[r] = _mm512_fmadd_ps(w, stretched, offset[r]);
             }
-            [b[4], b[5], b[6], b[7]]
+            [b[0], b[1], b[2], b[3]]
         } else {
             // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the
             // rotation, half the translation and a zero.

@@ -80,54 +80,35 @@ pub(super) trait VectorOps: Copy {
     fn store_points(self, p: [Self::F; 3], out: &mut [[f32; 3]]);
 
     /// For the lanes `lane0 .. lane0 + WIDTH`: the sum over the slots of each lane's weight
-    /// times the floats `offset .. offset + 4·ROWS` of its bone record, as `ROWS` rows of four
-    /// component vectors. The weight of slot `s` is `signed[s]` if given, else the slot's own.
-    /// By default from transposed records ([`transposed_window_sums`]).
+    /// times the floats `offsets[r] .. offsets[r] + 4` of its bone record, for each row `r`, as
+    /// `ROWS` rows of four component vectors. The weight of slot `s` is `signed[s]` if given,
+    /// else the slot's own. Rows come in pairs of adjacent ones (`offsets[2j + 1] = offsets[2j] + 4`),
+    /// which an instruction set may load together; an odd last row's four floats after it must
+    /// lie in the record too.
     ///
     /// # Safety
     /// Every bone index of those lanes of `slots` indexes `table`; `T` is made of f32 and the
-    /// window lies inside it; `signed`, if given, has one entry per slot.
-    #[inline(always)]
+    /// rows lie inside it; `signed`, if given, has one entry per slot.
     unsafe fn window_sums<T, const ROWS: usize>(
         self,
         slots: &[Slot],
         signed: Option<&[[f32; LANES]]>,
         lane0: usize,
         table: &[T],
-        offset: usize,
-    ) -> [[Self::F; 4]; ROWS] {
-        // SAFETY: the caller's contract.
-        unsafe { transposed_window_sums(self, slots, signed, lane0, table, offset) }
-    }
+        offsets: [usize; ROWS],
+    ) -> [[Self::F; 4]; ROWS];
 }
 
-/// [`VectorOps::window_sums`] from transposed records: one transpose per slot and row (the
-/// default; the AVX2 copy uses it for a single row, where it takes fewer instructions than
-/// per-lane sums).
-///
-/// # Safety
-/// As [`VectorOps::window_sums`].
-#[inline(always)]
-pub(super) unsafe fn transposed_window_sums<V: VectorOps, T, const ROWS: usize>(
-    v: V,
-    slots: &[Slot],
-    signed: Option<&[[f32; LANES]]>,
-    lane0: usize,
-    table: &[T],
-    offset: usize,
-) -> [[V::F; 4]; ROWS] {
-    let mut acc = [[v.splat(0.0); 4]; ROWS];
-    for (s, slot) in slots.iter().enumerate() {
-        let w = v.load(&signed.map_or(&slot.weights, |w| &w[s])[lane0..]);
-        for (r, row) in acc.iter_mut().enumerate() {
-            // SAFETY: the caller's contract.
-            let c = unsafe { v.load_columns4(table, &slot.records[lane0..], offset + 4 * r) };
-            for k in 0..4 {
-                row[k] = v.mul_add(c[k], w, row[k]);
-            }
-        }
+/// Row offsets `first, first + 4, …`: a contiguous window of `ROWS` rows for
+/// [`VectorOps::window_sums`].
+const fn window<const ROWS: usize>(first: usize) -> [usize; ROWS] {
+    let mut rows = [0; ROWS];
+    let mut r = 0;
+    while r < ROWS {
+        rows[r] = first + 4 * r;
+        r += 1;
     }
-    acc
+    rows
 }
 
 /// Inputs of the batch kernels that are the same for every batch of a call.
@@ -170,6 +151,12 @@ pub(super) struct FullBatch<'a> {
     pub blend_amount: Option<&'a [f32; LANES]>,
     pub centers: Option<&'a [[f32; 3]; LANES]>,
 }
+
+/// The rows of a `CorBone` the centers with scale sum: the matrix rows, then the scale/shear part
+/// in three rows (`s00 s01 s02 s10`, `s11 s12 s20 s21`, `s22` and zeros); not the rotation.
+const COR_WINDOW: [usize; 6] = [0, 4, 12, 16, 20, 24];
+/// Where a `CorBone`'s rotation is.
+const COR_ROTATION: usize = 8;
 
 /// Skins one full batch with the method `KIND` (`SCALED`: some bone takes Blender's scale path),
 /// as `PARTS` parts of one vector each (`PARTS · V::WIDTH = LANES`), one after the other: a part's
@@ -221,8 +208,8 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
     // the instruction set of the function it is written in, and its vector operations would
     // become calls.
     // The windows: a LinearBone's rows (floats 0–11), a DqBone's rotation and dual part (0–3,
-    // 4–7), a PivotBone's rotation (12–15), a PivotDualBone (0–15), a CorBone's rows, rotation
-    // and scale/shear part (0–27).
+    // 4–7), a PivotBone's rotation (12–15), a PivotDualBone (0–15), a CorBone's rows and
+    // scale/shear part ([`COR_WINDOW`]) and rotation ([`COR_ROTATION`]).
     let moved = if let (true, Some(centers)) = (KIND == CENTERS, batch.centers) {
         let c = v.load_points(&centers[lanes.clone()]);
         let c = match job.premat {
@@ -232,12 +219,11 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
         let d: [V::F; 3] = each3(|k| v.sub(p[k], c[k]));
         if SCALED {
             // SAFETY: the caller's contract.
-            let (real, contrib) = unsafe { sign_pass(v, slots, job.cor, 12, lane0, None) };
-            // One window over the rows, the rotation (its sum unused) and the scale/shear
-            // part: one index and weight per influence for both sums. SAFETY: the caller's
-            // contract.
-            let [m0, m1, m2, _, s0, s1, s2] = unsafe { v.window_sums::<_, 7>(slots, None, lane0, job.cor, 0) };
-            // Σ wᵢ·Sᵢ from the window s00 s01 s02 s10 | s11 s12 s20 s21 | s22 0 0 0.
+            let (real, contrib) = unsafe { sign_pass(v, slots, job.cor, COR_ROTATION, lane0, None) };
+            // One window over the rows and the scale/shear part: one index and weight per
+            // influence for both sums. SAFETY: the caller's contract.
+            let [m0, m1, m2, s0, s1, s2] = unsafe { v.window_sums(slots, None, lane0, job.cor, COR_WINDOW) };
+            // Σ wᵢ·Sᵢ from the rows s00 s01 s02 s10 | s11 s12 s20 s21 | s22 0 0 0.
             let [[s00, s01, s02, s10], [s11, s12, s20, s21], [s22, ..]] = [s0, s1, s2];
             let row = |a, b, c| v.mul_add(a, d[0], v.mul_add(b, d[1], v.mul(c, d[2])));
             let offset = [row(s00, s01, s02), row(s10, s11, s12), row(s20, s21, s22)];
@@ -249,7 +235,7 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
             // SAFETY: the caller's contract.
             let (real, contrib) = unsafe { sign_pass(v, slots, job.dq, 0, lane0, None) };
             // SAFETY: the caller's contract.
-            let matrix = unsafe { v.window_sums::<_, 3>(slots, None, lane0, job.linear, 0) };
+            let matrix = unsafe { v.window_sums(slots, None, lane0, job.linear, window::<3>(0)) };
             let anchor = each3(|k| affine_row(v, &matrix[k], &c));
             let u = rotation_terms(v, &real, d);
             centers_rigid(v, anchor, u, real, contrib, p, c, a)
@@ -262,7 +248,7 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
                 let (real, sum) = unsafe { sign_pass(v, slots, job.pivot, 12, lane0, Some(&mut *signed)) };
                 contrib = sum;
                 // SAFETY: the caller's contract.
-                let rows = unsafe { v.window_sums::<_, 4>(slots, Some(signed), lane0, job.pivot_dual, 0) };
+                let rows = unsafe { v.window_sums(slots, Some(signed), lane0, job.pivot_dual, window::<4>(0)) };
                 (real, each4(|c| affine_row(v, &rows[c], &p)))
             } else {
                 // SAFETY: the caller's contract.
@@ -281,7 +267,7 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
                 }
             }
             // SAFETY: the caller's contract.
-            let matrix = unsafe { v.window_sums::<_, 3>(slots, None, lane0, job.linear, 0) };
+            let matrix = unsafe { v.window_sums(slots, None, lane0, job.linear, window::<3>(0)) };
             linear(v, &matrix, contrib, p, a)
         } else {
             p

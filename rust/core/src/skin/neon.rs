@@ -131,9 +131,9 @@ impl VectorOps for Neon {
         signed: Option<&[[f32; LANES]]>,
         lane0: usize,
         table: &[T],
-        offset: usize,
+        offsets: [usize; ROWS],
     ) -> [[F; 4]; ROWS] {
-        debug_assert!(offset + 4 * ROWS <= core::mem::size_of::<T>() / 4 && signed.is_none_or(|s| s.len() == slots.len()));
+        debug_assert!(offsets.iter().all(|&r| r + 4 <= core::mem::size_of::<T>() / 4) && signed.is_none_or(|s| s.len() == slots.len()));
         let zero = self.splat(0.0);
         let mut acc = [[zero; ROWS]; 4];
         for (s, slot) in slots.iter().enumerate() {
@@ -142,7 +142,7 @@ impl VectorOps for Neon {
             let row = |l: usize, r: usize| {
                 // SAFETY: the caller's contract: the lane's bone indexes `table` and the window
                 // lies inside its record; NEON as in `instructions!`.
-                unsafe { vld1q_f32(lane_record(table, records[l]).add(offset + 4 * r)) }
+                unsafe { vld1q_f32(lane_record(table, records[l]).add(offsets[r])) }
             };
             for r in 0..ROWS {
                 // SAFETY: NEON as in `instructions!`.

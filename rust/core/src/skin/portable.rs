@@ -368,7 +368,7 @@ unsafe fn accumulate_centers<const SCALED: bool>(
                 // SAFETY: the caller's contract.
                 let b = unsafe { bone(cor, slot.records[l]) };
                 for r in 0..3 {
-                    let row = b.matrix.rows[r];
+                    let row = b.matrix_row(r);
                     let moved = madd(row.x, cx, madd(row.y, cy, madd(row.z, cz, row.w)));
                     s.anchor[r][l] = madd(w, moved, s.anchor[r][l]);
                 }

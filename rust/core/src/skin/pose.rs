@@ -76,24 +76,39 @@ impl PivotDualBone {
 }
 
 /// A bone for skinning with centers of rotation: its full deform matrix (which moves the
-/// center, as LBS would), its rotation (the one DQS uses), and its scale/shear part `S = Rᵀ·M₃`
-/// row by row (exactly the identity for bones that do not take the scale path). The first
-/// 24 floats are three 8-float windows that SIMD code transposes; `s22` alone, the last entry of
-/// `S`, is loaded on its own (by scalar loads in the SIMD copies; a fourth window for one float
-/// would cost a whole transpose).
+/// center, as LBS would), its scale/shear part `S = Rᵀ·M₃` (exactly the identity for bones that
+/// do not take the scale path) and its rotation (the one DQS uses). Laid out for the kernels'
+/// loads: floats 0–7 the matrix rows 0 and 1, 8–11 the rotation (x, y, z, w), 12–15 matrix row
+/// 2, 16–23 `s00 s01 s02 s10 s11 s12 s20 s21`, 24 `s22`, then zeros. The AVX2 and NEON copies
+/// sum the rows without the rotation (floats 0–7 and 12–27: three pairs of rows); the AVX-512
+/// copy transposes floats 0–23 as three 8-float windows (the rotation in the second, early for
+/// the sign chain) and loads `s22` alone (by scalar loads, off the sign chain).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct CorBone {
-    pub matrix: AffineRows,
+    /// Rows 0 and 1 of the deform matrix.
+    pub rows01: [Vec4; 2],
     pub real: Vec4,
+    /// Row 2 of the deform matrix.
+    pub row2: Vec4,
     /// `S` row-major without its last entry: `s00 s01 s02 s10 s11 s12 s20 s21`.
     pub stretch: [f32; 8],
     pub s22: f32,
-    /// Zeros, so that the record is two 64-byte lines.
+    /// Zeros, so that the record is two 64-byte lines (and `s22`'s row is `s22 0 0 0`).
     pub padding: [f32; 7],
 }
 
 impl CorBone {
+    /// Row `r` of the deform matrix.
+    #[inline(always)]
+    pub fn matrix_row(&self, r: usize) -> Vec4 {
+        if r < 2 {
+            self.rows01[r]
+        } else {
+            self.row2
+        }
+    }
+
     /// Row `r` of the scale/shear part `S`.
     #[inline(always)]
     pub fn stretch_row(&self, r: usize) -> [f32; 3] {
@@ -117,6 +132,13 @@ pub(crate) struct CorRigidBone {
 }
 
 const _: () = assert!(core::mem::size_of::<CorBone>() == 128 && core::mem::size_of::<CorRigidBone>() == 32);
+// The kernels read a CorBone by float offsets (see its layout).
+const _: () = assert!(
+    core::mem::offset_of!(CorBone, real) == 8 * 4
+        && core::mem::offset_of!(CorBone, row2) == 12 * 4
+        && core::mem::offset_of!(CorBone, stretch) == 16 * 4
+        && core::mem::offset_of!(CorBone, s22) == 24 * 4
+);
 
 /// Per-frame bone data for all skinning methods.
 #[derive(Clone, Debug)]
@@ -207,9 +229,11 @@ impl Pose {
                 }
                 let stretch = if is_scaled { Mat3::from_quat(q).transpose() * Mat3::from_mat4(*m) } else { Mat3::IDENTITY };
                 let (s0, s1, s2) = (stretch.row(0), stretch.row(1), stretch.row(2));
+                let [r0, r1, r2] = AffineRows::from_mat4(m).rows;
                 cor.push(CorBone {
-                    matrix: AffineRows::from_mat4(m),
+                    rows01: [r0, r1],
                     real: Vec4::from(q),
+                    row2: r2,
                     stretch: [s0.x, s0.y, s0.z, s1.x, s1.y, s1.z, s2.x, s2.y],
                     s22: s2.z,
                     padding: [0.0; 7],

@@ -20,6 +20,7 @@ precomputed once per mesh by :func:`centers_of_rotation`. Many meshes are skinne
 """
 
 from ._dqskin import (
+    MAX_BONES,
     MAX_INFLUENCES_PER_VERTEX,
     angular_speeds,
     continuous_signs,
@@ -63,6 +64,7 @@ from ._dqskin import _MeshMemory  # noqa: F401  (the Blender extension's vertex-
 from ._dqskin import PoseData, _PoseMemory  # noqa: F401  (the Blender extension's pose reader)
 
 __all__ = [
+    "MAX_BONES",
     "MAX_INFLUENCES_PER_VERTEX",
     "angular_speeds",
     "continuous_signs",

@@ -7,6 +7,7 @@ import numpy.typing as npt
 
 __version__: str
 MAX_INFLUENCES_PER_VERTEX: int  # more influences on one vertex are refused (ValueError)
+MAX_BONES: int  # influences referring to more bones are refused (ValueError)
 
 F32Array = npt.NDArray[np.float32]
 IntArray = npt.NDArray[np.integer]

@@ -124,6 +124,15 @@ def test_one_vertex_with_ten_million_influences_is_refused():
     assert time.perf_counter() - t < 5.0
 
 
+def test_bone_counts_beyond_the_kernels_addressing_are_refused():
+    # The kernels address a bone's records by its index times 16 in 32 bits.
+    assert dqskin.MAX_BONES == 2**28
+    one = (np.array([0, 1]), np.array([dqskin.MAX_BONES - 1], np.uint32), np.ones(1, np.float32))
+    assert dqskin.Influences(*one, dqskin.MAX_BONES).bone_count == dqskin.MAX_BONES
+    with pytest.raises(ValueError, match=r"bone_count is 268435457; at most 268435456 bones"):
+        dqskin.Influences(*one, dqskin.MAX_BONES + 1)
+
+
 def test_4096_influences_sum_within_the_stated_error():
     k = dqskin.MAX_INFLUENCES_PER_VERTEX
     assert k == 4096

@@ -67,6 +67,7 @@ fn _panic_for_tests() -> PyResult<()> {
 fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MAX_INFLUENCES_PER_VERTEX", dqskin_core::MAX_INFLUENCES_PER_VERTEX)?;
+    m.add("MAX_BONES", dqskin_core::MAX_BONES)?;
     m.add_function(wrap_pyfunction!(set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(get_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(_panic_for_tests, m)?)?;

@@ -289,9 +289,15 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
         Some(m) => apply(v, m, moved),
         None => moved,
     };
-    // A mask weight of 0 leaves the vertex bit-identical (no space round trip).
-    let untouched = v.eq(a, v.splat(0.0));
-    let r = each3(|k| v.select(untouched, o[k], r[k]));
+    // A mask weight of 0 leaves the vertex bit-identical (no space round trip). The original
+    // points are loaded again for it rather than kept in registers through the sums.
+    let r = if batch.strength.is_some() {
+        let o = v.load_points(&batch.positions[lanes.clone()]);
+        let untouched = v.eq(a, v.splat(0.0));
+        each3(|k| v.select(untouched, o[k], r[k]))
+    } else {
+        r
+    };
     v.store_points(r, &mut batch.out[lanes]);
 }
 

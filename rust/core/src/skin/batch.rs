@@ -195,15 +195,12 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
 ) {
     let lanes = lane0..lane0 + V::WIDTH;
     let slots = batch.slots;
-    let o = v.load_points(&batch.positions[lanes.clone()]);
     let a = match batch.strength {
         Some(s) => v.load(&s[lanes.clone()]),
         None => v.splat(1.0),
     };
-    let p = match job.premat {
-        Some(m) => apply(v, m, o),
-        None => o,
-    };
+    // The sums come first and the points (and centers) are loaded after them, where they are
+    // used: AVX2 has sixteen registers, and whatever is live through a sum's loop spills.
     // `if`s rather than closures here and below: a closure compiled on its own would not have
     // the instruction set of the function it is written in, and its vector operations would
     // become calls.
@@ -211,18 +208,16 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
     // 4–7), a PivotBone's rotation (12–15), a PivotDualBone (0–15), a CorBone's rows and
     // scale/shear part ([`COR_WINDOW`]) and rotation ([`COR_ROTATION`]).
     let moved = if let (true, Some(centers)) = (KIND == CENTERS, batch.centers) {
-        let c = v.load_points(&centers[lanes.clone()]);
-        let c = match job.premat {
-            Some(m) => apply(v, m, c),
-            None => c,
-        };
-        let d: [V::F; 3] = each3(|k| v.sub(p[k], c[k]));
+        // The sign chain first, so that the window's loop overlaps its latency.
         if SCALED {
             // SAFETY: the caller's contract.
             let (real, contrib) = unsafe { sign_pass(v, slots, job.cor, COR_ROTATION, lane0, None) };
             // One window over the rows and the scale/shear part: one index and weight per
             // influence for both sums. SAFETY: the caller's contract.
             let [m0, m1, m2, s0, s1, s2] = unsafe { v.window_sums(slots, None, lane0, job.cor, COR_WINDOW) };
+            let c = armature_points(v, job, &centers[lanes.clone()]);
+            let p = armature_points(v, job, &batch.positions[lanes.clone()]);
+            let d: [V::F; 3] = each3(|k| v.sub(p[k], c[k]));
             // Σ wᵢ·Sᵢ from the rows s00 s01 s02 s10 | s11 s12 s20 s21 | s22 0 0 0.
             let [[s00, s01, s02, s10], [s11, s12, s20, s21], [s22, ..]] = [s0, s1, s2];
             let row = |a, b, c| v.mul_add(a, d[0], v.mul_add(b, d[1], v.mul(c, d[2])));
@@ -236,29 +231,35 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
             let (real, contrib) = unsafe { sign_pass(v, slots, job.dq, 0, lane0, None) };
             // SAFETY: the caller's contract.
             let matrix = unsafe { v.window_sums(slots, None, lane0, job.linear, window::<3>(0)) };
+            let c = armature_points(v, job, &centers[lanes.clone()]);
             let anchor = each3(|k| affine_row(v, &matrix[k], &c));
+            let p = armature_points(v, job, &batch.positions[lanes.clone()]);
+            let d = each3(|k| v.sub(p[k], c[k]));
             let u = rotation_terms(v, &real, d);
             centers_rigid(v, anchor, u, real, contrib, p, c, a)
         }
     } else {
         let mut contrib = v.splat(0.0);
-        let dqs = if KIND == DUAL_QUATERNION || KIND == BLEND {
-            let (real, dual) = if SCALED {
+        let (dqs, p) = if KIND == DUAL_QUATERNION || KIND == BLEND {
+            let (real, dual, p) = if SCALED {
                 // SAFETY: the caller's contract.
                 let (real, sum) = unsafe { sign_pass(v, slots, job.pivot, 12, lane0, Some(&mut *signed)) };
                 contrib = sum;
                 // SAFETY: the caller's contract.
                 let rows = unsafe { v.window_sums(slots, Some(signed), lane0, job.pivot_dual, window::<4>(0)) };
-                (real, each4(|c| affine_row(v, &rows[c], &p)))
+                let p = armature_points(v, job, &batch.positions[lanes.clone()]);
+                (real, each4(|c| affine_row(v, &rows[c], &p)), p)
             } else {
                 // SAFETY: the caller's contract.
                 let (real, dual, sum) = unsafe { rigid_sums(v, slots, job.dq, lane0) };
                 contrib = sum;
-                (real, dual)
+                (real, dual, armature_points(v, job, &batch.positions[lanes.clone()]))
             };
-            dual_quaternion(v, real, dual, contrib, p, a)
+            (dual_quaternion(v, real, dual, contrib, p, a), Some(p))
         } else {
-            p
+            // Unused by LBS (and so not computed there); the points themselves for a method
+            // with neither sum.
+            (armature_points(v, job, &batch.positions[lanes.clone()]), None)
         };
         let lbs = if KIND == LINEAR || KIND == BLEND {
             if KIND == LINEAR {
@@ -268,9 +269,13 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
             }
             // SAFETY: the caller's contract.
             let matrix = unsafe { v.window_sums(slots, None, lane0, job.linear, window::<3>(0)) };
+            let p = match p {
+                Some(p) => p,
+                None => armature_points(v, job, &batch.positions[lanes.clone()]),
+            };
             linear(v, &matrix, contrib, p, a)
         } else {
-            p
+            dqs
         };
         match KIND {
             LINEAR => lbs,
@@ -299,6 +304,16 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
         r
     };
     v.store_points(r, &mut batch.out[lanes]);
+}
+
+/// A part's points in armature space (`premat` applied).
+#[inline(always)]
+fn armature_points<V: VectorOps>(v: V, job: &BatchJob<'_>, points: &[[f32; 3]]) -> [V::F; 3] {
+    let o = v.load_points(points);
+    match job.premat {
+        Some(m) => apply(v, m, o),
+        None => o,
+    }
 }
 
 /// `±wᵢ` for the quaternion `q` of an influence with weight `w`, against the running sum

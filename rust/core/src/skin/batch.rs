@@ -17,6 +17,8 @@
 //!    matrix (`p + u·(2a/|q|²)`, see [`dual_quaternion`]), the strength, `postmat`, the untouched
 //!    lanes, store.
 
+use core::mem::offset_of;
+
 use glam::Affine3A;
 
 use super::influences::{Slot, LANES};
@@ -152,11 +154,17 @@ pub(super) struct FullBatch<'a> {
     pub centers: Option<&'a [[f32; 3]; LANES]>,
 }
 
+/// Float offsets of what the batch kernels read in the pose tables' records.
+const DQ_REAL: usize = offset_of!(DqBone, real) / 4;
+const DQ_DUAL: usize = offset_of!(DqBone, dual) / 4;
+const PIVOT_REAL: usize = offset_of!(PivotBone, real) / 4;
+const COR_REAL: usize = offset_of!(CorBone, real) / 4;
 /// The rows of a `CorBone` the centers with scale sum: the matrix rows, then the scale/shear part
 /// in three rows (`s00 s01 s02 s10`, `s11 s12 s20 s21`, `s22` and zeros); not the rotation.
-const COR_WINDOW: [usize; 6] = [0, 4, 12, 16, 20, 24];
-/// Where a `CorBone`'s rotation is.
-const COR_ROTATION: usize = 8;
+const COR_WINDOW: [usize; 6] = {
+    let (row2, stretch) = (offset_of!(CorBone, row2) / 4, offset_of!(CorBone, stretch) / 4);
+    [0, 4, row2, stretch, stretch + 4, offset_of!(CorBone, s22) / 4]
+};
 
 /// Skins one full batch with the method `KIND` (`SCALED`: some bone takes Blender's scale path),
 /// as `PARTS` parts of one vector each (`PARTS · V::WIDTH = LANES`), one after the other: a part's
@@ -204,14 +212,13 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
     // `if`s rather than closures here and below: a closure compiled on its own would not have
     // the instruction set of the function it is written in, and its vector operations would
     // become calls.
-    // The windows: a LinearBone's rows (floats 0–11), a DqBone's rotation and dual part (0–3,
-    // 4–7), a PivotBone's rotation (12–15), a PivotDualBone (0–15), a CorBone's rows and
-    // scale/shear part ([`COR_WINDOW`]) and rotation ([`COR_ROTATION`]).
+    // The windows: a LinearBone's rows (floats 0–11), a PivotDualBone (0–15), a CorBone's rows
+    // and scale/shear part ([`COR_WINDOW`]).
     let moved = if let (true, Some(centers)) = (KIND == CENTERS, batch.centers) {
         // The sign chain first, so that the window's loop overlaps its latency.
         if SCALED {
             // SAFETY: the caller's contract.
-            let (real, contrib) = unsafe { sign_pass(v, slots, job.cor, COR_ROTATION, lane0, None) };
+            let (real, contrib) = unsafe { sign_pass(v, slots, job.cor, COR_REAL, lane0, None) };
             // One window over the rows and the scale/shear part: one index and weight per
             // influence for both sums. SAFETY: the caller's contract.
             let [m0, m1, m2, s0, s1, s2] = unsafe { v.window_sums(slots, None, lane0, job.cor, COR_WINDOW) };
@@ -228,7 +235,7 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
             centers_scaled(v, sum, u, real, contrib, p, a)
         } else {
             // SAFETY: the caller's contract.
-            let (real, contrib) = unsafe { sign_pass(v, slots, job.dq, 0, lane0, None) };
+            let (real, contrib) = unsafe { sign_pass(v, slots, job.dq, DQ_REAL, lane0, None) };
             // SAFETY: the caller's contract.
             let matrix = unsafe { v.window_sums(slots, None, lane0, job.linear, window::<3>(0)) };
             let c = armature_points(v, job, &centers[lanes.clone()]);
@@ -243,7 +250,7 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
         let (dqs, p) = if KIND == DUAL_QUATERNION || KIND == BLEND {
             let (real, dual, p) = if SCALED {
                 // SAFETY: the caller's contract.
-                let (real, sum) = unsafe { sign_pass(v, slots, job.pivot, 12, lane0, Some(&mut *signed)) };
+                let (real, sum) = unsafe { sign_pass(v, slots, job.pivot, PIVOT_REAL, lane0, Some(&mut *signed)) };
                 contrib = sum;
                 // SAFETY: the caller's contract.
                 let rows = unsafe { v.window_sums(slots, Some(signed), lane0, job.pivot_dual, window::<4>(0)) };
@@ -369,9 +376,8 @@ unsafe fn rigid_sums<V: VectorOps>(v: V, slots: &[Slot], dq: &[DqBone], lane0: u
     let (mut real, mut dual, mut contrib) = ([zero; 4], [zero; 4], zero);
     for (k, slot) in slots.iter().enumerate() {
         let records = &slot.records[lane0..];
-        // SAFETY: the caller's contract; a DqBone is the rotation (floats 0–3) and the dual
-        // part (4–7).
-        let (q, d) = unsafe { (v.load_columns4(dq, records, 0), v.load_columns4(dq, records, 4)) };
+        // SAFETY: the caller's contract; the rotation and the dual part are four floats each.
+        let (q, d) = unsafe { (v.load_columns4(dq, records, DQ_REAL), v.load_columns4(dq, records, DQ_DUAL)) };
         let w = v.load(&slot.weights[lane0..]);
         let ws = if k == 0 { w } else { signed_weight(v, &q, &real, w) };
         for c in 0..4 {

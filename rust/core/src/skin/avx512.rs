@@ -74,6 +74,25 @@ fn transpose(r: [__m512; 8]) -> [__m512; 8] {
     ]
 }
 
+/// `w·b + v × b` for the quaternion sums `(v, w)` (see `turn` in `batch.rs`).
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn turn([x, y, z, w]: &[__m512; 4], b: [__m512; 3]) -> [__m512; 3] {
+    let (x, y, z, w) = (*x, *y, *z, *w);
+    [
+        _mm512_fnmadd_ps(z, b[1], _mm512_fmadd_ps(y, b[2], _mm512_mul_ps(w, b[0]))),
+        _mm512_fnmadd_ps(x, b[2], _mm512_fmadd_ps(z, b[0], _mm512_mul_ps(w, b[1]))),
+        _mm512_fnmadd_ps(y, b[0], _mm512_fmadd_ps(x, b[1], _mm512_mul_ps(w, b[2]))),
+    ]
+}
+
+/// `|q|²` of quaternion sums `(x, y, z, w)`, in the other copies' order.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn length_squared([x, y, z, w]: &[__m512; 4]) -> __m512 {
+    _mm512_fmadd_ps(*z, *z, _mm512_fmadd_ps(*y, *y, _mm512_fmadd_ps(*x, *x, _mm512_mul_ps(*w, *w))))
+}
+
 /// `a·b` of quaternions per lane, in two independent halves: the sign choice that waits on it is
 /// the serial chain, so keep it short.
 #[inline]
@@ -377,15 +396,11 @@ pub(super) unsafe fn batch<const KIND: u8>(
         let ([tx, ty, tz], t0) = ([d0, d1, d2], d3);
         let fma = |a, b, c| _mm512_fmadd_ps(a, b, c);
         let fnma = |a, b, c| _mm512_fnmadd_ps(a, b, c);
-        let mul = |a, b| _mm512_mul_ps(a, b);
         // b = v × p + t⃗, u = w·b + v × b − t₀·v
         let b = [fnma(z, p[1], fma(y, p[2], tx)), fnma(x, p[2], fma(z, p[0], ty)), fnma(y, p[0], fma(x, p[1], tz))];
-        let u = [
-            fnma(t0, x, fnma(z, b[1], fma(y, b[2], mul(w, b[0])))),
-            fnma(t0, y, fnma(x, b[2], fma(z, b[0], mul(w, b[1])))),
-            fnma(t0, z, fnma(y, b[0], fma(x, b[1], mul(w, b[2])))),
-        ];
-        let len2 = fma(z, z, fma(y, y, fma(x, x, mul(w, w))));
+        let t = turn(&[x, y, z, w], b);
+        let u = [fnma(t0, x, t[0]), fnma(t0, y, t[1]), fnma(t0, z, t[2])];
+        let len2 = length_squared(&[x, y, z, w]);
         let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, threshold) & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
         let g = _mm512_maskz_div_ps(valid, _mm512_add_ps(a, a), len2);
         core::array::from_fn::<__m512, 3, _>(|k| fma(u[k], g, p[k]))
@@ -590,18 +605,14 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     };
     // The rotation through `u` (see `rotation_terms` in `batch.rs`), then the strength, as the
     // portable `finish_centers` (`portable.rs`).
-    let [x, y, z, w] = real;
+    let [x, y, z, _] = real;
     let fma = |a, b, c| _mm512_fmadd_ps(a, b, c);
     let fnma = |a, b, c| _mm512_fnmadd_ps(a, b, c);
     let mul = |a, b| _mm512_mul_ps(a, b);
     let dd = if SCALED { offset } else { d };
     let b = [fnma(z, dd[1], mul(y, dd[2])), fnma(x, dd[2], mul(z, dd[0])), fnma(y, dd[0], mul(x, dd[1]))];
-    let u = [
-        fnma(z, b[1], fma(y, b[2], mul(w, b[0]))),
-        fnma(x, b[2], fma(z, b[0], mul(w, b[1]))),
-        fnma(y, b[0], fma(x, b[1], mul(w, b[2]))),
-    ];
-    let len2 = fma(z, z, fma(y, y, fma(x, x, mul(w, w))));
+    let u = turn(&real, b);
+    let len2 = length_squared(&real);
     let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::MIN_TOTAL_WEIGHT))
         & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
     // One division serves both factors: a/contrib = inv·|q|², 2a/|q|² = 2·inv·contrib.

@@ -246,39 +246,38 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
             centers_rigid(v, anchor, u, real, contrib, p, c, a)
         }
     } else {
-        let mut contrib = v.splat(0.0);
-        let (dqs, p) = if KIND == DUAL_QUATERNION || KIND == BLEND {
-            let (real, dual, p) = if SCALED {
+        // DQS's sums give the points and the total weight to LBS in Blend.
+        let (dqs, summed) = if KIND == DUAL_QUATERNION || KIND == BLEND {
+            let (real, dual, contrib, p) = if SCALED {
                 // SAFETY: the caller's contract.
-                let (real, sum) = unsafe { sign_pass(v, slots, job.pivot, PIVOT_REAL, lane0, Some(&mut *signed)) };
-                contrib = sum;
+                let (real, contrib) = unsafe { sign_pass(v, slots, job.pivot, PIVOT_REAL, lane0, Some(&mut *signed)) };
                 // SAFETY: the caller's contract.
                 let rows = unsafe { v.window_sums(slots, Some(signed), lane0, job.pivot_dual, window::<4>(0)) };
                 let p = armature_points(v, job, &batch.positions[lanes.clone()]);
-                (real, each4(|c| affine_row(v, &rows[c], &p)), p)
+                (real, each4(|c| affine_row(v, &rows[c], &p)), contrib, p)
             } else {
                 // SAFETY: the caller's contract.
-                let (real, dual, sum) = unsafe { rigid_sums(v, slots, job.dq, lane0) };
-                contrib = sum;
-                (real, dual, armature_points(v, job, &batch.positions[lanes.clone()]))
+                let (real, dual, contrib) = unsafe { rigid_sums(v, slots, job.dq, lane0) };
+                (real, dual, contrib, armature_points(v, job, &batch.positions[lanes.clone()]))
             };
-            (dual_quaternion(v, real, dual, contrib, p, a), Some(p))
+            (dual_quaternion(v, real, dual, contrib, p, a), Some((p, contrib)))
         } else {
             // Unused by LBS (and so not computed there); the points themselves for a method
             // with neither sum.
             (armature_points(v, job, &batch.positions[lanes.clone()]), None)
         };
         let lbs = if KIND == LINEAR || KIND == BLEND {
-            if KIND == LINEAR {
-                for slot in slots {
-                    contrib = v.add(contrib, v.load(&slot.weights[lanes.clone()]));
-                }
-            }
             // SAFETY: the caller's contract.
             let matrix = unsafe { v.window_sums(slots, None, lane0, job.linear, window::<3>(0)) };
-            let p = match p {
-                Some(p) => p,
-                None => armature_points(v, job, &batch.positions[lanes.clone()]),
+            let (p, contrib) = match summed {
+                Some(summed) => summed,
+                None => {
+                    let mut contrib = v.splat(0.0);
+                    for slot in slots {
+                        contrib = v.add(contrib, v.load(&slot.weights[lanes.clone()]));
+                    }
+                    (armature_points(v, job, &batch.positions[lanes.clone()]), contrib)
+                }
             };
             linear(v, &matrix, contrib, p, a)
         } else {
@@ -331,9 +330,9 @@ fn signed_weight<V: VectorOps>(v: V, q: &[V::F; 4], real: &[V::F; 4], w: V::F) -
 }
 
 /// The sign-aligned quaternion sum of one part's lanes (from `lane0`) over the slots, and the
-/// total weight; each slot's signed weights go to `signed` if given (one entry per slot). The rotation of a lane's bone is
-/// floats `offset .. offset + 4` (x, y, z, w) of its record. The first slot needs no sign: the
-/// sum is still zero there, and Blender keeps the weight.
+/// total weight; each slot's signed weights go to `signed` if given (one entry per slot). The
+/// rotation of a lane's bone is floats `offset .. offset + 4` (x, y, z, w) of its record. The
+/// first slot needs no sign: the sum is still zero there, and Blender keeps the weight.
 ///
 /// # Safety
 /// Every bone index of the slots indexes `table`, whose records hold the rotation there.
@@ -438,23 +437,30 @@ fn length_squared<V: VectorOps>(v: V, [x, y, z, w]: &[V::F; 4]) -> V::F {
     v.mul_add(*z, *z, v.mul_add(*y, *y, v.mul_add(*x, *x, v.mul(*w, *w))))
 }
 
-/// `w·b + v × b` for the quaternion sum `(v, w)`: with `b = v × d` it is half of `|q|²·(R·d − d)`,
-/// `R` the rotation of the sum (`|q|²·R·d = |q|²·d + 2·(w·(v × d) + v × (v × d))`), which is how
-/// the kernels rotate: no matrix, and the `d` they already hold is added back at the end.
+/// `w·b + v × b` for the quaternion sum `(v, w)`: the step both [`rotation_terms`] and
+/// [`dual_quaternion`] take after their cross product.
 #[inline(always)]
-fn rotation_terms<V: VectorOps>(v: V, [x, y, z, w]: &[V::F; 4], d: [V::F; 3]) -> [V::F; 3] {
+fn turn<V: VectorOps>(v: V, [x, y, z, w]: &[V::F; 4], b: [V::F; 3]) -> [V::F; 3] {
     let (x, y, z, w) = (*x, *y, *z, *w);
-    // b = v × d
-    let b = [
-        v.neg_mul_add(z, d[1], v.mul(y, d[2])),
-        v.neg_mul_add(x, d[2], v.mul(z, d[0])),
-        v.neg_mul_add(y, d[0], v.mul(x, d[1])),
-    ];
     [
         v.neg_mul_add(z, b[1], v.mul_add(y, b[2], v.mul(w, b[0]))),
         v.neg_mul_add(x, b[2], v.mul_add(z, b[0], v.mul(w, b[1]))),
         v.neg_mul_add(y, b[0], v.mul_add(x, b[1], v.mul(w, b[2]))),
     ]
+}
+
+/// `w·b + v × b` for the quaternion sum `(v, w)` and `b = v × d`: half of `|q|²·(R·d − d)`, `R`
+/// the rotation of the sum (`|q|²·R·d = |q|²·d + 2·(w·(v × d) + v × (v × d))`), which is how
+/// the kernels rotate: no matrix, and the `d` they already hold is added back at the end.
+#[inline(always)]
+fn rotation_terms<V: VectorOps>(v: V, q: &[V::F; 4], d: [V::F; 3]) -> [V::F; 3] {
+    let [x, y, z, _] = *q;
+    let b = [
+        v.neg_mul_add(z, d[1], v.mul(y, d[2])),
+        v.neg_mul_add(x, d[2], v.mul(z, d[0])),
+        v.neg_mul_add(y, d[0], v.mul(x, d[1])),
+    ];
+    turn(v, q, b)
 }
 
 /// Applies summed dual quaternions to `p` (Blender's `mul_v3m3_dq`: `(M·p + t)/|q|²`, `M` the
@@ -465,7 +471,7 @@ fn rotation_terms<V: VectorOps>(v: V, [x, y, z, w]: &[V::F; 4], d: [V::F; 3]) ->
 /// 17 operations per lane instead of the matrix's 40, and `p`'s own term exact.
 #[inline(always)]
 fn dual_quaternion<V: VectorOps>(v: V, real: [V::F; 4], dual: [V::F; 4], contrib: V::F, p: [V::F; 3], a: V::F) -> [V::F; 3] {
-    let [x, y, z, w] = real;
+    let [x, y, z, _] = real;
     let [tx, ty, tz, t0] = dual;
     // b = v × p + t⃗
     let b = [
@@ -474,11 +480,8 @@ fn dual_quaternion<V: VectorOps>(v: V, real: [V::F; 4], dual: [V::F; 4], contrib
         v.neg_mul_add(y, p[0], v.mul_add(x, p[1], tz)),
     ];
     // u = w·b + v × b − t₀·v
-    let u = [
-        v.neg_mul_add(t0, x, v.neg_mul_add(z, b[1], v.mul_add(y, b[2], v.mul(w, b[0])))),
-        v.neg_mul_add(t0, y, v.neg_mul_add(x, b[2], v.mul_add(z, b[0], v.mul(w, b[1])))),
-        v.neg_mul_add(t0, z, v.neg_mul_add(y, b[0], v.mul_add(x, b[1], v.mul(w, b[2])))),
-    ];
+    let t = turn(v, &real, b);
+    let u = [v.neg_mul_add(t0, x, t[0]), v.neg_mul_add(t0, y, t[1]), v.neg_mul_add(t0, z, t[2])];
     let len2 = length_squared(v, &real);
     let valid = v.and(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.gt(len2, v.splat(0.0)));
     let g = v.select(valid, v.div(v.add(a, a), len2), v.splat(0.0));

@@ -292,7 +292,7 @@ fn finish_dual_quaternion(co: &Points, s: &DqSum, strength: &Lanes) -> Points {
     let mut r = *co;
     for l in 0..LANES {
         let q = [s.real[0][l], s.real[1][l], s.real[2][l], s.real[3][l]];
-        let (x, y, z, w) = (q[0], q[1], q[2], q[3]);
+        let (x, y, z) = (q[0], q[1], q[2]);
         let (tx, ty, tz, t0) = (s.dual[0][l], s.dual[1][l], s.dual[2][l], s.dual[3][l]);
         let p = [co.x[l], co.y[l], co.z[l]];
         // b = v × p + t⃗, u = w·b + v × b − t₀·v
@@ -301,11 +301,8 @@ fn finish_dual_quaternion(co: &Points, s: &DqSum, strength: &Lanes) -> Points {
             madd(-x, p[2], madd(z, p[0], ty)),
             madd(-y, p[0], madd(x, p[1], tz)),
         ];
-        let u = [
-            madd(-t0, x, madd(-z, b[1], madd(y, b[2], w * b[0]))),
-            madd(-t0, y, madd(-x, b[2], madd(z, b[0], w * b[1]))),
-            madd(-t0, z, madd(-y, b[0], madd(x, b[1], w * b[2]))),
-        ];
+        let t = turn(q, b);
+        let u = [madd(-t0, x, t[0]), madd(-t0, y, t[1]), madd(-t0, z, t[2])];
         let len2 = length_squared(q);
         let valid = s.contrib[l] > MIN_TOTAL_WEIGHT && len2 > 0.0;
         let a = strength[l];
@@ -323,16 +320,22 @@ fn length_squared([x, y, z, w]: [f32; 4]) -> f32 {
     madd(z, z, madd(y, y, madd(x, x, w * w)))
 }
 
-/// `w·b + v × b` with `b = v × d` for the quaternion sum `(v, w)`: half of `|q|²·(R·d − d)`, `R`
-/// its rotation (see `rotation_terms` in `batch.rs`).
+/// `w·b + v × b` for the quaternion sum `(v, w)` (see `turn` in `batch.rs`).
 #[inline(always)]
-fn rotation_terms([x, y, z, w]: [f32; 4], d: [f32; 3]) -> [f32; 3] {
-    let b = [madd(-z, d[1], y * d[2]), madd(-x, d[2], z * d[0]), madd(-y, d[0], x * d[1])];
+fn turn([x, y, z, w]: [f32; 4], b: [f32; 3]) -> [f32; 3] {
     [
         madd(-z, b[1], madd(y, b[2], w * b[0])),
         madd(-x, b[2], madd(z, b[0], w * b[1])),
         madd(-y, b[0], madd(x, b[1], w * b[2])),
     ]
+}
+
+/// `w·b + v × b` with `b = v × d` for the quaternion sum `(v, w)`: half of `|q|²·(R·d − d)`, `R`
+/// its rotation (see `rotation_terms` in `batch.rs`).
+#[inline(always)]
+fn rotation_terms(q: [f32; 4], d: [f32; 3]) -> [f32; 3] {
+    let [x, y, z, _] = q;
+    turn(q, [madd(-z, d[1], y * d[2]), madd(-x, d[2], z * d[0]), madd(-y, d[0], x * d[1])])
 }
 
 /// Per-lane sums for centers of rotation: where LBS puts the center, `Σ wᵢ·Mᵢ·c` (scaled poses)

@@ -17,6 +17,7 @@ ROOT = Path(__file__).resolve().parent.parent
 os.environ.setdefault("BLENDER_USER_RESOURCES", str(ROOT / ".blender_user"))
 
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
+
 import addon_utils  # noqa: E402
 
 ASSET = ROOT.parent / "shared" / "assets" / "CesiumMan.glb"

@@ -26,9 +26,7 @@ def main() -> int:
     os.environ["BLENDER_USER_RESOURCES"] = str(user)
     import bpy  # noqa: E402  (BLENDER_USER_RESOURCES must be set first)
 
-    result = bpy.ops.extensions.package_install_files(
-        filepath=str(zip_path), repo="user_default", enable_on_install=True
-    )
+    result = bpy.ops.extensions.package_install_files(filepath=str(zip_path), repo="user_default", enable_on_install=True)
     if result != {"FINISHED"}:
         raise SystemExit(f"installing {zip_path} failed: {result}")
     bpy.ops.wm.save_userpref()

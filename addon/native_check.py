@@ -21,8 +21,7 @@ from pathlib import Path
 # Blender 4.2+ is built for manylinux_2_28 (Rocky 8) and macOS 11.2.
 BLENDER_GLIBC = (2, 28)
 BLENDER_MACOS = (11, 2)
-LINUX_LIBRARIES = {"libc.so.6", "libm.so.6", "libpthread.so.0", "libdl.so.2", "librt.so.1", "libgcc_s.so.1",
-                   "ld-linux-x86-64.so.2"}
+LINUX_LIBRARIES = {"libc.so.6", "libm.so.6", "libpthread.so.0", "libdl.so.2", "librt.so.1", "libgcc_s.so.1", "ld-linux-x86-64.so.2"}
 WINDOWS_SYSTEM = re.compile(r"^(kernel32|ntdll|bcryptprimitives|advapi32|userenv|ws2_32|api-ms-win-[a-z0-9-]+)\.dll$", re.I)
 MACOS_SYSTEM = re.compile(r"^/usr/lib/lib[A-Za-z0-9_.+-]+\.dylib$|^/System/Library/Frameworks/")
 
@@ -62,22 +61,23 @@ def glibc_of_tag(tag: str) -> tuple[int, int] | None:
 
 # --- ELF -------------------------------------------------------------------------------------
 
+
 def _check_elf(name: str, data: bytes, glibc_limit: tuple[int, int]) -> Report:
     if data[4] != 2 or data[5] != 1:
         raise NativeError(f"{name}: not a 64-bit little-endian ELF file")
     machine = struct.unpack_from("<H", data, 18)[0]
     if machine != 62:
         raise NativeError(f"{name}: ELF machine {machine} is not x86-64")
-    shoff, = struct.unpack_from("<Q", data, 40)
+    (shoff,) = struct.unpack_from("<Q", data, 40)
     shentsize, shnum = struct.unpack_from("<HH", data, 58)
     sections = [struct.unpack_from("<IIQQQQIIQQ", data, shoff + i * shentsize) for i in range(shnum)]
 
     def strings(index: int) -> bytes:
         s = sections[index]
-        return data[s[4]:s[4] + s[5]]
+        return data[s[4] : s[4] + s[5]]
 
     def cstr(table: bytes, at: int) -> str:
-        return table[at:table.index(b"\0", at)].decode()
+        return table[at : table.index(b"\0", at)].decode()
 
     needed, versions = [], set()
     for _, kind, _, _, offset, size, link, _, _, _ in sections:
@@ -115,9 +115,10 @@ def _check_elf(name: str, data: bytes, glibc_limit: tuple[int, int]) -> Report:
 
 # --- PE --------------------------------------------------------------------------------------
 
+
 def _check_pe(name: str, data: bytes) -> Report:
-    pe, = struct.unpack_from("<I", data, 0x3C)
-    if data[pe:pe + 4] != b"PE\0\0":
+    (pe,) = struct.unpack_from("<I", data, 0x3C)
+    if data[pe : pe + 4] != b"PE\0\0":
         raise NativeError(f"{name}: no PE header")
     machine, nsections, _, _, _, opt_size, _ = struct.unpack_from("<HHIIIHH", data, pe + 4)
     if machine != 0x8664:
@@ -134,7 +135,7 @@ def _check_pe(name: str, data: bytes) -> Report:
         raise NativeError(f"{name}: address {rva:#x} is in no section")
 
     def cstr(offset: int) -> str:
-        return data[offset:data.index(b"\0", offset)].decode()
+        return data[offset : data.index(b"\0", offset)].decode()
 
     export_rva, _ = struct.unpack_from("<II", data, opt + 112)
     import_rva, _ = struct.unpack_from("<II", data, opt + 120)
@@ -163,6 +164,7 @@ def _check_pe(name: str, data: bytes) -> Report:
 
 # --- Mach-O ----------------------------------------------------------------------------------
 
+
 def _check_macho(name: str, data: bytes) -> Report:
     cpu, _, _, ncmds, _, _ = struct.unpack_from("<iiIIII", data, 4)
     platform = {0x0100000C: "macos-arm64", 0x01000007: "macos-x64"}.get(cpu)
@@ -172,8 +174,8 @@ def _check_macho(name: str, data: bytes) -> Report:
     for _ in range(ncmds):
         cmd, size = struct.unpack_from("<II", data, at)
         if cmd in (0xC, 0x80000018, 0x8000001F):  # LC_LOAD_DYLIB, LC_LOAD_WEAK_DYLIB, LC_REEXPORT_DYLIB
-            offset, = struct.unpack_from("<I", data, at + 8)
-            dylibs.append(data[at + offset:at + size].split(b"\0")[0].decode())
+            (offset,) = struct.unpack_from("<I", data, at + 8)
+            dylibs.append(data[at + offset : at + size].split(b"\0")[0].decode())
         elif cmd in (0x32, 0x24):  # LC_BUILD_VERSION (minos after the platform), LC_VERSION_MIN_MACOSX
             v = struct.unpack_from("<I", data, at + (12 if cmd == 0x32 else 8))[0]
             minos = (v >> 16, (v >> 8) & 0xFF)

@@ -40,6 +40,7 @@ ROOT = Path(__file__).resolve().parent.parent
 os.environ.setdefault("BLENDER_USER_RESOURCES", str(ROOT / ".blender_user"))
 
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
+
 import addon_utils  # noqa: E402  (importable once bpy is)
 
 sys.path.insert(0, str(ROOT / "tests" / "blender"))
@@ -49,6 +50,7 @@ ADDON = "bl_ext.user_default.dq_skin"
 
 
 # -- scenes ---------------------------------------------------------------------------------------
+
 
 def grid_rig(vertices: int, bones_per_side: int = 8, influences: int = 4, seed: int = 1):
     """A square grid of about `vertices` vertices with an 8×8 grid of bones above it, each
@@ -150,6 +152,7 @@ def show_only(*objs) -> None:
 
 # -- timing ---------------------------------------------------------------------------------------
 
+
 class Phases:
     """Timestamps around DQ Skin's frame handler: Blender's first evaluation ends where the
     frame_change_post handlers start; the second evaluation starts where they end."""
@@ -241,7 +244,13 @@ class HandlerParts:
     bones from it (`pose.frame`), this frame's influences (`pose.influences`), the kernel
     (`skin_many`) and writing the result (`results.write_positions`), per call."""
 
-    PARTS = {"read_pose": ("pose", "armature_signature"), "pose_frame": ("pose", "frame"), "influences": ("pose", "influences"), "kernel": ("dqskin", "skin_many"), "write": ("results", "write_positions")}
+    PARTS = {
+        "read_pose": ("pose", "armature_signature"),
+        "pose_frame": ("pose", "frame"),
+        "influences": ("pose", "influences"),
+        "kernel": ("dqskin", "skin_many"),
+        "write": ("results", "write_positions"),
+    }
 
     def __init__(self):
         self.addon = sys.modules[ADDON]
@@ -301,7 +310,9 @@ def kernel_ms(obj, runs: int) -> dict:
     job = addon.modifier.state_of(obj, mod).output.job
     res = {}
     for method in ("linear", "dual_quaternion"):
-        j = addon.dqskin.SkinJob(job.positions, job.influences, job.deform, job.rest, method=method, premat=job.premat, postmat=job.postmat, mask=job.mask)
+        j = addon.dqskin.SkinJob(
+            job.positions, job.influences, job.deform, job.rest, method=method, premat=job.premat, postmat=job.postmat, mask=job.mask
+        )
         ts = []
         for _ in range(runs):
             t = time.perf_counter()
@@ -312,6 +323,7 @@ def kernel_ms(obj, runs: int) -> dict:
 
 
 # -- cases ----------------------------------------------------------------------------------------
+
 
 def case_grid(vertices: int, later: str, method: str, quick: bool) -> dict:
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -436,7 +448,13 @@ def case_rigify(quick: bool) -> dict:
         bpy.context.scene.collection.objects.link(c)
         return c
 
-    variants = {"armature_linear": body, "armature_pv": copy("PV"), "dq_skin_linear": copy("DQ Linear"), "dq_skin_dqs": copy("DQ DQS"), "none": copy("none")}
+    variants = {
+        "armature_linear": body,
+        "armature_pv": copy("PV"),
+        "dq_skin_linear": copy("DQ Linear"),
+        "dq_skin_dqs": copy("DQ DQS"),
+        "none": copy("none"),
+    }
     variants["armature_pv"].modifiers["Armature"].use_deform_preserve_volume = True
     variants["none"].modifiers.remove(variants["none"].modifiers["Armature"])
     for name, method in (("dq_skin_linear", "LINEAR"), ("dq_skin_dqs", "DUAL_QUATERNION")):
@@ -477,7 +495,11 @@ def case_rigify(quick: bool) -> dict:
         bbones=sum(b.bbone_segments > 1 for b in deforming),
         build_s=build_s,
     )
-    for skin, reference in (("dq_skin_linear", "armature_linear"), ("dq_skin_dqs", "armature_pv"), ("in_evaluation_linear", "armature_linear")):
+    for skin, reference in (
+        ("dq_skin_linear", "armature_linear"),
+        ("dq_skin_dqs", "armature_pv"),
+        ("in_evaluation_linear", "armature_linear"),
+    ):
         row[f"{reference}_share_ms"] = row[f"{reference}_ms"] - row["none_ms"]
         row[f"{skin}_share_ms"] = row[f"{skin}_ms"] - row["none_ms"]
         row[f"{skin}_share_speedup"] = row[f"{reference}_share_ms"] / max(row[f"{skin}_share_ms"], 1e-6)
@@ -807,7 +829,11 @@ def case_regenerate(quick: bool) -> dict:
         addon_utils.disable("rigify", default_set=True)
     row = {f"{k}_s": float(np.median(v)) for k, v in times.items()}
     row.update({f"{k}_each_s": [round(x, 3) for x in v] for k, v in times.items()})
-    row.update(case="Rigify Re-Generate Rig, two DQ Skin characters on the rig, and the next frame", rounds=len(times["with_extension"]), dq_skin_live_after_each=all(skinned))
+    row.update(
+        case="Rigify Re-Generate Rig, two DQ Skin characters on the rig, and the next frame",
+        rounds=len(times["with_extension"]),
+        dq_skin_live_after_each=all(skinned),
+    )
     row["ratio"] = row["with_extension_s"] / row["without_extension_s"]
     return row
 
@@ -821,7 +847,11 @@ def case_binding(vertices: int) -> dict:
     add_dq_skin(grid, "DUAL_QUATERNION")
     grid.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
     seconds = time.perf_counter() - t
-    return {"case": f"dq_skin_add + first frame, {len(grid.data.vertices) // 1000}k", "vertices": len(grid.data.vertices), "seconds": seconds}
+    return {
+        "case": f"dq_skin_add + first frame, {len(grid.data.vertices) // 1000}k",
+        "vertices": len(grid.data.vertices),
+        "seconds": seconds,
+    }
 
 
 def subdivided_cesium_man(levels: int):
@@ -1048,11 +1078,20 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "target" / "bench-blender.json")
     parser.add_argument("--quick", action="store_true", help="smaller meshes, fewer rounds")
-    parser.add_argument("--only", nargs="*", default=None, help="case groups: grid, later, binding, weights, crowd, small, centers, bbones, rigify, regenerate")
+    parser.add_argument(
+        "--only",
+        nargs="*",
+        default=None,
+        help="case groups: grid, later, binding, weights, crowd, small, centers, bbones, rigify, regenerate",
+    )
     args = parser.parse_args()
     if addon_utils.enable(ADDON, default_set=True) is None:
         raise SystemExit("the DQ Skin extension is not installed: run make setup")
-    only = set(args.only) if args.only else {"grid", "later", "binding", "weights", "crowd", "small", "centers", "bbones", "rigify", "regenerate"}
+    only = (
+        set(args.only)
+        if args.only
+        else {"grid", "later", "binding", "weights", "crowd", "small", "centers", "bbones", "rigify", "regenerate"}
+    )
     q = args.quick
     big = [250_000] if q else [250_000, 1_000_000]
     rows = []
@@ -1067,7 +1106,7 @@ def main() -> int:
                 report(case_grid(n, "", method, q))
     if "later" in only:
         for later in ("smooth5", "subsurf2"):
-            for n in ([250_000] if later == "subsurf2" or q else big):
+            for n in [250_000] if later == "subsurf2" or q else big:
                 report(case_grid(n, later, "DUAL_QUATERNION", q))
     if "small" in only:
         for method in ("LINEAR", "DUAL_QUATERNION"):
@@ -1080,7 +1119,7 @@ def main() -> int:
     if "crowd" in only:
         report(case_crowd(50 if q else 200, q))
     if "centers" in only:
-        for levels in ([2] if q else [2, 3]):
+        for levels in [2] if q else [2, 3]:
             report(case_centers(levels))
     if "bbones" in only:
         for mapping in ("STRAIGHT", "CURVED"):

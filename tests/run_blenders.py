@@ -29,8 +29,9 @@ VERSIONS = {
 }
 # What the Blender tests need besides bpy, pinned as in requirements-dev.txt: pytest, and openjd-cli
 # (with PyYAML) for the farm template.
-TEST_TOOLS = [line.strip() for line in (ROOT / "requirements-dev.txt").read_text().splitlines()
-              if line.startswith(("pytest==", "openjd-cli=="))]
+TEST_TOOLS = [
+    line.strip() for line in (ROOT / "requirements-dev.txt").read_text().splitlines() if line.startswith(("pytest==", "openjd-cli=="))
+]
 
 
 def python_for(minor: str) -> str:
@@ -108,6 +109,7 @@ def run_files(venv: Path) -> list[str]:
         if code != 0:
             failed.append(path.name)
     return failed
+
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

@@ -9,6 +9,7 @@ result the handlers (see `handlers`) keep current.
 import bpy
 
 from . import animation, bake, blend_paint, cli, compare, handlers, operators, switch, ui
+
 # Found by the glTF exporter in every enabled add-on's module (see `exports`).
 from .exports import glTF2_post_export_callback, glTF2_pre_export_callback  # noqa: F401
 

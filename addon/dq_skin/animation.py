@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import math
 
-import bpy
 import numpy as np
+
+import bpy
+
 from mathutils import Matrix
 
 from . import dqskin, keys
@@ -69,11 +71,15 @@ class ANIM_OT_dq_rotation_bake(bpy.types.Operator):
     method: bpy.props.EnumProperty(
         name="Method",
         description="How rotations go from key to key",
-        items=(("SLERP", "Slerp", "Shortest arc at constant speed between neighbouring keys"),
-               ("SQUAD", "Squad", "Smooth through the keys (continuous angular velocity)")),
+        items=(
+            ("SLERP", "Slerp", "Shortest arc at constant speed between neighbouring keys"),
+            ("SQUAD", "Squad", "Smooth through the keys (continuous angular velocity)"),
+        ),
         default="SQUAD",
     )
-    step: bpy.props.FloatProperty(name="Step", description="Frames between baked keys (sub-frames allowed)", default=1.0, min=0.01, soft_max=10.0)
+    step: bpy.props.FloatProperty(
+        name="Step", description="Frames between baked keys (sub-frames allowed)", default=1.0, min=0.01, soft_max=10.0
+    )
 
     def execute(self, context):
         targets = _keyed_rotation_targets(context)
@@ -104,8 +110,12 @@ class ANIM_OT_dq_screw_inbetweens(bpy.types.Operator):
     bl_label = "Screw In-betweens"
     bl_options = {"REGISTER", "UNDO"}
 
-    step: bpy.props.FloatProperty(name="Step", description="Frames between baked keys (sub-frames allowed)", default=1.0, min=0.01, soft_max=10.0)
-    use_frame_range: bpy.props.BoolProperty(name="Frame Range", description="Bake only between Start and End (else between all keys)", default=False)
+    step: bpy.props.FloatProperty(
+        name="Step", description="Frames between baked keys (sub-frames allowed)", default=1.0, min=0.01, soft_max=10.0
+    )
+    use_frame_range: bpy.props.BoolProperty(
+        name="Frame Range", description="Bake only between Start and End (else between all keys)", default=False
+    )
     frame_start: bpy.props.FloatProperty(name="Start", description="First frame to bake (with Frame Range)", default=1.0)
     frame_end: bpy.props.FloatProperty(name="End", description="Last frame to bake (with Frame Range)", default=250.0)
 
@@ -126,9 +136,7 @@ class ANIM_OT_dq_screw_inbetweens(bpy.types.Operator):
                 continue
             locations = keys.locations_at(t, frames)
             rotations = keys.rotations_at(t, frames)
-            transforms = np.stack([
-                dqskin.DualQuat.from_rotation_translation(r, loc).to_array() for r, loc in zip(rotations, locations)
-            ])
+            transforms = np.stack([dqskin.DualQuat.from_rotation_translation(r, loc).to_array() for r, loc in zip(rotations, locations)])
             at = _frames_between(float(frames[0]), float(frames[-1]), self.step, frames)
             samples = dqskin.sample_transforms(frames, transforms, at)
             matrices = dqskin.matrices_from_dual_quats(samples)
@@ -155,12 +163,20 @@ class ANIM_OT_dq_blend_transforms(bpy.types.Operator):
     method: bpy.props.EnumProperty(
         name="Method",
         description="How the selected transforms are blended",
-        items=(("DLB", "DLB", "Dual quaternion linear blending (fast)"),
-               ("DIB", "DIB", "Dual quaternion iterative blending (exact)"),
-               ("SCLERP", "ScLERP", "Screw interpolation (two inputs)")),
+        items=(
+            ("DLB", "DLB", "Dual quaternion linear blending (fast)"),
+            ("DIB", "DIB", "Dual quaternion iterative blending (exact)"),
+            ("SCLERP", "ScLERP", "Screw interpolation (two inputs)"),
+        ),
         default="DLB",
     )
-    weights: bpy.props.FloatVectorProperty(name="Weights", description="How much each of the other selected transforms counts, in selection order", size=16, default=(1.0,) * 16, min=0.0)
+    weights: bpy.props.FloatVectorProperty(
+        name="Weights",
+        description="How much each of the other selected transforms counts, in selection order",
+        size=16,
+        default=(1.0,) * 16,
+        min=0.0,
+    )
     keyframe: bpy.props.BoolProperty(name="Insert Keyframe", description="Key the blended transform at the current frame", default=False)
 
     def execute(self, context):
@@ -215,10 +231,14 @@ class ANIM_OT_dq_spring_smoothing(bpy.types.Operator):
     bl_label = "Spring Smoothing (Experimental)"
     bl_options = {"REGISTER", "UNDO"}
 
-    step: bpy.props.FloatProperty(name="Step", description="Frames between samples; keys must lie on this grid", default=1.0, min=0.05, soft_max=5.0)
+    step: bpy.props.FloatProperty(
+        name="Step", description="Frames between samples; keys must lie on this grid", default=1.0, min=0.05, soft_max=5.0
+    )
     iterations: bpy.props.IntProperty(name="Iterations", description="Gradient steps per level", default=400, min=1, max=100000)
     levels: bpy.props.IntProperty(name="Levels", description="Coarse-to-fine levels", default=3, min=1, max=12)
-    key_weight: bpy.props.FloatProperty(name="Key Weight", description="Extra weight of the curvature at the keys", default=1.2, min=0.01, soft_max=5.0)
+    key_weight: bpy.props.FloatProperty(
+        name="Key Weight", description="Extra weight of the curvature at the keys", default=1.2, min=0.01, soft_max=5.0
+    )
 
     def execute(self, context):
         targets = _keyed_rotation_targets(context)
@@ -232,7 +252,9 @@ class ANIM_OT_dq_spring_smoothing(bpy.types.Operator):
                 continue
             q = keys.rotations_at(t, frames)
             try:
-                samples = dqskin.spring(frames, q, step=self.step, levels=self.levels, iterations=self.iterations, key_weight=self.key_weight)
+                samples = dqskin.spring(
+                    frames, q, step=self.step, levels=self.levels, iterations=self.iterations, key_weight=self.key_weight
+                )
             except ValueError as e:
                 self.report({"ERROR"}, f"{t.label}: {e}")
                 return {"CANCELLED"}
@@ -324,8 +346,8 @@ def plot_image(name: str, speeds, before, width: int, height: int):
     n = max(len(speeds), 1)
     xs = margin + np.arange(n) * (width - 2 * margin - 1) / max(n - 1, 1)
     to_y = lambda v: margin + np.asarray(v) / top * (height - 2 * margin - 1)  # noqa: E731
-    pixels[margin, margin:width - margin, :3] = 0.5
-    pixels[margin:height - margin, margin, :3] = 0.5
+    pixels[margin, margin : width - margin, :3] = 0.5
+    pixels[margin : height - margin, margin, :3] = 0.5
     if before:
         _draw_line(pixels, xs[: len(before)], to_y(before), (1.0, 0.55, 0.1, 1.0))
     _draw_line(pixels, xs, to_y(speeds), (1.0, 1.0, 1.0, 1.0))

@@ -6,13 +6,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import bpy
 import numpy as np
 
+import bpy
+
 from . import modifier, operators
-from .state import Mode
-from .progress import Progress
 from .dqskin import pc2
+from .progress import Progress
+from .state import Mode
 
 CACHE_NAME = "DQ Skin Cache"
 
@@ -35,7 +36,7 @@ def bake(context, obj, mod, path, frame_start: int, frame_end: int, check=None) 
     scene = context.scene
     mods = list(obj.modifiers)
     at = mods.index(mod)
-    muted = [m for m in mods[at + 1:] + _simulations_before(obj, mod) if m.show_viewport]
+    muted = [m for m in mods[at + 1 :] + _simulations_before(obj, mod) if m.show_viewport]
     current = scene.frame_current
     progress = Progress(context, frame_end - frame_start + 1, f"Baking {obj.name}")
     try:

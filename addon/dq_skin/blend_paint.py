@@ -5,8 +5,9 @@ so that nothing changes until it is painted), made the active group, and Weight 
 
 from __future__ import annotations
 
-import bpy
 import numpy as np
+
+import bpy
 
 from . import dqskin, meshdata, nodes, operators, settings
 

@@ -22,8 +22,9 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import bpy
 import numpy as np
+
+import bpy
 
 from . import dqskin, interrupts
 from .progress import Progress

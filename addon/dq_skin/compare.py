@@ -8,8 +8,10 @@ from __future__ import annotations
 import math
 import time
 
-import bpy
 import numpy as np
+
+import bpy
+
 from mathutils import Quaternion, Vector
 
 from . import compat, dqskin, operators
@@ -41,11 +43,17 @@ def _tube_rig(scene, name, bones, length=4.0, radius=0.4, rings=32, segments=24)
                 b.parent, b.use_connect = prev, True
             prev = b
         bpy.ops.object.mode_set(mode="OBJECT")
-    verts = [(radius * math.cos(2 * math.pi * s / segments), radius * math.sin(2 * math.pi * s / segments), length * r / (rings - 1))
-             for r in range(rings) for s in range(segments)]
+    verts = [
+        (radius * math.cos(2 * math.pi * s / segments), radius * math.sin(2 * math.pi * s / segments), length * r / (rings - 1))
+        for r in range(rings)
+        for s in range(segments)
+    ]
     verts += [(0, 0, 0), (0, 0, length)]
-    faces = [(r * segments + s, r * segments + (s + 1) % segments, (r + 1) * segments + (s + 1) % segments, (r + 1) * segments + s)
-             for r in range(rings - 1) for s in range(segments)]
+    faces = [
+        (r * segments + s, r * segments + (s + 1) % segments, (r + 1) * segments + (s + 1) % segments, (r + 1) * segments + s)
+        for r in range(rings - 1)
+        for s in range(segments)
+    ]
     bottom, top, last = len(verts) - 2, len(verts) - 1, (rings - 1) * segments
     faces += [(bottom, (s + 1) % segments, s) for s in range(segments)]
     faces += [(top, last + s, last + (s + 1) % segments) for s in range(segments)]
@@ -359,7 +367,9 @@ def write_report(result, out_dir, source: str, frames, pictures: dict[str, str] 
     out.mkdir(parents=True, exist_ok=True)
     start, end = frames[0], frames[-1]
     lines = [f"# DQ Skin vs the Armature modifier: {source}, frames {start}-{end}", ""]
-    lines.append("| mesh | method | max dev. from Linear | max dev. from Preserve Volume | volume / rest | edge shrink (collapse) | edge stretch (bulge) | ms/frame |")
+    lines.append(
+        "| mesh | method | max dev. from Linear | max dev. from Preserve Volume | volume / rest | edge shrink (collapse) | edge stretch (bulge) | ms/frame |"
+    )
     lines.append("|---|---|---|---|---|---|---|---|")
     for row in result:
         for method, r in row["methods"].items():
@@ -407,8 +417,13 @@ def render(scene, path, width=1600, height=None, samples=8) -> None:
 
 
 # A perceptually uniform scale (viridis), low to high.
-DEVIATION_COLORS = ((0.0, (0.267, 0.005, 0.329)), (0.25, (0.229, 0.322, 0.546)), (0.5, (0.128, 0.567, 0.551)),
-                    (0.75, (0.369, 0.789, 0.383)), (1.0, (0.993, 0.906, 0.144)))
+DEVIATION_COLORS = (
+    (0.0, (0.267, 0.005, 0.329)),
+    (0.25, (0.229, 0.322, 0.546)),
+    (0.5, (0.128, 0.567, 0.551)),
+    (0.75, (0.369, 0.789, 0.383)),
+    (1.0, (0.993, 0.906, 0.144)),
+)
 DEVIATION_ATTRIBUTE = "dq_skin_deviation"
 
 

@@ -127,7 +127,6 @@ def last_operator():
         return None
 
 
-
 def new_fcurve(curves, data_path: str, index: int, group: str):
     """A new F-curve in `curves` (an action's or a channel bag's), in the channel group `group`.
     The group argument is `action_group` before slotted actions (4.2, 4.3), missing on channel

@@ -185,7 +185,7 @@ def index_readers(obj, structure_version: int) -> list[str]:
 def _own_simulation(obj, mod) -> str:
     """A simulation in the object's own stack after DQ Skin, or one the object takes part in."""
     mods = obj.modifiers
-    for later in list(mods)[mods.find(mod.name) + 1:]:
+    for later in list(mods)[mods.find(mod.name) + 1 :]:
         label = simulation_label(later)
         if label and (later.show_viewport or later.show_render):
             return label

@@ -33,8 +33,9 @@ import tempfile
 import threading
 from dataclasses import dataclass
 
-import bpy
 import numpy as np
+
+import bpy
 
 from . import dqskin, nodes, pose
 from .state import FrameKey, Mode
@@ -80,7 +81,13 @@ def ensure(result, st, armature, binding, positions: np.ndarray) -> None:
     bones change), its file holding `positions`."""
     feed = fed(result)
     names = tuple(binding.bone_names)
-    if feed is not None and feed.st is st and feed.armature == armature and feed.names == names and result.modifiers.get(MODIFIER) is not None:
+    if (
+        feed is not None
+        and feed.st is st
+        and feed.armature == armature
+        and feed.names == names
+        and result.modifiers.get(MODIFIER) is not None
+    ):
         write(result, positions)
         return
     remove(result)

@@ -217,4 +217,3 @@ def get(obj, verify: bool = False) -> MeshData:
         return old
     _cache[uid] = new
     return new
-

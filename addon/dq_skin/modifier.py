@@ -43,10 +43,34 @@ class SkinError(Exception):
 
 # Modifiers that never add or remove vertices.
 KEEP_VERTEX_COUNT = {
-    "ARMATURE", "CAST", "CLOTH", "COLLISION", "CORRECTIVE_SMOOTH", "CURVE", "DATA_TRANSFER", "DISPLACE",
-    "HOOK", "LAPLACIANDEFORM", "LAPLACIANSMOOTH", "LATTICE", "MESH_DEFORM", "NORMAL_EDIT", "SHRINKWRAP",
-    "SIMPLE_DEFORM", "SMOOTH", "SOFT_BODY", "SURFACE_DEFORM", "UV_PROJECT", "UV_WARP", "VERTEX_WEIGHT_EDIT",
-    "VERTEX_WEIGHT_MIX", "VERTEX_WEIGHT_PROXIMITY", "WARP", "WAVE", "WEIGHTED_NORMAL", "MESH_CACHE",
+    "ARMATURE",
+    "CAST",
+    "CLOTH",
+    "COLLISION",
+    "CORRECTIVE_SMOOTH",
+    "CURVE",
+    "DATA_TRANSFER",
+    "DISPLACE",
+    "HOOK",
+    "LAPLACIANDEFORM",
+    "LAPLACIANSMOOTH",
+    "LATTICE",
+    "MESH_DEFORM",
+    "NORMAL_EDIT",
+    "SHRINKWRAP",
+    "SIMPLE_DEFORM",
+    "SMOOTH",
+    "SOFT_BODY",
+    "SURFACE_DEFORM",
+    "UV_PROJECT",
+    "UV_WARP",
+    "VERTEX_WEIGHT_EDIT",
+    "VERTEX_WEIGHT_MIX",
+    "VERTEX_WEIGHT_PROXIMITY",
+    "WARP",
+    "WAVE",
+    "WEIGHTED_NORMAL",
+    "MESH_CACHE",
 }
 
 
@@ -159,7 +183,9 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: str, 
         deforms, reason = _where_it_deforms(obj, mod, st, s, ctx)
         if not (mod.show_render if ctx.render else mod.show_viewport):
             where = "renders" if ctx.render else "the viewport"
-            return _step_aside(obj, mod, st, s, deforms, Mode.OFF, f"Off in {where}: Blender's Armature modifier deforms the mesh there", ctx.render)
+            return _step_aside(
+                obj, mod, st, s, deforms, Mode.OFF, f"Off in {where}: Blender's Armature modifier deforms the mesh there", ctx.render
+            )
         if reason:
             return _step_aside(obj, mod, st, s, deforms, Mode.HANDED_OVER, reason + _instead(s), ctx.render)
         plan = _prepare(obj, obj_eval, mod, st, s, ctx, source, previous, force, deforms, start)
@@ -290,11 +316,16 @@ def _fallback(obj, mod, st: ModifierState, s, message: str, render: bool = False
         message += f" (and the companion could not be set up: {type(e).__name__}: {e})"
     _report(st, Mode.FALLBACK, message)
     c = _companion(obj, mod, st) if obj.library is None else None
-    st.status.instead = f"Blender's Armature modifier '{c.name}' deforms the mesh instead" if c is not None else "No Armature modifier after it: the mesh is not deformed"
+    st.status.instead = (
+        f"Blender's Armature modifier '{c.name}' deforms the mesh instead"
+        if c is not None
+        else "No Armature modifier after it: the mesh is not deformed"
+    )
     return False
 
 
 # -- steady playback ----------------------------------------------------------------------------
+
 
 def _quick(obj, mod, st: ModifierState, ctx: Context):
     """The steady state of playback, cheaply: a live DQ Skin on the mesh's own coordinates
@@ -415,7 +446,10 @@ def run_batch(plans: list) -> None:
 
 # -- the full path ------------------------------------------------------------------------------
 
-def _prepare(obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: Context, source, previous, force, deforms, start) -> Plan | None:
+
+def _prepare(
+    obj, obj_eval, mod, st: ModifierState, s: settings.Settings, ctx: Context, source, previous, force, deforms, start
+) -> Plan | None:
     """Everything before the kernel: checks, what reaches the modifier, influences, this frame's
     matrices; None when the result is already this."""
     arm = s.armature
@@ -495,7 +529,16 @@ def _binding(obj, arm, arm_eval, st: ModifierState, s: settings.Settings, data, 
     (the armature's bones are compared on every full evaluation, whatever changed them: from
     Blender's memory, see `pose.armature_signature`)."""
     cache = st.binding
-    key = BindingKey(data.uid, data.version, arm.session_uid, pose.armature_signature(arm_eval, ctx.pose_data), s.mask_group, s.invert_mask, s.blend_group, s.use_vertex_groups)
+    key = BindingKey(
+        data.uid,
+        data.version,
+        arm.session_uid,
+        pose.armature_signature(arm_eval, ctx.pose_data),
+        s.mask_group,
+        s.invert_mask,
+        s.blend_group,
+        s.use_vertex_groups,
+    )
     if cache.binding is None or cache.key != key:
         cache.clear()
         binding = rig.bind(obj, arm, s.mask_group, s.invert_mask, s.use_vertex_groups, data=data)
@@ -636,6 +679,7 @@ def feeds_faster(vertices: int, armature) -> bool:
 
 # -- what reaches the modifier ------------------------------------------------------------------
 
+
 class _CaptureNeeded(SkinError):
     """Shape keys DQ Skin cannot mix itself: it reads what reaches it from the evaluation."""
 
@@ -730,7 +774,7 @@ def _captured(obj, obj_eval, mod, st: ModifierState, data, ctx: Context):
                 f"An earlier modifier changed the vertex count ({data.vertex_count} → {count}): "
                 f"put DQ Skin before {', '.join(earlier)}, which add or remove vertices"
             )
-        later = [m.name for m in mods[at + 1:] if m.show_viewport and m.type not in KEEP_VERTEX_COUNT]
+        later = [m.name for m in mods[at + 1 :] if m.show_viewport and m.type not in KEEP_VERTEX_COUNT]
         raise SkinError(
             f"Modifiers before DQ Skin deform the mesh, so it reads the coordinates reaching it from "
             f"the evaluated mesh, but {', '.join(later) or 'a later modifier'} changes the vertex count "
@@ -743,6 +787,7 @@ def _captured(obj, obj_eval, mod, st: ModifierState, data, ctx: Context):
 
 
 # -- the result object --------------------------------------------------------------------------
+
 
 def _own_result(obj, mod, st: ModifierState):
     """This modifier's result object: the one it wrote last, or the one its node group points at
@@ -775,6 +820,7 @@ def switch_off(obj, mod) -> None:
 
 
 # -- files ----------------------------------------------------------------------------------------
+
 
 def deactivate(obj, mod, detach: bool) -> None:
     """The state files are saved in: the companion on wherever DQ Skin is on, set up like it, no

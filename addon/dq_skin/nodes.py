@@ -50,18 +50,82 @@ WARNING = (
 
 # (name, socket type, default, min, max, description, hidden)
 SETTINGS = (
-    ("Armature", "NodeSocketObject", None, None, None, "The armature whose bones deform this mesh (as the Armature modifier's Object)", False),
-    ("Method", "NodeSocketMenu", "Dual Quaternion", None, None, "How bones bend the mesh: Linear (Preserve Volume off), Dual Quaternion (Preserve Volume on: no candy wrapper when twisting), Blend (a painted mix of both) or Optimized Centers (no candy wrapper and less bulging at bent joints)", False),
-    ("Blend Amount", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend method: how much Dual Quaternion each vertex gets, 0 = Linear, 1 = Dual Quaternion (pick a vertex group with the attribute toggle, or paint one from the DQ Skin panel)", False),
+    (
+        "Armature",
+        "NodeSocketObject",
+        None,
+        None,
+        None,
+        "The armature whose bones deform this mesh (as the Armature modifier's Object)",
+        False,
+    ),
+    (
+        "Method",
+        "NodeSocketMenu",
+        "Dual Quaternion",
+        None,
+        None,
+        "How bones bend the mesh: Linear (Preserve Volume off), Dual Quaternion (Preserve Volume on: no candy wrapper when twisting), Blend (a painted mix of both) or Optimized Centers (no candy wrapper and less bulging at bent joints)",
+        False,
+    ),
+    (
+        "Blend Amount",
+        "NodeSocketFloat",
+        1.0,
+        0.0,
+        1.0,
+        "Blend method: how much Dual Quaternion each vertex gets, 0 = Linear, 1 = Dual Quaternion (pick a vertex group with the attribute toggle, or paint one from the DQ Skin panel)",
+        False,
+    ),
     ("Blend Factor", "NodeSocketFloat", 1.0, 0.0, 1.0, "Blend method: scales the Blend Amount everywhere (0 = all Linear)", False),
-    ("Use Vertex Groups", "NodeSocketBool", True, None, None, "Vertex Groups: bones deform the vertices of the vertex groups named after them (as the Armature modifier's Vertex Groups)", False),
-    ("Use Envelopes", "NodeSocketBool", False, None, None, "Bone Envelopes: bones deform the vertices inside their envelopes (as the Armature modifier's Bone Envelopes)", False),
-    ("Mask", "NodeSocketFloat", 1.0, 0.0, 1.0, "How strongly the armature deforms each vertex (pick a vertex group with the attribute toggle), as the Armature modifier's Vertex Group", False),
-    ("Invert Mask", "NodeSocketBool", False, None, None, "Deform where the mask group is 0 instead of 1 (as the Armature modifier's Invert)", False),
+    (
+        "Use Vertex Groups",
+        "NodeSocketBool",
+        True,
+        None,
+        None,
+        "Vertex Groups: bones deform the vertices of the vertex groups named after them (as the Armature modifier's Vertex Groups)",
+        False,
+    ),
+    (
+        "Use Envelopes",
+        "NodeSocketBool",
+        False,
+        None,
+        None,
+        "Bone Envelopes: bones deform the vertices inside their envelopes (as the Armature modifier's Bone Envelopes)",
+        False,
+    ),
+    (
+        "Mask",
+        "NodeSocketFloat",
+        1.0,
+        0.0,
+        1.0,
+        "How strongly the armature deforms each vertex (pick a vertex group with the attribute toggle), as the Armature modifier's Vertex Group",
+        False,
+    ),
+    (
+        "Invert Mask",
+        "NodeSocketBool",
+        False,
+        None,
+        None,
+        "Deform where the mask group is 0 instead of 1 (as the Armature modifier's Invert)",
+        False,
+    ),
     ("Result", "NodeSocketObject", None, None, None, "Internal: the skinned result DQ Skin writes (never saved)", True),
     ("Capture", "NodeSocketBool", False, None, None, "Internal: store the incoming positions for the add-on", True),
     ("Capture Name", "NodeSocketString", "", None, None, "Internal: the attribute the incoming positions are stored in", True),
-    ("Companion", "NodeSocketString", "", None, None, "Internal: the Armature modifier kept for Blender without DQ Skin, and its settings before DQ Skin", True),
+    (
+        "Companion",
+        "NodeSocketString",
+        "",
+        None,
+        None,
+        "Internal: the Armature modifier kept for Blender without DQ Skin, and its settings before DQ Skin",
+        True,
+    ),
 )
 FIELDS = ("Blend Amount", "Mask")
 
@@ -83,11 +147,7 @@ def socket_ids(group) -> dict[str, str]:
     key = group.session_uid
     ids = _socket_ids.get(key)
     if ids is None:
-        ids = {
-            item.name: item.identifier
-            for item in group.interface.items_tree
-            if item.item_type == "SOCKET" and item.in_out == "INPUT"
-        }
+        ids = {item.name: item.identifier for item in group.interface.items_tree if item.item_type == "SOCKET" and item.in_out == "INPUT"}
         _socket_ids[key] = ids
     return ids
 
@@ -106,11 +166,7 @@ def menu_values(group) -> dict[int, str]:
     values = _menu_values.get(key)
     if values is None:
         switch = group.nodes.get("Method Items")
-        values = {
-            int(sock.identifier.split("_")[1]): sock.name
-            for sock in switch.inputs
-            if sock.identifier.startswith("Item_")
-        }
+        values = {int(sock.identifier.split("_")[1]): sock.name for sock in switch.inputs if sock.identifier.startswith("Item_")}
         _menu_values[key] = values
     return values
 
@@ -123,16 +179,13 @@ def raw_settings(mod) -> tuple:
     ids = socket_ids(mod.node_group)
     if compat.RNA_INPUTS:
         inputs = mod.properties.inputs
-        return tuple(
-            (s.value, s.type, getattr(s, "attribute_name", "")) for s in (getattr(inputs, ids[n]) for n in RAW)
-        )
+        return tuple((s.value, s.type, getattr(s, "attribute_name", "")) for s in (getattr(inputs, ids[n]) for n in RAW))
     get = mod.get
-    return tuple(get(ids[n]) for n in RAW) + tuple(
-        (get(ids[n] + "_use_attribute"), get(ids[n] + "_attribute_name")) for n in FIELDS
-    )
+    return tuple(get(ids[n]) for n in RAW) + tuple((get(ids[n] + "_use_attribute"), get(ids[n] + "_attribute_name")) for n in FIELDS)
 
 
 # -- reading and writing a modifier's settings ---------------------------------------------------
+
 
 def get(mod, name: str):
     return compat.get_input(mod, socket_ids(mod.node_group)[name])
@@ -177,6 +230,7 @@ def put_companion(mod, data: dict) -> None:
 
 
 # -- the group ------------------------------------------------------------------------------------
+
 
 def ensure_group():
     """The DQ Skin node group, created on first use (shared by all DQ Skin modifiers)."""

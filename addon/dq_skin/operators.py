@@ -95,7 +95,12 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
     bl_label = "Add DQ Skin"
     bl_options = {"REGISTER", "UNDO"}
 
-    method: bpy.props.EnumProperty(name="Method", description="How bones bend the mesh (default: as the Armature modifier's Preserve Volume says)", items=METHOD_ITEMS, default="AUTO")
+    method: bpy.props.EnumProperty(
+        name="Method",
+        description="How bones bend the mesh (default: as the Armature modifier's Preserve Volume says)",
+        items=METHOD_ITEMS,
+        default="AUTO",
+    )
     all_selected: bpy.props.BoolProperty(
         name="All Selected",
         description="Add DQ Skin to every selected mesh with an Armature modifier, not only the active one "

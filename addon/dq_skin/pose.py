@@ -24,7 +24,7 @@ last_error = ""
 """Why the last read from memory was refused ("" if it was not)."""
 
 
-def read(arm_eval, cache: dict | None = None) -> "dqskin.PoseData | None":
+def read(arm_eval, cache: dict | None = None) -> dqskin.PoseData | None:
     """The pose of an (evaluated) armature object from memory, or None (see `last_error`).
     With `cache` (one handler call's, see `modifier.Context.pose_data`), each armature is read
     once: a full evaluation needs the pose for the binding's signature and for the frame."""
@@ -68,7 +68,7 @@ class Bones:
     rest: np.ndarray
     key: object
     """Changes whenever the deformation may: the pose signature, or the matrices themselves."""
-    data: "dqskin.PoseData | None"
+    data: dqskin.PoseData | None
     """The pose from memory (None: read through the Python API)."""
 
 
@@ -107,7 +107,7 @@ def influences(
     use_envelopes: bool,
     envelopes: np.ndarray,
     segments: np.ndarray,
-) -> "dqskin.Influences":
+) -> dqskin.Influences:
     """This frame's influences over `bones` (see `Influences.effective`): `positions` are what
     reaches the modifier and `input_key` changes with them. From memory, kept in the binding
     until the vertices, the spaces, the settings or the bones' rest data change; through the

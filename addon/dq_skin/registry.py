@@ -19,8 +19,9 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass, field
 
-import bpy
 import numpy as np
+
+import bpy
 
 from . import companion, compat, feed, meshdata, modifier, nodes, results
 from .state import STATES, Mode

@@ -38,9 +38,7 @@ class Binding:
     """The binding signature of the last pose from memory whose bones matched these."""
 
 
-def bind(
-    mesh_object, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True, data=None
-) -> Binding:
+def bind(mesh_object, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True, data=None) -> Binding:
     """Influences of `mesh_object`'s vertex groups on `armature`'s deforming bones. The bone
     indices run over every deforming pose bone in Blender's order (what envelopes need too);
     zero weights are kept, since a vertex with any group mapped to a bone never uses envelopes.
@@ -51,9 +49,11 @@ def bind(
     armature.data.bones.foreach_get("use_deform", deform)
     # data.bones and pose.bones share their order.
     bone_indices = np.flatnonzero(deform)
-    bone_names = [armature.pose.bones[int(i)].name for i in bone_indices] if len(bone_indices) < len(deform) else [
-        pb.name for pb in armature.pose.bones
-    ]
+    bone_names = (
+        [armature.pose.bones[int(i)].name for i in bone_indices]
+        if len(bone_indices) < len(deform)
+        else [pb.name for pb in armature.pose.bones]
+    )
     ours = {name: k for k, name in enumerate(bone_names)}
     # Vertex group index -> our bone index, for groups naming a deforming bone.
     group_to_bone = np.full(max(len(data.group_names), 1), -1, np.int32)
@@ -179,8 +179,7 @@ def curved_bbone_mapping(armature, binding: Binding, positions: np.ndarray, prem
     for the vertices the bone can influence; -1 elsewhere. None when no bone needs it."""
     bones = armature.data.bones
     curved = [
-        k for k, name in enumerate(binding.bone_names)
-        if bones[name].bbone_segments > 1 and bones[name].bbone_mapping_mode == "CURVED"
+        k for k, name in enumerate(binding.bone_names) if bones[name].bbone_segments > 1 and bones[name].bbone_mapping_mode == "CURVED"
     ]
     if not curved:
         return None

@@ -8,7 +8,6 @@ from dataclasses import dataclass
 
 from . import dqskin, nodes
 
-
 # What each method does, in an artist's words (the tooltips of the menus).
 DESCRIPTIONS = {
     dqskin.Method.LINEAR: "Linear blend skinning, as the Armature modifier with Preserve Volume off",
@@ -38,7 +37,16 @@ class Settings:
 
     def key(self) -> tuple:
         arm = self.armature.session_uid if self.armature is not None else 0
-        return (arm, self.method.name, self.blend_group, self.blend_factor, self.use_vertex_groups, self.use_envelopes, self.mask_group, self.invert_mask)
+        return (
+            arm,
+            self.method.name,
+            self.blend_group,
+            self.blend_factor,
+            self.use_vertex_groups,
+            self.use_envelopes,
+            self.mask_group,
+            self.invert_mask,
+        )
 
     @property
     def preserve_volume(self) -> bool:

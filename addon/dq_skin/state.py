@@ -18,8 +18,8 @@ a copied modifier or object never shares it). It has named parts, each with one 
 from __future__ import annotations
 
 import enum
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Iterator
 
 import numpy as np
 

@@ -75,9 +75,8 @@ fn scene(vertices: usize, per_vertex: usize) -> Scene {
         offsets.push(bones.len() as u32);
     }
     let influences = Influences::from_csr(&offsets, &bones, &weights, BONES).expect("valid CSR");
-    let rest: Vec<Mat4> = (0..BONES)
-        .map(|b| Mat4::from_translation(Vec3::new(0.0, 2.0 * b as f32 / BONES as f32, 0.0)))
-        .collect();
+    let rest: Vec<Mat4> =
+        (0..BONES).map(|b| Mat4::from_translation(Vec3::new(0.0, 2.0 * b as f32 / BONES as f32, 0.0))).collect();
     let pose_with = |scale: bool, rng: &mut Rng| -> Pose {
         let deform: Vec<Mat4> = rest
             .iter()
@@ -151,7 +150,9 @@ fn main() {
     let quick = args.iter().any(|a| a == "--quick");
     let json = args.iter().position(|a| a == "--json").and_then(|i| args.get(i + 1).cloned());
     let value = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1).cloned());
-    let number = |name: &str| value(name).map(|v| v.parse::<usize>().unwrap_or_else(|_| panic!("{name} needs a number, got {v}")));
+    let number = |name: &str| {
+        value(name).map(|v| v.parse::<usize>().unwrap_or_else(|_| panic!("{name} needs a number, got {v}")))
+    };
     let only = value("--only");
     let all = std::thread::available_parallelism().map_or(1, |n| n.get());
     let sizes: Vec<usize> = match number("--vertices") {
@@ -180,7 +181,13 @@ fn main() {
             let bytes = vertices * 12 * 2 + s.influences.byte_size();
             for &threads in &thread_counts {
                 pool::set_num_threads(threads).expect("threads");
-                let runs = rounds.unwrap_or(if quick || vertices >= BEYOND_CACHES { 5 } else if vertices >= 1_000_000 { 25 } else { 60 });
+                let runs = rounds.unwrap_or(if quick || vertices >= BEYOND_CACHES {
+                    5
+                } else if vertices >= 1_000_000 {
+                    25
+                } else {
+                    60
+                });
                 let cases: Vec<(&str, Method, &str, &Pose)> = [
                     ("LBS", Method::Linear, "rigid", &s.rigid),
                     ("DQS", Method::DualQuaternion, "rigid", &s.rigid),
@@ -197,7 +204,10 @@ fn main() {
                 // [without, with] the centers.
                 let mut reference = [f64::INFINITY; 2];
                 let mut best = vec![f64::INFINITY; cases.len()];
-                let space = glam::Mat4::from_rotation_translation(glam::Quat::from_rotation_z(0.3), glam::Vec3::new(0.5, -1.0, 2.0));
+                let space = glam::Mat4::from_rotation_translation(
+                    glam::Quat::from_rotation_z(0.3),
+                    glam::Vec3::new(0.5, -1.0, 2.0),
+                );
                 for round in 0..=runs {
                     let r = [false, true].map(|c| once(&mut || bandwidth_reference(&s, &mut out, c)));
                     for (k, (_, method, _, pose)) in cases.iter().enumerate() {
@@ -308,7 +318,10 @@ fn precompute_rows(quick: bool, all: usize) -> Vec<PrecomputeRow> {
     let sizes: &[usize] = if quick { &[50_000] } else { &[50_000, 250_000] };
     let mut rows = Vec::new();
     println!();
-    println!("{:>9} {:>9} {:>5} {:>8} {:>8} {:>3} {:>9}", "vertices", "triangles", "bones", "unique", "centers", "thr", "precompute s");
+    println!(
+        "{:>9} {:>9} {:>5} {:>8} {:>8} {:>3} {:>9}",
+        "vertices", "triangles", "bones", "unique", "centers", "thr", "precompute s"
+    );
     for &target in sizes {
         let c = Creature::new(target).expect("creature");
         let unique: std::collections::HashSet<Vec<u32>> = (0..c.positions.len())

@@ -19,27 +19,28 @@ precomputed once per mesh by :func:`centers_of_rotation`. Many meshes are skinne
 :func:`skin_many` from a :class:`SkinJob` each.
 """
 
-from ._dqskin import (
+from ._dqskin import (  # noqa: F401  (the Blender extension's pose reader)
     MAX_BONES,
     MAX_INFLUENCES_PER_VERTEX,
-    angular_speeds,
-    continuous_signs,
-    curvature_energy,
-    deform_group_weights,
-    sample_rotations,
-    sample_transforms,
-    spring,
     Cancelled,
     DualQuat,
     Influences,
     Method,
+    PoseData,
     Screw,
     SkinJob,
     TwistCylinder,
     __version__,
+    _MeshMemory,  # noqa: F401  (the Blender extension's vertex-group reader)
+    _panic_for_tests,  # noqa: F401  (tests check panics become RuntimeError)
+    _PoseMemory,
+    angular_speeds,
     armature_spaces,
     bbone_segment_matrices,
     centers_of_rotation,
+    continuous_signs,
+    curvature_energy,
+    deform_group_weights,
     dib,
     dlb,
     dual_quats_from_matrices,
@@ -49,19 +50,19 @@ from ._dqskin import (
     matrices_from_dual_quats,
     mesh_volume,
     polygon_area,
+    sample_rotations,
+    sample_transforms,
     sclerp,
     set_num_threads,
     shape_key_mix,
     skin,
     skin_many,
     slerp,
+    spring,
     squad,
     squad_control_points,
     transform_points,
 )
-from ._dqskin import _panic_for_tests  # noqa: F401  (tests check panics become RuntimeError)
-from ._dqskin import _MeshMemory  # noqa: F401  (the Blender extension's vertex-group reader)
-from ._dqskin import PoseData, _PoseMemory  # noqa: F401  (the Blender extension's pose reader)
 
 __all__ = [
     "MAX_BONES",

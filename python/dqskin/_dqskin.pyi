@@ -1,6 +1,7 @@
 """Type stubs for the compiled core of dqskin (see the package docstring for conventions)."""
 
-from typing import Callable, Literal, Sequence, SupportsFloat, Union, final, overload
+from collections.abc import Callable, Sequence
+from typing import Literal, SupportsFloat, final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -11,7 +12,7 @@ MAX_BONES: int  # influences referring to more bones are refused (ValueError)
 
 F32Array = npt.NDArray[np.float32]
 IntArray = npt.NDArray[np.integer]
-ArrayLike = Union[npt.ArrayLike, Sequence[float]]
+ArrayLike = npt.ArrayLike | Sequence[float]
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 
@@ -102,9 +103,7 @@ def sclerp(a: ArrayLike, b: ArrayLike, t: ArrayLike) -> F32Array:
 def dlb(transforms: ArrayLike, weights: ArrayLike) -> F32Array:
     """Dual quaternion linear blending of ``(N, 8)`` transforms; returns ``(8,)``."""
 
-def dib(
-    transforms: ArrayLike, weights: ArrayLike, precision: float = 1e-6, max_iterations: int = 32
-) -> tuple[F32Array, int, bool]:
+def dib(transforms: ArrayLike, weights: ArrayLike, precision: float = 1e-6, max_iterations: int = 32) -> tuple[F32Array, int, bool]:
     """Dual quaternion iterative blending; returns ``(blend, iterations, converged)``."""
 
 @overload
@@ -188,11 +187,26 @@ class Method:
     def __eq__(self, other: object) -> bool: ...
     def __hash__(self) -> int: ...
 
-MethodName = Method | Literal[
-    "linear", "dual_quaternion", "blend", "centers_of_rotation",
-    "LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS_OF_ROTATION", "lbs", "dqs", "cor",
-    "Linear", "Dual Quaternion", "Blend", "Optimized Centers",
-]
+MethodName = (
+    Method
+    | Literal[
+        "linear",
+        "dual_quaternion",
+        "blend",
+        "centers_of_rotation",
+        "LINEAR",
+        "DUAL_QUATERNION",
+        "BLEND",
+        "CENTERS_OF_ROTATION",
+        "lbs",
+        "dqs",
+        "cor",
+        "Linear",
+        "Dual Quaternion",
+        "Blend",
+        "Optimized Centers",
+    ]
+)
 
 def skin(
     positions: F32Array,
@@ -317,9 +331,7 @@ def polygon_area(points: F32Array) -> float:
 class TwistCylinder:
     """A two-bone cylinder along +Y for the candy-wrapper test."""
 
-    def __init__(
-        self, rings: int = 33, segments: int = 48, length: float = 4.0, radius: float = 0.5, blend_zone: float = 0.5
-    ) -> None: ...
+    def __init__(self, rings: int = 33, segments: int = 48, length: float = 4.0, radius: float = 0.5, blend_zone: float = 0.5) -> None: ...
     @property
     def positions(self) -> F32Array: ...
     @property
@@ -339,9 +351,7 @@ class TwistCylinder:
 def continuous_signs(keys: ArrayLike) -> tuple[F32Array, int]:
     """Keys ``(K, 4)`` made sign-continuous and normalized; returns ``(keys, flipped)``."""
 
-def sample_rotations(
-    times: ArrayLike, keys: ArrayLike, at: ArrayLike, method: Literal["slerp", "squad"] = "squad"
-) -> F32Array:
+def sample_rotations(times: ArrayLike, keys: ArrayLike, at: ArrayLike, method: Literal["slerp", "squad"] = "squad") -> F32Array:
     """Rotation keys at ``times`` sampled at ``at`` with Slerp or time-aware Squad; ``(T, 4)``."""
 
 def sample_transforms(times: ArrayLike, keys: ArrayLike, at: ArrayLike) -> F32Array:
@@ -362,7 +372,6 @@ def curvature_energy(rotations: ArrayLike) -> float:
     """Summed squared discrete curvature of evenly spaced rotations."""
 
 def _panic_for_tests() -> None: ...
-
 def influences_from_deform_groups(
     offsets: npt.NDArray[np.uint32],
     groups: npt.NDArray[np.uint32],
@@ -373,9 +382,7 @@ def influences_from_deform_groups(
     """Influences from vertex groups in CSR form (stored order), with each group index mapped to
     a bone index (or -1), as Blender's Armature modifier maps them."""
 
-def deform_group_weights(
-    offsets: npt.NDArray[np.uint32], groups: npt.NDArray[np.uint32], weights: F32Array, group: int
-) -> F32Array:
+def deform_group_weights(offsets: npt.NDArray[np.uint32], groups: npt.NDArray[np.uint32], weights: F32Array, group: int) -> F32Array:
     """Each vertex's weight in one vertex group (0 outside it); ``(V,)``."""
 
 def shape_key_mix(

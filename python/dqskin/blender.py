@@ -46,6 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     if folder:
         os.environ["BLENDER_USER_RESOURCES"] = str(Path(folder).resolve())
     import bpy  # noqa: F401  (after BLENDER_USER_RESOURCES)
+
     import addon_utils
 
     extension = addon_utils.enable(EXTENSION, default_set=True)

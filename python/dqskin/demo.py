@@ -72,17 +72,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     angles = [0, 45, 90, 135, 150, 170, 180]
-    print(f"dqskin {dqskin.__version__}: two-bone cylinder twisted about its axis "
-          f"({args.rings} rings x {args.segments} segments)")
+    print(f"dqskin {dqskin.__version__}: two-bone cylinder twisted about its axis ({args.rings} rings x {args.segments} segments)")
     print("Volume and middle cross-section kept, relative to rest:")
     header = f"{'twist':>6} | {'linear (LBS)':>19} | {'dual quaternion':>19} | {'blend 50%':>19}"
     print(header)
     print(f"{'':>6} | {'volume':>9} {'area':>9} | {'volume':>9} {'area':>9} | {'volume':>9} {'area':>9}")
     print("-" * len(header))
     for row in run(angles, args.rings, args.segments):
-        cells = " | ".join(
-            f"{row[m]['volume']:>9.3f} {row[m]['middle_area']:>9.3f}" for m, _ in METHODS
-        )
+        cells = " | ".join(f"{row[m]['volume']:>9.3f} {row[m]['middle_area']:>9.3f}" for m, _ in METHODS)
         print(f"{row['twist_deg']:>5.0f}° | {cells}")
 
     t = timing(args.timing_vertices)

@@ -103,7 +103,7 @@ class Writer:
         self._tmp = None
         self._interrupted = None  # the signal that discarded the temporary
 
-    def __enter__(self) -> "Writer":
+    def __enter__(self) -> Writer:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path)
         self._tmp = temporary_path(self.path)
@@ -251,7 +251,7 @@ def remove_stale_temporaries(path) -> list[Path]:
         name = p.name
         if not (name.startswith(prefix) and name.endswith(suffix)):
             continue
-        pid_text = name[len(prefix):-len(suffix)]
+        pid_text = name[len(prefix) : -len(suffix)]
         if pid_text.isdigit() and not _alive(int(pid_text)):
             try:
                 p.unlink()

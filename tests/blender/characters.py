@@ -16,9 +16,11 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import addon_utils  # noqa: E402  (importable once bpy is)
-import bpy
 import numpy as np
+
+import bpy
+
+import addon_utils  # noqa: E402  (importable once bpy is)
 
 # Controls animated on frames 1-40 (Rigify's names): (bone, rotation axis, angle, scale).
 MOTION = [

@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import json
 
-import bpy
 import numpy as np
-from mathutils import Quaternion
-
 from scenes import rig_tube
+
+import bpy
+
+from mathutils import Quaternion
 
 REL_TOL = 1e-5  # of the bounding-box diagonal (the bar of every exactness test)
 FRAMES = (1, 4, 9, 13, 20, 2)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import math
 
-import bpy
 import numpy as np
+
+import bpy
 
 
 def link(obj):

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import math
 
-import bpy
 import numpy as np
 import pytest
-from mathutils import Euler, Matrix, Quaternion
-
 from dqtest import import_character
+
+import bpy
+
+from mathutils import Euler, Matrix, Quaternion
 
 ANGLE_TOL = 1e-4  # rad per frame: f32 keys, LINEAR interpolation between them
 F32 = np.float32
@@ -142,7 +143,8 @@ def test_quaternion_cleanup_removes_every_sign_flip(dq):
 def test_screw_inbetweens_move_at_constant_speed_along_the_screw(dq):
     dqskin, keys = dq
     obj = keyed_object(
-        "Screw", [1, 21],
+        "Screw",
+        [1, 21],
         [Quaternion((1, 0, 0, 0)), Quaternion((0, 0, 1), 2.0)],
         locations=[(0, 0, 0), (2.0, 1.0, 3.0)],
     )
@@ -178,11 +180,22 @@ def test_blend_transforms_of_objects(dq, method):
     target.rotation_mode = "QUATERNION"
     target.scale = (2, 2, 2)
     weights = [0.2, 0.5, 0.3][: len(sources)]
-    result = run_on_objects(bpy.ops.anim.dq_blend_transforms, sources + [target], active=target, method=method, weights=weights + [1.0] * (16 - len(weights)), keyframe=True)
+    result = run_on_objects(
+        bpy.ops.anim.dq_blend_transforms,
+        sources + [target],
+        active=target,
+        method=method,
+        weights=weights + [1.0] * (16 - len(weights)),
+        keyframe=True,
+    )
     assert result == {"FINISHED"}
     dqs = np.stack([dqskin.DualQuat.from_matrix(np.array(o.matrix_world, F32)).to_array() for o in sources])
     w = np.array(weights, F32)
-    want = {"DLB": lambda: dqskin.dlb(dqs, w), "DIB": lambda: dqskin.dib(dqs, w)[0], "SCLERP": lambda: dqskin.sclerp(dqs[0], dqs[1], w[1] / w.sum())}[method]()
+    want = {
+        "DLB": lambda: dqskin.dlb(dqs, w),
+        "DIB": lambda: dqskin.dib(dqs, w)[0],
+        "SCLERP": lambda: dqskin.sclerp(dqs[0], dqs[1], w[1] / w.sum()),
+    }[method]()
     got = dqskin.DualQuat.from_matrix(np.array(target.matrix_world.normalized(), F32), check=False)
     assert np.abs(np.abs(np.dot(got.to_array()[:4], want[:4])) - 1) < 1e-5
     np.testing.assert_allclose(got.translation, dqskin.DualQuat(want[:4], want[4:]).translation, atol=1e-5)
@@ -259,11 +272,17 @@ def test_rotation_speed_plot_before_and_after_a_bake(dq, tmp_path):
 
 def test_tools_are_in_the_animation_menus(dq_skin):
     lines = []
-    menu = type("M", (), {"layout": type("L", (), {"operator": lambda self, idname, **_: lines.append(idname), "separator": lambda self: None})()})()
+    menu = type(
+        "M", (), {"layout": type("L", (), {"operator": lambda self, idname, **_: lines.append(idname), "separator": lambda self: None})()}
+    )()
     dq_skin.ui.VIEW3D_MT_dq_skin_animation.draw(menu, bpy.context)
     assert lines == [
-        "anim.dq_blend_transforms", "anim.dq_screw_inbetweens", "anim.dq_rotation_bake",
-        "anim.dq_quaternion_cleanup", "anim.dq_spring_smoothing", "anim.dq_rotation_speed_plot",
+        "anim.dq_blend_transforms",
+        "anim.dq_screw_inbetweens",
+        "anim.dq_rotation_bake",
+        "anim.dq_quaternion_cleanup",
+        "anim.dq_spring_smoothing",
+        "anim.dq_rotation_speed_plot",
     ]
     for idname in lines:
         assert hasattr(bpy.ops.anim, idname.split(".")[1])
@@ -314,7 +333,8 @@ def test_tools_on_pose_bones_of_the_fox(dq, assets, tool, tmp_path):
 def test_screw_inbetweens_on_a_frame_range_leave_the_rest_alone(dq):
     dqskin, keys = dq
     obj = keyed_object(
-        "Ranged", [1, 11, 21],
+        "Ranged",
+        [1, 11, 21],
         [Quaternion((1, 0, 0, 0)), Quaternion((0, 0, 1), 1.0), Quaternion((0, 0, 1), 2.0)],
         locations=[(0, 0, 0), (1.0, 0.0, 0.0), (1.0, 2.0, 0.0)],
     )

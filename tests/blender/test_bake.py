@@ -6,12 +6,12 @@ import os
 import subprocess
 import sys
 
-import bpy
 import numpy as np
 import pytest
-
 from dqtest import add_dq_skin, assert_fed, evaluated_positions, import_character
 from scenes import RIGS, make_rig
+
+import bpy
 
 PLAYBACK_TOL = 1e-6  # of the bounding-box diagonal: float32 positions stored and read back
 
@@ -37,8 +37,7 @@ def test_mesh_cache_playback_reproduces_the_live_result(dq_skin, assets, tmp_pat
         result = bpy.ops.object.dq_skin_bake(filepath=str(path), frame_start=start, frame_end=end)
     assert result == {"FINISHED"}
     header = pc2.read_header(path)
-    assert (header.points, header.start_frame, header.sample_rate, header.samples) == (
-        len(obj.data.vertices), start, 1.0, end - start + 1)
+    assert (header.points, header.start_frame, header.sample_rate, header.samples) == (len(obj.data.vertices), start, 1.0, end - start + 1)
     assert not mod.show_viewport and not mod.show_render
     cache = obj.modifiers["DQ Skin Cache"]
     assert cache.type == "MESH_CACHE" and list(obj.modifiers).index(cache) == list(obj.modifiers).index(mod) + 1

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import ASSETS, USER
 
 ENTRY_POINTS = {
@@ -91,7 +90,20 @@ def test_apply_saves_a_file_with_dq_skin(run, tmp_path):
 
 def test_compare_writes_a_report_and_a_picture(tmp_path):
     out = tmp_path / "out"
-    r = run("compare", str(ASSETS / "RiggedFigure.glb"), "--frames", "1-10", "--out", str(out), "--width", "160", "--height", "90", "--samples", "1")
+    r = run(
+        "compare",
+        str(ASSETS / "RiggedFigure.glb"),
+        "--frames",
+        "1-10",
+        "--out",
+        str(out),
+        "--width",
+        "160",
+        "--height",
+        "90",
+        "--samples",
+        "1",
+    )
     assert r.returncode == 0, r.stderr
     report = json.loads((out / "report.json").read_text())
     methods = report["rows"][0]["methods"]
@@ -141,15 +153,19 @@ def test_long_commands_report_progress(tmp_path):
     assert r.returncode == 0 and "Comparing 3 row(s) over 4 frame(s) [" in r.stderr, r.stderr
 
 
-@pytest.mark.parametrize("args, option", [
-    (["compare", "--width", "0"], "--width"),
-    (["compare", "--height", "-5"], "--height"),
-    (["compare", "--width", "wide"], "--width"),
-    (["compare", "--samples", "0"], "--samples"),
-    (["compare", "--frames", "5-1"], "--frames"),
-    (["compare", "--frames", "1-x"], "--frames"),
-    (["bake", "shot.blend", "--object", "A", "--out", "x.pc2", "--frames", "1-99999999"], "--frames"),
-], ids=lambda v: " ".join(v) if isinstance(v, list) else v)
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["compare", "--width", "0"], "--width"),
+        (["compare", "--height", "-5"], "--height"),
+        (["compare", "--width", "wide"], "--width"),
+        (["compare", "--samples", "0"], "--samples"),
+        (["compare", "--frames", "5-1"], "--frames"),
+        (["compare", "--frames", "1-x"], "--frames"),
+        (["bake", "shot.blend", "--object", "A", "--out", "x.pc2", "--frames", "1-99999999"], "--frames"),
+    ],
+    ids=lambda v: " ".join(v) if isinstance(v, list) else v,
+)
 def test_out_of_range_options_are_usage_errors_naming_the_option(args, option, tmp_path):
     r = run(*args, cwd=tmp_path)
     assert r.returncode == 2, (r.returncode, r.stderr)

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import bpy
 import numpy as np
 import pytest
-
 from dqtest import import_character
+
+import bpy
 
 
 def test_builtin_rigs_comparison_report_and_render(dq_skin, tmp_path):
@@ -18,7 +18,9 @@ def test_builtin_rigs_comparison_report_and_render(dq_skin, tmp_path):
     assert len(labels) == 3 * len(compare.VARIANTS)
     rows = []
     for rig in ("Candy Wrapper Twist", "Elbow Bend", "Shoulder Raise"):
-        meshes = sorted((o for o in collection.objects if o.type == "MESH" and o.name.startswith(rig)), key=lambda o: o.matrix_world.translation.x)
+        meshes = sorted(
+            (o for o in collection.objects if o.type == "MESH" and o.name.startswith(rig)), key=lambda o: o.matrix_world.translation.x
+        )
         rows.append(dict(zip((v[0] for v in compare.VARIANTS), meshes)))
     result = compare.report(bpy.context, bpy.context.scene, rows, list(range(*compare.FRAMES, 8)) + [compare.FRAMES[1]])
     twist = result[0]["methods"]
@@ -74,8 +76,12 @@ def test_labels_sit_above_their_own_row(dq_skin):
     step = columns[1] - columns[0]
     for label in labels:
         # Its own mesh: in its column, under it, within one row.
-        below = [m for m in meshes if abs(m.matrix_world.translation.x - label.location.x) < step / 2
-                 and 0 < label.location.z - m.matrix_world.translation.z < heights[0] - heights[1]]
+        below = [
+            m
+            for m in meshes
+            if abs(m.matrix_world.translation.x - label.location.x) < step / 2
+            and 0 < label.location.z - m.matrix_world.translation.z < heights[0] - heights[1]
+        ]
         assert len(below) == 1, label.name
         column = round((below[0].matrix_world.translation.x - columns[0]) / step)
         assert label.name.startswith(dq_skin.compare.VARIANTS[column][0] + " label"), label.name

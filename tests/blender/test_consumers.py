@@ -11,15 +11,25 @@ Bar: <= 1e-5 of the bounding-box diagonal, every frame (Shrinkwrap: 1e-4).
 
 from __future__ import annotations
 
-import math
-
-import bpy
 import numpy as np
 import pytest
-from mathutils import Vector
-
-from dqtest import METHODS, REL_TOL, add_dq_skin, assert_fed, deviation, dq_skin_mods, evaluated_positions, import_character, perturbed, status
+from dqtest import (
+    METHODS,
+    REL_TOL,
+    add_dq_skin,
+    assert_fed,
+    deviation,
+    dq_skin_mods,
+    evaluated_positions,
+    import_character,
+    perturbed,
+    status,
+)
 from scenes import RIGS, make_rig
+
+import bpy
+
+from mathutils import Vector
 
 # Where the reference character stands: at the same place (simulations in world space round
 # differently elsewhere; nothing here makes the two characters interact).
@@ -126,6 +136,7 @@ def upper_body_group(obj, name="Pin", below: float = 0.9) -> None:
 
 # -- simulations ---------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 def test_cloth_after_dq_skin_follows_the_skinned_pins(dq_skin, assets, method, rig):
@@ -188,6 +199,7 @@ def test_particle_hair_on_the_character(dq_skin, assets, method, rig):
 
 # -- modifiers and constraints targeting the character ------------------------------------------
 
+
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 def test_shrinkwrap_onto_the_character(dq_skin, assets, method, rig):
@@ -216,12 +228,17 @@ def test_shrinkwrap_onto_the_character(dq_skin, assets, method, rig):
 
 # -- brushes and edit mode on the posed mesh ------------------------------------------------------
 
+
 def crazyspace(obj, vertices) -> np.ndarray:
     dg = bpy.context.evaluated_depsgraph_get()
     obj.crazyspace_eval(dg, bpy.context.scene)
     try:
         return np.array(
-            [obj.crazyspace_displacement_to_deformed(vertex_index=v, displacement=d) for v in vertices for d in (Vector((1, 0, 0)), Vector((0, 0, 1)))],
+            [
+                obj.crazyspace_displacement_to_deformed(vertex_index=v, displacement=d)
+                for v in vertices
+                for d in (Vector((1, 0, 0)), Vector((0, 0, 1)))
+            ],
             np.float64,
         )
     finally:
@@ -258,6 +275,7 @@ def test_brushes_map_through_the_deformation_as_through_the_armature_modifier(dq
 
 # -- exporters ----------------------------------------------------------------------------------
 
+
 def reimported(path, importer) -> dict:
     """What a fresh scene gets from importing `path`: each skinned mesh's rest positions (world),
     its vertex groups' weights, and its armature."""
@@ -268,7 +286,9 @@ def reimported(path, importer) -> dict:
     for obj in bpy.data.objects:
         if obj.type != "MESH" or obj in shapes:  # the importers' bone shapes are not characters
             continue
-        arm = next((m.object for m in obj.modifiers if m.type == "ARMATURE"), None) or (obj.parent if obj.parent and obj.parent.type == "ARMATURE" else None)
+        arm = next((m.object for m in obj.modifiers if m.type == "ARMATURE"), None) or (
+            obj.parent if obj.parent and obj.parent.type == "ARMATURE" else None
+        )
         co = np.empty(len(obj.data.vertices) * 3, np.float32)
         obj.data.vertices.foreach_get("co", co)
         m = np.array(obj.matrix_world, np.float64)
@@ -326,7 +346,9 @@ def compare_exports(name, ours, theirs):
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("apply_modifiers", [True, False])
 def test_fbx_export_is_the_same_skinned_character(dq_skin, assets, tmp_path, method, rig, apply_modifiers):
-    name, (ours, theirs) = export_both(dq_skin, tmp_path, assets, method, rig, bpy.ops.export_scene.fbx, ".fbx", use_mesh_modifiers=apply_modifiers)
+    name, (ours, theirs) = export_both(
+        dq_skin, tmp_path, assets, method, rig, bpy.ops.export_scene.fbx, ".fbx", use_mesh_modifiers=apply_modifiers
+    )
     compare_exports(name, reimported(ours, bpy.ops.import_scene.fbx), reimported(theirs, bpy.ops.import_scene.fbx))
 
 
@@ -334,11 +356,14 @@ def test_fbx_export_is_the_same_skinned_character(dq_skin, assets, tmp_path, met
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("apply_modifiers", [True, False])
 def test_gltf_export_is_the_same_skinned_character(dq_skin, assets, tmp_path, method, rig, apply_modifiers):
-    name, (ours, theirs) = export_both(dq_skin, tmp_path, assets, method, rig, bpy.ops.export_scene.gltf, ".glb", export_apply=apply_modifiers)
+    name, (ours, theirs) = export_both(
+        dq_skin, tmp_path, assets, method, rig, bpy.ops.export_scene.gltf, ".glb", export_apply=apply_modifiers
+    )
     compare_exports(name, reimported(ours, bpy.ops.import_scene.gltf), reimported(theirs, bpy.ops.import_scene.gltf))
 
 
 # -- more simulations on the character --------------------------------------------------------------
+
 
 def _soft_body(obj):
     upper_body_group(obj, name="Goal", below=0.6)
@@ -431,6 +456,7 @@ def test_a_garment_bound_by_surface_deform(dq_skin, assets, method, rig):
 
 
 # -- objects that read the character ---------------------------------------------------------------
+
 
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
@@ -597,7 +623,9 @@ def test_apply_as_shape_key(dq_skin, assets, method, rig, keep):
     body, ref = characters(dq_skin, assets, method, rig)
     bpy.context.scene.frame_set(17)
     with bpy.context.temp_override(object=ref, active_object=ref):
-        assert bpy.ops.object.modifier_apply_as_shapekey(modifier=next(m.name for m in ref.modifiers if m.type == "ARMATURE"), keep_modifier=keep) == {"FINISHED"}
+        assert bpy.ops.object.modifier_apply_as_shapekey(
+            modifier=next(m.name for m in ref.modifiers if m.type == "ARMATURE"), keep_modifier=keep
+        ) == {"FINISHED"}
     mod = dq_skin_mods(body)[0]
     bpy.context.view_layer.objects.active = body
     with bpy.context.temp_override(object=body, active_object=body):
@@ -625,10 +653,26 @@ def _import_positions(path, importer) -> np.ndarray:
 
 
 FILE_EXPORTS = {
-    "OBJ": ("obj", lambda p, sel: bpy.ops.wm.obj_export(filepath=p, export_selected_objects=sel), lambda p: bpy.ops.wm.obj_import(filepath=p)),
-    "PLY": ("ply", lambda p, sel: bpy.ops.wm.ply_export(filepath=p, export_selected_objects=sel), lambda p: bpy.ops.wm.ply_import(filepath=p)),
-    "STL": ("stl", lambda p, sel: bpy.ops.wm.stl_export(filepath=p, export_selected_objects=sel), lambda p: bpy.ops.wm.stl_import(filepath=p)),
-    "USD": ("usdc", lambda p, sel: bpy.ops.wm.usd_export(filepath=p, selected_objects_only=sel, export_armatures=False), lambda p: bpy.ops.wm.usd_import(filepath=p)),
+    "OBJ": (
+        "obj",
+        lambda p, sel: bpy.ops.wm.obj_export(filepath=p, export_selected_objects=sel),
+        lambda p: bpy.ops.wm.obj_import(filepath=p),
+    ),
+    "PLY": (
+        "ply",
+        lambda p, sel: bpy.ops.wm.ply_export(filepath=p, export_selected_objects=sel),
+        lambda p: bpy.ops.wm.ply_import(filepath=p),
+    ),
+    "STL": (
+        "stl",
+        lambda p, sel: bpy.ops.wm.stl_export(filepath=p, export_selected_objects=sel),
+        lambda p: bpy.ops.wm.stl_import(filepath=p),
+    ),
+    "USD": (
+        "usdc",
+        lambda p, sel: bpy.ops.wm.usd_export(filepath=p, selected_objects_only=sel, export_armatures=False),
+        lambda p: bpy.ops.wm.usd_import(filepath=p),
+    ),
 }
 
 
@@ -705,4 +749,3 @@ def test_texture_bake_from_the_posed_mesh(dq_skin, assets, tmp_path, method, rig
         pictures.append(np.array(image.pixels[:]).reshape(64, 64, 4))
     assert np.abs(pictures[0] - pictures[1]).max() <= 1e-3
     assert pictures[0][..., :3].std() > 0.01  # something was baked
-

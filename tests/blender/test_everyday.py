@@ -10,13 +10,8 @@ Bar: <= 1e-5 of the bounding-box diagonal (`dqtest.REL_TOL`).
 
 from __future__ import annotations
 
-import math
-
-import bpy
 import numpy as np
 import pytest
-from mathutils import Quaternion
-
 from characters import bbone_counts, open_rigify_character
 from dqtest import (
     METHODS,
@@ -37,10 +32,12 @@ from dqtest import (
     status,
     twin,
 )
-from scenes import RIGS, chain_weights, tube
+from scenes import RIGS
 
+import bpy
 
 # -- files ----------------------------------------------------------------------------------------
+
 
 def mesh_data_of_every_kind(obj):
     """Shape keys (two, one driven by a vertex group), custom normals, a color attribute, a UV
@@ -114,7 +111,9 @@ def test_the_apply_command_writes_clean_files(dq_skin, tmp_path):
     src, out = tmp_path / "src.blend", tmp_path / "out.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(src), copy=True)
     env = dict(__import__("os").environ, BLENDER_USER_RESOURCES=str(USER), PYTHONPATH=str(ROOT / "python"))
-    r = subprocess.run([sys.executable, "-m", "dqskin.blender", "apply", str(src), "--out", str(out)], capture_output=True, text=True, env=env, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-m", "dqskin.blender", "apply", str(src), "--out", str(out)], capture_output=True, text=True, env=env, timeout=300
+    )
     assert r.returncode == 0, r.stderr
     bpy.ops.wm.open_mainfile(filepath=str(out))
     assert dangling() == []
@@ -122,6 +121,7 @@ def test_the_apply_command_writes_clean_files(dq_skin, tmp_path):
 
 
 # -- copied modifiers -------------------------------------------------------------------------
+
 
 def two_characters(assets):
     """Two CesiumMen, each with its own armature playing the walk at its own pace."""
@@ -155,7 +155,15 @@ def copy_by_script(src, dst, dq_skin):
             for name in ("Mask", "Blend Amount"):
                 dq_skin.nodes.put_attribute(new, name, dq_skin.nodes.get_attribute(m, name))
         else:
-            for p in ("object", "use_vertex_groups", "use_bone_envelopes", "use_deform_preserve_volume", "show_viewport", "show_render", "vertex_group"):
+            for p in (
+                "object",
+                "use_vertex_groups",
+                "use_bone_envelopes",
+                "use_deform_preserve_volume",
+                "show_viewport",
+                "show_render",
+                "vertex_group",
+            ):
                 setattr(new, p, getattr(m, p))
         new.show_viewport, new.show_render = m.show_viewport, m.show_render
 
@@ -208,6 +216,7 @@ def test_a_modifier_duplicated_within_its_stack_gets_its_own_result(dq_skin, rig
 
 # -- DQ Skin and its Armature modifier ---------------------------------------------------------
 
+
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 def test_switching_dq_skin_off_shows_blenders_deformation(dq_skin, tmp_path, method, rig):
@@ -250,6 +259,7 @@ def test_renders_follow_the_render_toggles(dq_skin, tmp_path):
 
 # -- scripts that edit bones --------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("edit", ["deform off", "B-Bone segments", "rest pose", "envelope"])
@@ -286,6 +296,7 @@ def test_scripts_editing_bones_then_changing_frames(dq_skin, method, rig, edit):
 
 # -- the mask group -----------------------------------------------------------------------------
 
+
 def test_removing_the_mask_group_gives_a_steady_result(dq_skin):
     """The mask group removed as artists remove it (the Vertex Groups panel's minus button):
     no mask any more, for DQ Skin as for the Armature modifier, on every evaluation. (Removing
@@ -318,6 +329,7 @@ def test_removing_the_mask_group_gives_a_steady_result(dq_skin):
 
 # -- Corrective Smooth ----------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("method", METHODS)
 def test_corrective_smooth_after_dq_skin(dq_skin, assets, method):
     """Corrective Smooth turns the last float bits of its input into far larger differences on
@@ -349,6 +361,7 @@ def test_corrective_smooth_after_dq_skin(dq_skin, assets, method):
 
 # -- failures without tracebacks ------------------------------------------------------------------
 
+
 def test_fallbacks_print_no_traceback(dq_skin, capfd):
     obj, arm, _ = animated_tube()
     mod = add_dq_skin(obj, "DUAL_QUATERNION")
@@ -374,6 +387,7 @@ def test_fallbacks_print_no_traceback(dq_skin, capfd):
 
 
 # -- a Rigify character ---------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="session")
 def rigify_folder(tmp_path_factory):

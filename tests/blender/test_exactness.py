@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import math
 
-import bpy
 import numpy as np
 import pytest
-from mathutils import Matrix, Quaternion
-
 from dqtest import REL_TOL, action_frames, evaluated_positions, import_character
 from scenes import rig_tube
+
+import bpy
+
+from mathutils import Matrix, Quaternion
 
 METHODS = {"linear": False, "dual_quaternion": True}  # ours -> use_deform_preserve_volume
 

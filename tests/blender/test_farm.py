@@ -11,11 +11,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-import bpy
 import pytest
 import yaml
-
 from conftest import ASSETS, ROOT
+
+import bpy
 
 OPENJD_TEMPLATE = ROOT / "farm" / "dq-skin-bake.openjd.yaml"
 FLAMENCO_JOB_TYPE = ROOT / "farm" / "dq-skin-bake.js"
@@ -33,8 +33,12 @@ def shot(tmp_path_factory):
     bpy.ops.import_scene.gltf(filepath=str(ASSETS / "CesiumMan.glb"))
     bpy.ops.wm.save_as_mainfile(filepath=str(blend), copy=True)
     single = folder / "single.pc2"
-    r = subprocess.run([*COMMAND.split(), "bake", str(blend), "--object", OBJECT, "--frames", "%d-%d" % FRAMES, "--out", str(single)],
-                       capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [*COMMAND.split(), "bake", str(blend), "--object", OBJECT, "--frames", "{}-{}".format(*FRAMES), "--out", str(single)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stderr
     return blend, single.read_bytes()
 
@@ -57,10 +61,29 @@ def test_openjd_run_bakes_every_chunk_and_merges_them_like_one_bake(shot, tmp_pa
     stale = out.with_name("body.pc2.chunks") / "40-48.pc2"
     stale.parent.mkdir(parents=True)
     stale.write_bytes(b"not this job's")
-    params = {"BlendFile": str(blend), "Object": OBJECT, "Frames": "%d-%d" % FRAMES, "ChunkSize": "7", "Output": str(out), "DqSkinCommand": COMMAND}
-    r = subprocess.run([str(OPENJD), "run", str(OPENJD_TEMPLATE), "--step", "Merge", "--run-dependencies",
-                        *[a for k, v in params.items() for a in ("-p", f"{k}={v}")]],
-                       capture_output=True, text=True, timeout=1200, cwd=tmp_path)
+    params = {
+        "BlendFile": str(blend),
+        "Object": OBJECT,
+        "Frames": "{}-{}".format(*FRAMES),
+        "ChunkSize": "7",
+        "Output": str(out),
+        "DqSkinCommand": COMMAND,
+    }
+    r = subprocess.run(
+        [
+            str(OPENJD),
+            "run",
+            str(OPENJD_TEMPLATE),
+            "--step",
+            "Merge",
+            "--run-dependencies",
+            *[a for k, v in params.items() for a in ("-p", f"{k}={v}")],
+        ],
+        capture_output=True,
+        text=True,
+        timeout=1200,
+        cwd=tmp_path,
+    )
     assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-2000:]
     # OpenJD splits 20 frames into chunks of at most 7: three bake tasks, then the merge.
     assert "Chunks run: 4" in r.stdout, r.stdout[-2000:]
@@ -71,8 +94,12 @@ def test_openjd_run_bakes_every_chunk_and_merges_them_like_one_bake(shot, tmp_pa
 
 
 def flamenco_graph(settings: dict) -> subprocess.CompletedProcess:
-    return subprocess.run(["node", str(ROOT / "tests" / "farm" / "flamenco_compile.js"), str(FLAMENCO_JOB_TYPE), json.dumps(settings)],
-                          capture_output=True, text=True, timeout=60)
+    return subprocess.run(
+        ["node", str(ROOT / "tests" / "farm" / "flamenco_compile.js"), str(FLAMENCO_JOB_TYPE), json.dumps(settings)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
 
 
 def test_the_flamenco_job_type_compiles_to_one_bake_per_chunk_and_a_merge_after_them():
@@ -85,14 +112,32 @@ def test_the_flamenco_job_type_compiles_to_one_bake_per_chunk_and_a_merge_after_
     assert list(tasks) == ["bake-1-4", "bake-5-8", "bake-9-10", "merge"]
     bake = tasks["bake-9-10"]["commands"][0]
     assert bake["name"] == "exec" and bake["parameters"]["exe"] == "{blender}"
-    assert bake["parameters"]["args"] == ["-b", "--command", "dq_skin", "bake", "/shots/a.blend", "--object", "Body",
-                                          "--frames", "9-10", "--method", "AUTO", "--out", "/cache/body.pc2.chunks/9-10.pc2"]
+    assert bake["parameters"]["args"] == [
+        "-b",
+        "--command",
+        "dq_skin",
+        "bake",
+        "/shots/a.blend",
+        "--object",
+        "Body",
+        "--frames",
+        "9-10",
+        "--method",
+        "AUTO",
+        "--out",
+        "/cache/body.pc2.chunks/9-10.pc2",
+    ]
     merge = tasks["merge"]
     assert merge["dependencies"] == ["bake-1-4", "bake-5-8", "bake-9-10"]
     assert merge["commands"][0]["parameters"]["args"][3:] == [
-        "merge", "/cache/body.pc2", *[f"/cache/body.pc2.chunks/{c}.pc2" for c in ("1-4", "5-8", "9-10")]]
+        "merge",
+        "/cache/body.pc2",
+        *[f"/cache/body.pc2.chunks/{c}.pc2" for c in ("1-4", "5-8", "9-10")],
+    ]
     # One frame left over is written "9" by the chunker: still a range for the bake.
-    single = json.loads(flamenco_graph({"blendfile": "a.blend", "object": "B", "frames": "1..9", "chunk_size": 4, "output": "o.pc2"}).stdout)
+    single = json.loads(
+        flamenco_graph({"blendfile": "a.blend", "object": "B", "frames": "1..9", "chunk_size": 4, "output": "o.pc2"}).stdout
+    )
     assert [t["name"] for t in single["tasks"]] == ["bake-1-4", "bake-5-8", "bake-9-9", "merge"]
 
 
@@ -105,8 +150,16 @@ def test_the_flamenco_job_type_refuses_frames_that_are_not_one_range(frames):
 def test_the_flamenco_tasks_run_in_order_give_the_single_bake(shot, tmp_path):
     blend, single = shot
     out = tmp_path / "body.pc2"
-    r = flamenco_graph({"blendfile": str(blend), "object": OBJECT, "frames": "%d-%d" % FRAMES, "chunk_size": 8,
-                        "output": str(out), "dq_skin_command": COMMAND})
+    r = flamenco_graph(
+        {
+            "blendfile": str(blend),
+            "object": OBJECT,
+            "frames": "{}-{}".format(*FRAMES),
+            "chunk_size": 8,
+            "output": str(out),
+            "dq_skin_command": COMMAND,
+        }
+    )
     assert r.returncode == 0, r.stderr
     tasks = json.loads(r.stdout)["tasks"]
     done: set[str] = set()

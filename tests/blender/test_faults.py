@@ -10,11 +10,11 @@ import sys
 import time
 from pathlib import Path
 
-import bpy
 import numpy as np
 import pytest
-
 from conftest import ASSETS, USER
+
+import bpy
 
 
 def env():
@@ -50,12 +50,16 @@ def test_unwritable_output_is_one_line_and_exit_1(tmp_path):
     blocker.write_text("not a folder")
     line = one_line_failure(run("apply", str(ASSETS / "RiggedSimple.glb"), "--out", str(blocker / "out.blend")))
     assert "cannot be written" in line
-    line = one_line_failure(run("bake", str(ASSETS / "CesiumMan.glb"), "--object", "Cesium_Man", "--frames", "1-3", "--out", str(blocker / "x.pc2")))
+    line = one_line_failure(
+        run("bake", str(ASSETS / "CesiumMan.glb"), "--object", "Cesium_Man", "--frames", "1-3", "--out", str(blocker / "x.pc2"))
+    )
     assert "x.pc2" in line or "file" in line
 
 
 def start(*args):
-    return subprocess.Popen([sys.executable, "-m", "dqskin.blender", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env())
+    return subprocess.Popen(
+        [sys.executable, "-m", "dqskin.blender", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env()
+    )
 
 
 def wait_for(predicate, timeout=120.0):
@@ -138,7 +142,9 @@ def test_merge_stops_on_ctrl_c(tmp_path):
             w.add_many(np.zeros((20, 500_000, 3), np.float32))
         chunks.append(path)
     out = tmp_path / "all.pc2"
-    p = subprocess.Popen([sys.executable, "-m", "dqskin.blender", "merge", str(out), *map(str, chunks)], stderr=subprocess.PIPE, text=True, env=env())
+    p = subprocess.Popen(
+        [sys.executable, "-m", "dqskin.blender", "merge", str(out), *map(str, chunks)], stderr=subprocess.PIPE, text=True, env=env()
+    )
     wait_for(lambda: temporaries(tmp_path) or p.poll() is not None)
     if p.poll() is not None:
         pytest.skip("merge finished before the signal")
@@ -166,9 +172,10 @@ def test_sigkill_leaves_a_recognisable_temporary_that_the_next_run_removes(tmp_p
 
 # -- the add-on ---------------------------------------------------------------------------------
 
+
 def test_an_empty_mesh_under_dq_skin_says_so(dq_skin):
-    from scenes import rig_tube
     from dqtest import add_dq_skin, draw_panel
+    from scenes import rig_tube
 
     obj, arm, _ = rig_tube()
     mod = add_dq_skin(obj)
@@ -183,8 +190,8 @@ def test_an_empty_mesh_under_dq_skin_says_so(dq_skin):
 
 
 def test_renaming_an_object_200_times_keeps_one_entry(dq_skin):
-    from scenes import rig_tube
     from dqtest import add_dq_skin
+    from scenes import rig_tube
 
     obj, arm, _ = rig_tube()
     add_dq_skin(obj)

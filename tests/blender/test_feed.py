@@ -13,14 +13,13 @@ from __future__ import annotations
 
 import os
 
-import bpy
 import pytest
-
-from dqtest import add_dq_skin, animate, assert_same, dq_skin_mods, reference_copy, select_only, status
 from conftest import feed_every_size
-from dqtest import get_input
+from dqtest import add_dq_skin, animate, assert_same, dq_skin_mods, get_input, reference_copy, select_only, status
 from test_pose_memory import bbone_rig
 from test_render import SAME_IMAGE, changed, render_frame, setup_scene
+
+import bpy
 
 
 @pytest.fixture(autouse=True)

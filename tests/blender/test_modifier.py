@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import math
 
-import bpy
 import numpy as np
 import pytest
-from mathutils import Quaternion
-
 from dqtest import REL_TOL, add_dq_skin, deviation, draw_panel, evaluated_positions, import_character, reference_copy
 from scenes import rig_tube
+
+import bpy
+
+from mathutils import Quaternion
 
 
 def snapshot(obj):

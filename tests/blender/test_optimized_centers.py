@@ -8,12 +8,13 @@ from __future__ import annotations
 import math
 import time
 
-import bpy
 import pytest
-from mathutils import Quaternion
-
-from scenes import rig_tube
 from dqtest import REL_TOL, add_dq_skin, deviation, evaluated_positions, import_character
+from scenes import rig_tube
+
+import bpy
+
+from mathutils import Quaternion
 
 
 def expected(dq_skin, obj, arm):
@@ -25,8 +26,15 @@ def expected(dq_skin, obj, arm):
     c = dq_skin.dqskin.centers_of_rotation(positions, centers.triangles_of(obj.data), binding.influences)
     f = rig.frame(binding, obj, arm)
     return dq_skin.dqskin.skin(
-        positions, binding.influences, f.deform, f.rest, method="centers_of_rotation", centers=c,
-        premat=f.premat, postmat=f.postmat, mask=binding.mask,
+        positions,
+        binding.influences,
+        f.deform,
+        f.rest,
+        method="centers_of_rotation",
+        centers=c,
+        premat=f.premat,
+        postmat=f.postmat,
+        mask=binding.mask,
     )
 
 
@@ -81,7 +89,9 @@ def test_candy_wrapper_and_elbow_against_linear_and_dual_quaternion(dq_skin):
     collection = bpy.data.collections["DQ Skin Comparison"]
     rows = []
     for rig_name in ("Candy Wrapper Twist", "Elbow Bend", "Shoulder Raise"):
-        meshes = sorted((o for o in collection.objects if o.type == "MESH" and o.name.startswith(rig_name)), key=lambda o: o.matrix_world.translation.x)
+        meshes = sorted(
+            (o for o in collection.objects if o.type == "MESH" and o.name.startswith(rig_name)), key=lambda o: o.matrix_world.translation.x
+        )
         rows.append(dict(zip((v[0] for v in compare.VARIANTS), meshes)))
     result = compare.report(bpy.context, bpy.context.scene, rows, [compare.FRAMES[1]])
     twist, elbow, shoulder = (r["methods"] for r in result)

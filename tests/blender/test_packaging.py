@@ -12,7 +12,6 @@ import zipfile
 from pathlib import Path
 
 import dqskin
-
 from conftest import EXTENSION_SITE_PACKAGES, ROOT
 
 DIST = ROOT / "dist"
@@ -40,7 +39,12 @@ def test_no_other_dqskin_is_on_the_path():
 
 
 def test_processes_started_by_the_tests_import_the_same_core():
-    r = subprocess.run([sys.executable, "-c", "import dqskin; print(dqskin._dqskin.__file__)"], capture_output=True, text=True,
-                       env=dict(os.environ), timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-c", "import dqskin; print(dqskin._dqskin.__file__)"],
+        capture_output=True,
+        text=True,
+        env=dict(os.environ),
+        timeout=120,
+    )
     assert r.returncode == 0, r.stderr
     assert Path(r.stdout.strip()) == Path(dqskin._dqskin.__file__)

@@ -11,16 +11,17 @@ from __future__ import annotations
 
 import math
 
-import bpy
 import numpy as np
 import pytest
-from mathutils import Quaternion, Vector
-
 from characters import rigify_character
-from scenes import armature_chain, armature_modifier, chain_weights, link, tube
 from conftest import feed_every_size
 from dqtest import REL_TOL, add_dq_skin, evaluated_positions, reference_copy
 from dqtest import deviation as relative_deviation
+from scenes import armature_chain, armature_modifier, chain_weights, link, tube
+
+import bpy
+
+from mathutils import Quaternion, Vector
 
 LENGTH = 4.0
 
@@ -300,7 +301,9 @@ def test_the_reader_gives_what_the_python_api_gives(dq_skin):
     # The segment mapping, Straight and Curved, to the bit: one vertex per sample point, weight 1
     # on one B-Bone, so its two effective weights are exactly 1 − blend and blend.
     rng = np.random.default_rng(5)
-    points = np.column_stack([rng.uniform(-0.8, 0.8, 400), rng.uniform(-0.8, 0.8, 400), rng.uniform(-0.3, LENGTH + 0.3, 400)]).astype(np.float32)
+    points = np.column_stack([rng.uniform(-0.8, 0.8, 400), rng.uniform(-0.8, 0.8, 400), rng.uniform(-0.3, LENGTH + 0.3, 400)]).astype(
+        np.float32
+    )
     offsets = np.arange(len(points) + 1)
     first = b
     checked = 0

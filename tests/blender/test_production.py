@@ -15,11 +15,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-import bpy
 import numpy as np
 import pytest
-from mathutils import Quaternion
-
 from dqtest import (
     METHODS,
     REL_TOL,
@@ -43,10 +40,15 @@ from dqtest import (
 )
 from scenes import RIGS, armature_chain, chain_weights, rig_tube, tube
 
+import bpy
+
+from mathutils import Quaternion
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
 # -- duplicates and crowds ------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
@@ -124,6 +126,7 @@ def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method, ri
 
 
 # -- files: append, link, override, without the add-on ------------------------------------------
+
 
 def character_file(path: Path, method: str = "DUAL_QUATERNION", frame: int = 7, rig: str = "vertex groups") -> None:
     """A library file with one character in the collection "Character", DQ Skin on, saved at
@@ -224,7 +227,11 @@ def test_plain_linked_instance_plays_the_library_animation(dq_skin, tmp_path):
     inst.instance_type = "COLLECTION"
     inst.instance_collection = dst.collections[0]
     bpy.context.scene.collection.objects.link(inst)
-    body = bpy.data.objects["Body", str(lib)] if ("Body", str(lib)) in bpy.data.objects else next(o for o in bpy.data.objects if o.name == "Body")
+    body = (
+        bpy.data.objects["Body", str(lib)]
+        if ("Body", str(lib)) in bpy.data.objects
+        else next(o for o in bpy.data.objects if o.name == "Body")
+    )
     assert body.library is not None
     # Reference: the same mesh and armature through a local object with a plain Armature modifier.
     ref = bpy.data.objects.new("Reference", body.data)
@@ -353,6 +360,7 @@ def test_undo_and_redo_stay_exact_and_leave_no_orphans(dq_skin, method, rig):
 
 # -- Apply, remove, several DQ Skins ------------------------------------------------------------
 
+
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 def test_apply_gives_the_builtin_applied_mesh_and_leaves_nothing_behind(dq_skin, method, rig):
@@ -435,6 +443,7 @@ def test_removing_one_of_two_restores_only_its_own_armature_modifier(dq_skin):
 
 # -- any modifier after DQ Skin ------------------------------------------------------------------
 
+
 def later_modifier(obj, kind: str):
     if kind == "SUBSURF":
         m = obj.modifiers.new(kind, "SUBSURF")
@@ -487,7 +496,19 @@ def later_modifier(obj, kind: str):
     return m
 
 
-LATER = ["SUBSURF", "SOLIDIFY", "MIRROR", "DECIMATE", "WELD", "EDGE_SPLIT", "TRIANGULATE", "NODES", "CORRECTIVE_SMOOTH", "SMOOTH", "DISPLACE"]
+LATER = [
+    "SUBSURF",
+    "SOLIDIFY",
+    "MIRROR",
+    "DECIMATE",
+    "WELD",
+    "EDGE_SPLIT",
+    "TRIANGULATE",
+    "NODES",
+    "CORRECTIVE_SMOOTH",
+    "SMOOTH",
+    "DISPLACE",
+]
 
 
 @pytest.mark.parametrize("rig", RIGS)
@@ -564,6 +585,7 @@ def test_later_modifiers_run_once_per_frame(dq_skin):
 
 
 # -- shape keys, render, viewport ------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("method", METHODS)
 def test_driven_corrective_shape_keys(dq_skin, method):
@@ -685,6 +707,7 @@ def test_panel_status_says_what_is_wrong_and_where(dq_skin):
 
 # -- what already worked and must keep working ----------------------------------------------------
 
+
 def test_two_scenes_renames_nla_and_method_changes(dq_skin):
     obj, arm, _ = animated_tube()
     mod = add_dq_skin(obj, "LINEAR")
@@ -779,6 +802,7 @@ def same_picture(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 # -- weights: read fast, follow painting ---------------------------------------------------------
+
 
 @pytest.mark.parametrize("asset", ["RiggedSimple.glb", "RiggedFigure.glb", "CesiumMan.glb", "Fox.glb"])
 def test_weights_read_from_memory_equal_the_python_api(dq_skin, assets, asset):

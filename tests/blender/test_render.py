@@ -3,10 +3,10 @@ render of CesiumMan with DQ Skin gives the same image as one with the Armature m
 
 from __future__ import annotations
 
-import bpy
 import numpy as np
-
 from dqtest import add_dq_skin, import_character, reference_copy
+
+import bpy
 
 # Two renders of the same geometry differ at most by rounding (1/255); a pixel that differs by
 # more counts as changed. Allowed share of changed pixels for "the same image"; a pose from

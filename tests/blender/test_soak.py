@@ -8,11 +8,11 @@ import gc
 import os
 from pathlib import Path
 
-import bpy
 import pytest
-
 from conftest import ASSETS
 from dqtest import REL_TOL, action_frames, add_dq_skin, deviation, evaluated_positions, import_character, plain_twin
+
+import bpy
 
 FRAMES = 10_000
 RELOAD_EVERY = 1_000

@@ -3,12 +3,12 @@ deformation, painting the blend, and a description on everything they can click.
 
 from __future__ import annotations
 
-import bpy
 import numpy as np
 import pytest
-
-from dqtest import METHODS, _Recorder, add_dq_skin, animated_tube, assert_same, draw_panel, dq_skin_mods, evaluated_positions, status, twin
+from dqtest import METHODS, _Recorder, add_dq_skin, animated_tube, assert_same, draw_panel, evaluated_positions, status, twin
 from scenes import rig_tube, tube
+
+import bpy
 
 
 def drawn(menu_idname: str, obj) -> list[str]:
@@ -39,7 +39,11 @@ def test_the_menu_operator_gives_the_stack_dq_skin_add_gives(dq_skin):
     bpy.context.view_layer.objects.active = b
     with bpy.context.temp_override(object=b, active_object=b):
         assert bpy.ops.object.dq_skin_add("EXEC_DEFAULT") == {"FINISHED"}  # what the menu entry runs
-    assert [(m.type, m.name) for m in a.modifiers] == [(m.type, m.name) for m in b.modifiers] == [("NODES", "DQ Skin"), ("ARMATURE", "Armature")]
+    assert (
+        [(m.type, m.name) for m in a.modifiers]
+        == [(m.type, m.name) for m in b.modifiers]
+        == [("NODES", "DQ Skin"), ("ARMATURE", "Armature")]
+    )
 
 
 @pytest.mark.parametrize("parent_type", ["OBJECT", "ARMATURE"])
@@ -141,7 +145,7 @@ def test_everything_an_artist_can_click_says_what_it_does(dq_skin):
         doc = (getattr(cls, "bl_description", "") or cls.__doc__ or "").strip()
         assert len(doc) > 20, f"{cls.__name__} has no description"
         rna = getattr(cls, "bl_rna", None)
-        for prop in (rna.properties if rna is not None else []):
+        for prop in rna.properties if rna is not None else []:
             if prop.identifier not in ("rna_type",) and not prop.is_hidden and prop.identifier in getattr(cls, "__annotations__", {}):
                 assert len(prop.description) > 10, f"{cls.__name__}.{prop.identifier} has no description"
     group = dq_skin.nodes.ensure_group()

@@ -7,9 +7,8 @@ Conventions are dqskin's: quaternions ``(w, x, y, z)``, dual quaternions ``(8,)`
 
 from __future__ import annotations
 
-import numpy as np
-
 import dqskin
+import numpy as np
 
 # ---------------------------------------------------------------------------------------------
 # Quaternions

@@ -20,7 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from dqmath import mat3_to_quat, qmul
 
 # Blender's thresholds (armature_deform.cc / math_rotation_c.cc / math_matrix_c.cc).
@@ -93,11 +92,7 @@ def takes_scale_path(basemat, mat):
     mat = np.asarray(mat, dtype=np.float64)
     base_rs = mat @ basemat
     dscale = np.linalg.norm(base_rs[:3, :3], axis=0) - 1.0
-    return (
-        not is_orthonormal(mat[:3, :3])
-        or np.linalg.det(mat) < 0
-        or float(np.dot(dscale, dscale)) > SCALE_TOLERANCE_SQ
-    )
+    return not is_orthonormal(mat[:3, :3]) or np.linalg.det(mat) < 0 or float(np.dot(dscale, dscale)) > SCALE_TOLERANCE_SQ
 
 
 def mat4_to_dquat(basemat, mat):

@@ -3,10 +3,9 @@ skin() validates everything before it writes to ``out``."""
 
 from __future__ import annotations
 
+import dqskin
 import numpy as np
 import pytest
-
-import dqskin
 
 V = 5  # vertices of the small valid setup
 B = 2  # bones
@@ -91,27 +90,87 @@ SKIN_CASES = [
     ("positions 1-D", with_(positions=lambda a: a["positions"].ravel()), {}, ValueError, r"positions must have shape"),
     ("positions transposed", with_(positions=transposed_positions), {}, ValueError, r"positions must be C-contiguous"),
     ("positions strided", with_(positions=strided_positions), {}, ValueError, r"positions must be C-contiguous"),
-    ("deform bone count", with_(deform=lambda a: np.tile(np.eye(4, dtype=np.float32), (B + 1, 1, 1))), {}, ValueError, r"deform must have shape"),
+    (
+        "deform bone count",
+        with_(deform=lambda a: np.tile(np.eye(4, dtype=np.float32), (B + 1, 1, 1))),
+        {},
+        ValueError,
+        r"deform must have shape",
+    ),
     ("deform float64", with_(deform=lambda a: a["deform"].astype(np.float64)), {}, TypeError, r"deform.*float32"),
     ("deform 3x4", with_(deform=lambda a: a["deform"][:, :3, :].copy()), {}, ValueError, r"deform must have shape"),
     ("deform list", with_(deform=lambda a: a["deform"].tolist()), {}, TypeError, r"deform must be a numpy array"),
-    ("deform not contiguous", with_(deform=lambda a: np.ascontiguousarray(a["deform"].transpose(0, 2, 1)).transpose(0, 2, 1)), {}, ValueError, r"deform must be C-contiguous"),
+    (
+        "deform not contiguous",
+        with_(deform=lambda a: np.ascontiguousarray(a["deform"].transpose(0, 2, 1)).transpose(0, 2, 1)),
+        {},
+        ValueError,
+        r"deform must be C-contiguous",
+    ),
     ("rest float64", with_(rest=lambda a: a["rest"].astype(np.float64)), {}, TypeError, r"rest.*float32"),
     ("deform NaN", with_(deform=deform_with(lambda d: _set(d, (1, 0, 3), np.nan))), {}, ValueError, r"deform contains a NaN"),
     ("deform inf", with_(deform=deform_with(lambda d: _set(d, (0, 2, 2), np.inf))), {}, ValueError, r"deform contains a NaN or infinite"),
-    ("deform not affine", with_(deform=deform_with(lambda d: _set(d, (1, 3, 0), 0.5))), {"method": "linear"}, ValueError, r"deform matrix of bone 1 is not affine"),
-    ("deform w != 1", with_(deform=deform_with(lambda d: _set(d, (0, 3, 3), 2.0))), {}, ValueError, r"deform matrix of bone 0 is not affine"),
+    (
+        "deform not affine",
+        with_(deform=deform_with(lambda d: _set(d, (1, 3, 0), 0.5))),
+        {"method": "linear"},
+        ValueError,
+        r"deform matrix of bone 1 is not affine",
+    ),
+    (
+        "deform w != 1",
+        with_(deform=deform_with(lambda d: _set(d, (0, 3, 3), 2.0))),
+        {},
+        ValueError,
+        r"deform matrix of bone 0 is not affine",
+    ),
     ("rest missing dqs", with_(rest=None), {"method": "dual_quaternion"}, ValueError, r"rest is required"),
     ("rest missing blend", with_(rest=None), {"method": "blend"}, ValueError, r"rest is required"),
-    ("rest not invertible", with_(rest=lambda a: np.stack([np.eye(4, dtype=np.float32), np.diag(np.float32([1, 0, 1, 1]))])), {}, ValueError, r"rest matrix of bone 1 is not invertible"),
+    (
+        "rest not invertible",
+        with_(rest=lambda a: np.stack([np.eye(4, dtype=np.float32), np.diag(np.float32([1, 0, 1, 1]))])),
+        {},
+        ValueError,
+        r"rest matrix of bone 1 is not invertible",
+    ),
     ("rest wrong count", with_(rest=lambda a: a["rest"][:1].copy()), {}, ValueError, r"rest must have shape"),
     ("rest NaN", with_(rest=lambda a: np.full((B, 4, 4), np.nan, np.float32)), {}, ValueError, r"rest contains a NaN"),
     ("rest not affine", with_(rest=deform_with(lambda d: _set(d, (0, 3, 1), 1.0))), {}, ValueError, r"rest matrix of bone 0 is not affine"),
-    ("unknown method", valid, {"method": "bbone"}, ValueError, r"method must be a dqskin.Method, one of 'linear', 'dual_quaternion', 'blend', 'centers_of_rotation'"),
-    ("blend with linear", valid, {"method": "linear", "blend": np.full(V, 0.5, np.float32)}, ValueError, r"blend is only used with method='blend'"),
-    ("blend with dqs", valid, {"method": "dual_quaternion", "blend": np.full(V, 0.5, np.float32)}, ValueError, r"blend is only used with method='blend'"),
-    ("blend above 1", valid, {"method": "blend", "blend": np.float32([0, 0.5, 1.5, 1, 0])}, ValueError, r"blend amount\[2\] = 1.5 is outside \[0, 1\]"),
-    ("blend negative", valid, {"method": "blend", "blend": np.float32([0, -0.1, 0, 1, 0])}, ValueError, r"blend amount\[1\].*outside \[0, 1\]"),
+    (
+        "unknown method",
+        valid,
+        {"method": "bbone"},
+        ValueError,
+        r"method must be a dqskin.Method, one of 'linear', 'dual_quaternion', 'blend', 'centers_of_rotation'",
+    ),
+    (
+        "blend with linear",
+        valid,
+        {"method": "linear", "blend": np.full(V, 0.5, np.float32)},
+        ValueError,
+        r"blend is only used with method='blend'",
+    ),
+    (
+        "blend with dqs",
+        valid,
+        {"method": "dual_quaternion", "blend": np.full(V, 0.5, np.float32)},
+        ValueError,
+        r"blend is only used with method='blend'",
+    ),
+    (
+        "blend above 1",
+        valid,
+        {"method": "blend", "blend": np.float32([0, 0.5, 1.5, 1, 0])},
+        ValueError,
+        r"blend amount\[2\] = 1.5 is outside \[0, 1\]",
+    ),
+    (
+        "blend negative",
+        valid,
+        {"method": "blend", "blend": np.float32([0, -0.1, 0, 1, 0])},
+        ValueError,
+        r"blend amount\[1\].*outside \[0, 1\]",
+    ),
     ("blend NaN", valid, {"method": "blend", "blend": np.float32([0, 0, 0, np.nan, 0])}, ValueError, r"blend amount\[3\] = NaN"),
     ("blend wrong length", valid, {"method": "blend", "blend": np.zeros(V + 1, np.float32)}, ValueError, r"blend must have shape"),
     ("blend float64", valid, {"method": "blend", "blend": np.zeros(V)}, TypeError, r"blend.*float32"),
@@ -127,7 +186,13 @@ SKIN_CASES = [
     ("premat not affine", valid, {"premat": not_affine_premat(None)}, ValueError, r"premat is not affine"),
     ("premat wrong shape", valid, {"premat": np.eye(3, dtype=np.float32)}, ValueError, r"premat must have shape"),
     ("premat not numbers", valid, {"premat": "identity"}, TypeError, r"premat must be an array of numbers"),
-    ("postmat inf", valid, {"postmat": np.where(np.eye(4) > 0, np.inf, 0).astype(np.float32)}, ValueError, r"postmat contains a NaN or infinite"),
+    (
+        "postmat inf",
+        valid,
+        {"postmat": np.where(np.eye(4) > 0, np.inf, 0).astype(np.float32)},
+        ValueError,
+        r"postmat contains a NaN or infinite",
+    ),
     ("postmat not affine", valid, {"postmat": not_affine_premat(None)}, ValueError, r"postmat is not affine"),
 ]
 
@@ -257,10 +322,29 @@ F32 = np.float32
         (np.array([0, 1]), np.array([0]), F32([1]), -1, ValueError, r"bone_count must be"),
     ],
     ids=[
-        "offsets-start", "offsets-decrease", "offsets-last-short", "offsets-last-long", "offsets-empty",
-        "bone-too-big", "bone-equal-count", "bone-negative", "zero-bones", "offset-negative",
-        "weight-negative", "weight-nan", "weight-inf", "offsets-float", "bones-float", "weights-float64",
-        "offsets-list", "weights-list", "fewer-weights", "fewer-bones", "offsets-2d", "weights-2d", "bone-count-negative",
+        "offsets-start",
+        "offsets-decrease",
+        "offsets-last-short",
+        "offsets-last-long",
+        "offsets-empty",
+        "bone-too-big",
+        "bone-equal-count",
+        "bone-negative",
+        "zero-bones",
+        "offset-negative",
+        "weight-negative",
+        "weight-nan",
+        "weight-inf",
+        "offsets-float",
+        "bones-float",
+        "weights-float64",
+        "offsets-list",
+        "weights-list",
+        "fewer-weights",
+        "fewer-bones",
+        "offsets-2d",
+        "weights-2d",
+        "bone-count-negative",
     ],
 )
 def test_influences_reject(offsets, bones, weights, bone_count, exc, pattern):
@@ -310,8 +394,21 @@ TWO = np.stack([IDENTITY, np.float32([0, 0, 1, 0, 0, 0.5, 0, 0])])
         (TWO, F32([[1, 1]]), ValueError, r"weights must have shape \(N,\)"),
         ("abc", F32([1]), TypeError, r"transforms must be an array of numbers"),
     ],
-    ids=["empty", "fewer-weights", "more-weights", "negative", "all-zero", "zero-dq", "nan-transform",
-         "nan-weight", "inf-weight", "shape-7", "shape-1d", "weights-2d", "not-numbers"],
+    ids=[
+        "empty",
+        "fewer-weights",
+        "more-weights",
+        "negative",
+        "all-zero",
+        "zero-dq",
+        "nan-transform",
+        "nan-weight",
+        "inf-weight",
+        "shape-7",
+        "shape-1d",
+        "weights-2d",
+        "not-numbers",
+    ],
 )
 def test_blend_rejects(fn, transforms, weights, exc, pattern):
     with pytest.raises(exc, match=pattern):
@@ -411,8 +508,18 @@ LOCALS3 = np.tile(IDENTITY, (3, 1))
         (np.array([-1, 0, 1]), LOCALS3[:, :4].copy(), ValueError, r"locals must have shape \(N, 8\)"),
         (np.array([-1, 0, 1]), np.stack([IDENTITY, np.zeros(8, F32), IDENTITY]), ValueError, r"locals\[1\] has a zero real part"),
     ],
-    ids=["cycle-3", "self-parent", "out-of-range", "parent-equals-count", "fewer-parents", "more-parents",
-         "float-parents", "2d-parents", "locals-shape", "zero-local"],
+    ids=[
+        "cycle-3",
+        "self-parent",
+        "out-of-range",
+        "parent-equals-count",
+        "fewer-parents",
+        "more-parents",
+        "float-parents",
+        "2d-parents",
+        "locals-shape",
+        "zero-local",
+    ],
 )
 def test_forward_kinematics_rejects(parents, locals_, exc, pattern):
     with pytest.raises(exc, match=pattern):
@@ -477,9 +584,21 @@ def test_zero_dualquat_has_no_inverse_and_no_normalization():
         (lambda: dqskin.dual_quats_from_matrices(np.zeros((2, 4, 4))), TypeError, r"matrices must have dtype float32"),
         (lambda: dqskin.dual_quats_from_matrices(np.eye(4, dtype=F32)), ValueError, r"matrices must have shape \(N, 4, 4\)"),
     ],
-    ids=["real-shape", "dual-nan", "zero-rotation", "translation-shape", "translation-inf", "point-shape",
-         "points-float64", "points-shape", "zero-dq-to-matrix", "dqs-float64", "dqs-shape", "matrices-float64",
-         "matrices-2d"],
+    ids=[
+        "real-shape",
+        "dual-nan",
+        "zero-rotation",
+        "translation-shape",
+        "translation-inf",
+        "point-shape",
+        "points-float64",
+        "points-shape",
+        "zero-dq-to-matrix",
+        "dqs-float64",
+        "dqs-shape",
+        "matrices-float64",
+        "matrices-2d",
+    ],
 )
 def test_dualquat_and_conversions_reject(make, exc, pattern):
     with pytest.raises(exc, match=pattern):

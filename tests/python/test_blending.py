@@ -4,10 +4,9 @@ math (dqmath.py) and against the properties Kavan et al. 2006 and Dam et al. 199
 
 from __future__ import annotations
 
+import dqskin
 import numpy as np
 import pytest
-
-import dqskin
 from dqmath import (
     angle_between_quats,
     dq_distance,
@@ -15,9 +14,9 @@ from dqmath import (
     dq_mul,
     dq_to_matrix,
     dq_transform_point,
-    mat3_to_quat,
     dq_translation,
     from_dualquat,
+    mat3_to_quat,
     qconj,
     qmul,
     qnormalize,

@@ -10,10 +10,9 @@ import _thread
 import threading
 import time
 
+import dqskin
 import numpy as np
 import pytest
-
-import dqskin
 import reference
 from dqmath import quat_to_mat3, random_unit_quat
 
@@ -199,7 +198,9 @@ def test_kernel_matches_the_reference_with_scaled_bones_spaces_and_mask():
     postmat = np.linalg.inv(premat).astype(F)
     mask = rng.random(len(positions)).astype(F)
     mask[::7] = 0.0
-    got = dqskin.skin(positions, influences, deform, rest, method="centers_of_rotation", centers=centers, premat=premat, postmat=postmat, mask=mask)
+    got = dqskin.skin(
+        positions, influences, deform, rest, method="centers_of_rotation", centers=centers, premat=premat, postmat=postmat, mask=mask
+    )
     want = reference_skin(positions, centers, influences, deform, rest, premat=premat, postmat=postmat, mask=mask)
     err = np.linalg.norm(got - want, axis=1)
     assert np.all(err <= REL_TOL * (1 + np.linalg.norm(want, axis=1))), err.max()
@@ -219,7 +220,9 @@ def test_rows_without_a_center_are_lbs_and_translations_are_lbs():
     cor = dqskin.skin(positions, influences, shifts, rest, method="cor", centers=centers)
     lbs = dqskin.skin(positions, influences, shifts, rest, method="lbs")
     assert np.allclose(cor, lbs, rtol=0, atol=1e-5)
-    still = dqskin.skin(positions, influences, np.tile(np.eye(4, dtype=F), (len(rest), 1, 1)), rest, method="centers_of_rotation", centers=centers)
+    still = dqskin.skin(
+        positions, influences, np.tile(np.eye(4, dtype=F), (len(rest), 1, 1)), rest, method="centers_of_rotation", centers=centers
+    )
     assert np.allclose(still, positions, rtol=0, atol=1e-5)
 
 
@@ -270,7 +273,16 @@ def test_skin_many_takes_centers_in_a_job():
 )
 def test_bad_precompute_input(kwargs, error, words):
     cyl = dqskin.TwistCylinder(10, 10)
-    args = dict(positions=cyl.positions[:100].copy(), triangles=cyl.triangles[:50], influences=dqskin.Influences(cyl.influences.offsets[:101], cyl.influences.bones[: cyl.influences.offsets[100]], cyl.influences.weights[: cyl.influences.offsets[100]], 2))
+    args = dict(
+        positions=cyl.positions[:100].copy(),
+        triangles=cyl.triangles[:50],
+        influences=dqskin.Influences(
+            cyl.influences.offsets[:101],
+            cyl.influences.bones[: cyl.influences.offsets[100]],
+            cyl.influences.weights[: cyl.influences.offsets[100]],
+            2,
+        ),
+    )
     args.update(kwargs)
     with pytest.raises(error) as e:
         dqskin.centers_of_rotation(**args)
@@ -302,7 +314,13 @@ def test_bad_kernel_input_leaves_out_untouched():
 def test_ctrl_c_stops_a_long_precompute():
     positions, tris, influences, _ = tube(rings=700, segments=48, bones=30, seed=2, length=30.0)
     start = time.perf_counter()
-    dqskin.centers_of_rotation(positions[:2000], tris[:3000] % 2000, dqskin.Influences(influences.offsets[:2001], influences.bones[: influences.offsets[2000]], influences.weights[: influences.offsets[2000]], 30))
+    dqskin.centers_of_rotation(
+        positions[:2000],
+        tris[:3000] % 2000,
+        dqskin.Influences(
+            influences.offsets[:2001], influences.bones[: influences.offsets[2000]], influences.weights[: influences.offsets[2000]], 30
+        ),
+    )
     small = time.perf_counter() - start
     # The interrupt (at 0.2 s) must come while the precompute runs: on a fast machine a longer
     # tube (the precompute's time grows with the vertices; 33,600 of them once took under 0.2 s).

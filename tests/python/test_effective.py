@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+import dqskin
 import numpy as np
 import pytest
-
-import dqskin
 
 F32 = np.float32
 
@@ -96,12 +95,14 @@ def test_b_bone_influences_split_between_segment_joints():
 
 def test_bbone_segment_matrices_follow_blenders_formula():
     rng = np.random.default_rng(3)
+
     def rigid():
         q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
         q *= np.sign(np.linalg.det(q))
         m = np.eye(4)
         m[:3, :3], m[:3, 3] = q, rng.normal(size=3)
         return m
+
     channel, rest = rigid(), rigid()
     pose = np.stack([rigid() for _ in range(4)])
     rest_joints = np.stack([rigid() for _ in range(4)])
@@ -140,7 +141,10 @@ def test_bad_effective_inputs_are_named():
         infl.effective(pos, bbone_segments=np.array([1, 4]), rest=np.stack([np.eye(4, dtype=F32)] * 2), lengths=F32([1, 0]))
     with pytest.raises(ValueError, match="bbone_mapping index must have shape"):
         infl.effective(
-            pos, bbone_segments=np.array([1, 4]), rest=np.stack([np.eye(4, dtype=F32)] * 2), lengths=F32([1, 1]),
+            pos,
+            bbone_segments=np.array([1, 4]),
+            rest=np.stack([np.eye(4, dtype=F32)] * 2),
+            lengths=F32([1, 1]),
             bbone_mapping={1: (np.zeros(3, np.int32), F32([0, 0, 0]))},
         )
     with pytest.raises(ValueError, match="matrix is not affine"):

@@ -22,12 +22,11 @@ import inspect
 import os
 import re
 
+import dqskin
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
-
-import dqskin
 
 EXAMPLES = int(os.environ.get("DQSKIN_FUZZ_EXAMPLES", "60"))
 SEED = int(os.environ.get("DQSKIN_FUZZ_SEED", "20261123"))
@@ -75,20 +74,102 @@ def replaced_on_a_job(positions=POS, deform=DEF, premat=None, postmat=None):
 # fresh arrays.
 def catalogue():
     c = {
-        "skin": (dqskin.skin, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="blend", blend=np.full(V, 0.5, F), blend_factor=0.5, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F), mask=np.ones(V, F), out=out()), ["out"]),
-        "skin.centers_of_rotation": (dqskin.skin, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="centers_of_rotation", centers=POS * 0.5, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F), mask=np.ones(V, F), out=out()), ["out"]),
-        "centers_of_rotation": (dqskin.centers_of_rotation, lambda: dict(positions=POS, triangles=TRI, influences=INF, sigma=0.1, with_mask=True), []),
+        "skin": (
+            dqskin.skin,
+            lambda: dict(
+                positions=POS,
+                influences=INF,
+                deform=DEF,
+                rest=REST,
+                method="blend",
+                blend=np.full(V, 0.5, F),
+                blend_factor=0.5,
+                premat=np.eye(4, dtype=F),
+                postmat=np.eye(4, dtype=F),
+                mask=np.ones(V, F),
+                out=out(),
+            ),
+            ["out"],
+        ),
+        "skin.centers_of_rotation": (
+            dqskin.skin,
+            lambda: dict(
+                positions=POS,
+                influences=INF,
+                deform=DEF,
+                rest=REST,
+                method="centers_of_rotation",
+                centers=POS * 0.5,
+                premat=np.eye(4, dtype=F),
+                postmat=np.eye(4, dtype=F),
+                mask=np.ones(V, F),
+                out=out(),
+            ),
+            ["out"],
+        ),
+        "centers_of_rotation": (
+            dqskin.centers_of_rotation,
+            lambda: dict(positions=POS, triangles=TRI, influences=INF, sigma=0.1, with_mask=True),
+            [],
+        ),
         "skin_many": (dqskin.skin_many, lambda: dict(jobs=[job(out=out()), job(method="dqs")]), []),
-        "SkinJob": (dqskin.SkinJob, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method=dqskin.Method.BLEND, blend=np.full(V, 0.5, F), blend_factor=0.5, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F), mask=np.ones(V, F), out=out()), ["out"]),
-        "SkinJob.centers_of_rotation": (dqskin.SkinJob, lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="cor", centers=POS * 0.5, out=out()), ["out"]),
-        "SkinJob setters": (replaced_on_a_job, lambda: dict(positions=POS.copy(), deform=DEF, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F)), []),
+        "SkinJob": (
+            dqskin.SkinJob,
+            lambda: dict(
+                positions=POS,
+                influences=INF,
+                deform=DEF,
+                rest=REST,
+                method=dqskin.Method.BLEND,
+                blend=np.full(V, 0.5, F),
+                blend_factor=0.5,
+                premat=np.eye(4, dtype=F),
+                postmat=np.eye(4, dtype=F),
+                mask=np.ones(V, F),
+                out=out(),
+            ),
+            ["out"],
+        ),
+        "SkinJob.centers_of_rotation": (
+            dqskin.SkinJob,
+            lambda: dict(positions=POS, influences=INF, deform=DEF, rest=REST, method="cor", centers=POS * 0.5, out=out()),
+            ["out"],
+        ),
+        "SkinJob setters": (
+            replaced_on_a_job,
+            lambda: dict(positions=POS.copy(), deform=DEF, premat=np.eye(4, dtype=F), postmat=np.eye(4, dtype=F)),
+            [],
+        ),
         "Method": (dqskin.Method, lambda: dict(value="Optimized Centers"), []),
-        "Influences": (dqskin.Influences, lambda: dict(offsets=np.array([0, 1, 2]), bones=np.array([0, 1]), weights=np.ones(2, F), bone_count=2), []),
-        "Influences.from_dense": (dqskin.Influences.from_dense, lambda: dict(bones=np.zeros((V, 2), int), weights=np.ones((V, 2), F), bone_count=B), []),
-        "Influences.effective": (lambda **kw: INF.effective(**kw), lambda: dict(positions=POS, premat=np.eye(4, dtype=F), pose=None, envelopes=np.ones((B, 11), F), use_vertex_groups=True, use_envelopes=True), []),
+        "Influences": (
+            dqskin.Influences,
+            lambda: dict(offsets=np.array([0, 1, 2]), bones=np.array([0, 1]), weights=np.ones(2, F), bone_count=2),
+            [],
+        ),
+        "Influences.from_dense": (
+            dqskin.Influences.from_dense,
+            lambda: dict(bones=np.zeros((V, 2), int), weights=np.ones((V, 2), F), bone_count=B),
+            [],
+        ),
+        "Influences.effective": (
+            lambda **kw: INF.effective(**kw),
+            lambda: dict(
+                positions=POS,
+                premat=np.eye(4, dtype=F),
+                pose=None,
+                envelopes=np.ones((B, 11), F),
+                use_vertex_groups=True,
+                use_envelopes=True,
+            ),
+            [],
+        ),
         "set_num_threads": (dqskin.set_num_threads, lambda: dict(threads=dqskin.get_num_threads()), []),
         "DualQuat": (dqskin.DualQuat, lambda: dict(real=KEYS[1], dual=np.zeros(4, F)), []),
-        "DualQuat.from_rotation_translation": (dqskin.DualQuat.from_rotation_translation, lambda: dict(rotation=KEYS[1], translation=np.ones(3, F)), []),
+        "DualQuat.from_rotation_translation": (
+            dqskin.DualQuat.from_rotation_translation,
+            lambda: dict(rotation=KEYS[1], translation=np.ones(3, F)),
+            [],
+        ),
         "DualQuat.from_translation": (dqskin.DualQuat.from_translation, lambda: dict(translation=np.ones(3, F)), []),
         "DualQuat.from_screw": (dqskin.DualQuat.from_screw, lambda: dict(screw=dqskin.Screw((0, 0, 1), (0, 0, 0), 1.0, 0.5)), []),
         "DualQuat.from_matrix": (dqskin.DualQuat.from_matrix, lambda: dict(matrix=DEF[0], check=True, tolerance=1e-4), []),
@@ -106,7 +187,11 @@ def catalogue():
         "squad": (dqskin.squad, lambda: dict(keys=KEYS, u=np.array([0.5, 1.5], F)), []),
         "squad_control_points": (dqskin.squad_control_points, lambda: dict(keys=KEYS), []),
         "forward_kinematics": (dqskin.forward_kinematics, lambda: dict(parents=np.array([-1, 0, 1]), locals=DQS), []),
-        "bbone_segment_matrices": (dqskin.bbone_segment_matrices, lambda: dict(channel=DEF[0], rest=REST[0], pose_joints=rigid(4), rest_joints=rigid(4)), []),
+        "bbone_segment_matrices": (
+            dqskin.bbone_segment_matrices,
+            lambda: dict(channel=DEF[0], rest=REST[0], pose_joints=rigid(4), rest_joints=rigid(4)),
+            [],
+        ),
         "transform_points": (dqskin.transform_points, lambda: dict(matrix=DEF[0], points=POS), []),
         "mesh_volume": (dqskin.mesh_volume, lambda: dict(positions=TETRA, triangles=TRI), []),
         "polygon_area": (dqskin.polygon_area, lambda: dict(points=TETRA[:3]), []),
@@ -119,9 +204,23 @@ def catalogue():
         "spring": (dqskin.spring, lambda: dict(times=TIMES, keys=KEYS, step=1.0, levels=2, iterations=5, key_weight=1.2), []),
         "angular_speeds": (dqskin.angular_speeds, lambda: dict(rotations=KEYS), []),
         "curvature_energy": (dqskin.curvature_energy, lambda: dict(rotations=KEYS), []),
-        "influences_from_deform_groups": (dqskin.influences_from_deform_groups, lambda: dict(offsets=GROUPS[0], groups=GROUPS[1], weights=GROUPS[2], group_to_bone=np.array([0, 1, -1], np.int32), bone_count=2), []),
-        "deform_group_weights": (dqskin.deform_group_weights, lambda: dict(offsets=GROUPS[0], groups=GROUPS[1], weights=GROUPS[2], group=1), []),
-        "shape_key_mix": (dqskin.shape_key_mix, lambda: dict(keys=[(POS, 0, 0.0, False, None), (POS + 1, 0, 0.5, False, np.ones(V, F))], reference=0, out=out(), shown=None), ["out"]),
+        "influences_from_deform_groups": (
+            dqskin.influences_from_deform_groups,
+            lambda: dict(
+                offsets=GROUPS[0], groups=GROUPS[1], weights=GROUPS[2], group_to_bone=np.array([0, 1, -1], np.int32), bone_count=2
+            ),
+            [],
+        ),
+        "deform_group_weights": (
+            dqskin.deform_group_weights,
+            lambda: dict(offsets=GROUPS[0], groups=GROUPS[1], weights=GROUPS[2], group=1),
+            [],
+        ),
+        "shape_key_mix": (
+            dqskin.shape_key_mix,
+            lambda: dict(keys=[(POS, 0, 0.0, False, None), (POS + 1, 0, 0.5, False, np.ones(V, F))], reference=0, out=out(), shown=None),
+            ["out"],
+        ),
         "armature_spaces": (dqskin.armature_spaces, lambda: dict(object_world=DEF[0], armature_world=DEF[1]), []),
         "_MeshMemory": (dqskin._MeshMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
         "_PoseMemory": (dqskin._PoseMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
@@ -145,7 +244,9 @@ scalars = st.one_of(
     st.binary(max_size=8),
     st.sampled_from([object(), dqskin.DualQuat(), INF, {}, (), [], slice(1), Ellipsis, type]),
 )
-dtypes = st.sampled_from([np.float32, np.float64, np.float16, np.int8, np.int32, np.int64, np.uint32, np.uint64, np.bool_, np.complex64, object])
+dtypes = st.sampled_from(
+    [np.float32, np.float64, np.float16, np.int8, np.int32, np.int64, np.uint32, np.uint64, np.bool_, np.complex64, object]
+)
 shapes = st.lists(st.integers(0, 9), min_size=0, max_size=4).map(tuple)
 
 
@@ -168,9 +269,13 @@ def arrays(draw):
             "ones": lambda: np.ones(shape, dtype),
             "random": lambda: (rng.normal(size=shape) * 3).astype(dtype),
             "nan": lambda: np.full(shape, np.nan).astype(dtype),
-            "huge": lambda: np.full(shape, 1e38 if np.dtype(dtype).kind == "f" else np.iinfo(dtype).max if np.dtype(dtype).kind in "iu" else 1).astype(dtype),
+            "huge": lambda: np.full(
+                shape, 1e38 if np.dtype(dtype).kind == "f" else np.iinfo(dtype).max if np.dtype(dtype).kind in "iu" else 1
+            ).astype(dtype),
             "negative": lambda: np.full(shape, -3).astype(dtype),
-            "eye": lambda: (np.broadcast_to(np.eye(shape[-1]) if shape and len(shape) >= 2 and shape[-1] == shape[-2] else np.ones(shape), shape)).astype(dtype),
+            "eye": lambda: (
+                np.broadcast_to(np.eye(shape[-1]) if shape and len(shape) >= 2 and shape[-1] == shape[-2] else np.ones(shape), shape)
+            ).astype(dtype),
         }[fill]()
     view = draw(st.sampled_from(["plain", "transposed", "strided", "readonly", "fortran"]))
     if view == "transposed" and a.ndim >= 2:
@@ -269,7 +374,25 @@ def every_other(x: np.ndarray) -> np.ndarray:
 
 def bad_values(x) -> list:
     """Each kind of bad value, made from the valid value `x` of an argument."""
-    values = [None, object(), "text", b"bytes", 1j, True, 2**70, -(2**70), float("nan"), float("inf"), -1.0, 1e39, 0, [], {}, dqskin.DualQuat(), INF]
+    values = [
+        None,
+        object(),
+        "text",
+        b"bytes",
+        1j,
+        True,
+        2**70,
+        -(2**70),
+        float("nan"),
+        float("inf"),
+        -1.0,
+        1e39,
+        0,
+        [],
+        {},
+        dqskin.DualQuat(),
+        INF,
+    ]
     if isinstance(x, np.ndarray):
         values += [x.astype(np.float64), x.astype(np.complex64), x.astype(object), x.tolist()]
         if x.dtype.kind in "iu":
@@ -336,8 +459,10 @@ def test_the_known_gaps_are_still_open():
 
 def test_the_catalogue_covers_every_public_function():
     public = {
-        n for n in dqskin.__all__
-        if callable(getattr(dqskin, n)) and not n.startswith("__")
+        n
+        for n in dqskin.__all__
+        if callable(getattr(dqskin, n))
+        and not n.startswith("__")
         and not (inspect.isclass(getattr(dqskin, n)) and issubclass(getattr(dqskin, n), BaseException))
     }
     covered = {n.split(".")[0] for n in CATALOGUE}

@@ -25,8 +25,12 @@ DIST = ROOT / "dist"
 ZIPS = sorted(DIST.glob("dq_skin-*.zip"))
 WHEELS = sorted(DIST.glob("dqskin-*.whl"))
 MANIFEST = tomllib.loads((ROOT / "addon" / "dq_skin" / "blender_manifest.toml").read_text())
-TAGS = {"linux-x64": "manylinux2014_x86_64", "windows-x64": "win_amd64", "macos-arm64": "macosx_11_0_arm64",
-        "macos-x64": "macosx_10_12_x86_64"}
+TAGS = {
+    "linux-x64": "manylinux2014_x86_64",
+    "windows-x64": "win_amd64",
+    "macos-arm64": "macosx_11_0_arm64",
+    "macos-x64": "macosx_10_12_x86_64",
+}
 
 
 def module_of(wheel: bytes, into: Path) -> Path:
@@ -94,8 +98,22 @@ def test_the_pypi_wheel_gives_the_numpy_api_without_blender(tmp_path):
     in it imports bpy (the batch commands' launcher does only when run)."""
     wheel = next(w for w in WHEELS if build.platform_of_tag(build.WHEEL_NAME.match(w.name)["tag"]) == build_native.native_platform())
     target = tmp_path / "site"
-    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "--no-deps",
-                    "--target", str(target), str(wheel)], check=True, timeout=300)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+            "--no-deps",
+            "--target",
+            str(target),
+            str(wheel),
+        ],
+        check=True,
+        timeout=300,
+    )
     code = (
         "import sys, numpy as np, dqskin, dqskin.blender, dqskin.pc2, dqskin.demo\n"
         f"assert dqskin.__file__.startswith({str(target)!r}), dqskin.__file__\n"
@@ -105,7 +123,9 @@ def test_the_pypi_wheel_gives_the_numpy_api_without_blender(tmp_path):
         "assert not [m for m in sys.modules if m == 'bpy' or m.startswith(('bpy.', 'bl_ext'))]\n"
         "print('ok')\n"
     )
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env={"PYTHONPATH": str(target), "PATH": ""})
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env={"PYTHONPATH": str(target), "PATH": ""}
+    )
     assert r.returncode == 0 and r.stdout.strip() == "ok", r.stdout + r.stderr
 
 

@@ -11,7 +11,6 @@ import time
 
 import numpy as np
 import pytest
-
 from dqskin import pc2
 
 
@@ -71,6 +70,7 @@ def test_bad_files_and_interrupted_writes(tmp_path):
 
 
 # -- defensive reading and recognisable temporaries ------------------------------------------------
+
 
 def raw_pc2(path, points, start, rate, samples, data_floats=None):
     with open(path, "wb") as f:

@@ -3,18 +3,15 @@ fast, with nothing left behind (threads, memory, panics)."""
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
+import dqskin
 import numpy as np
 import pytest
-
-import dqskin
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -52,7 +49,9 @@ def test_a_sane_thread_count_still_works():
         dqskin.set_num_threads(before)
 
 
-@pytest.mark.parametrize("kw, name", [({"rings": 10**6, "segments": 10**6}, "rings × segments"), ({"rings": 10**12}, "rings"), ({"segments": 2**63}, "segments")])
+@pytest.mark.parametrize(
+    "kw, name", [({"rings": 10**6, "segments": 10**6}, "rings × segments"), ({"rings": 10**12}, "rings"), ({"segments": 2**63}, "segments")]
+)
 def test_huge_cylinders_are_refused_before_allocating(kw, name):
     t = time.perf_counter()
     with pytest.raises(ValueError, match=name):

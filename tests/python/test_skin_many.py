@@ -3,10 +3,9 @@ would skin it; jobs checked when built and when their per-frame inputs are repla
 
 from __future__ import annotations
 
+import dqskin
 import numpy as np
 import pytest
-
-import dqskin
 
 F = np.float32
 
@@ -20,8 +19,12 @@ def mesh(rng, v: int, bones: int, k: int = 4):
 
 
 def pose(rng, bones: int) -> np.ndarray:
-    deform = np.stack([dqskin.DualQuat.from_rotation_translation(q / np.linalg.norm(q), t).to_matrix()
-                       for q, t in zip(rng.normal(size=(bones, 4)).astype(F), rng.normal(size=(bones, 3)).astype(F))])
+    deform = np.stack(
+        [
+            dqskin.DualQuat.from_rotation_translation(q / np.linalg.norm(q), t).to_matrix()
+            for q, t in zip(rng.normal(size=(bones, 4)).astype(F), rng.normal(size=(bones, 3)).astype(F))
+        ]
+    )
     return np.ascontiguousarray(deform, F)
 
 

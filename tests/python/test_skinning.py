@@ -7,12 +7,11 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from functools import lru_cache
-
-import numpy as np
-import pytest
+from functools import cache
 
 import dqskin
+import numpy as np
+import pytest
 import reference
 from dqmath import qmul, quat_from_axis_angle, quat_to_mat3, random_axis, random_unit_quat
 
@@ -107,7 +106,7 @@ def make_influences(rng, vertices, bones):
     return offsets, b.astype(np.int64), w.astype(np.float32)
 
 
-@lru_cache(maxsize=None)
+@cache
 def case(seed):
     rng = np.random.default_rng(seed)
     bones = int(rng.integers(6, 10))
@@ -157,13 +156,20 @@ def influences_of(c):
     return dqskin.Influences(c["offsets"], c["bones"], c["weights"], len(c["deform"]))
 
 
-@lru_cache(maxsize=None)
+@cache
 def reference_result(seed, options, dqs):
     c = case(seed)
     stats = reference.Stats()
     out = reference.skin(
-        c["positions"], c["offsets"], c["bones"], c["weights"], c["deform"], c["rest"],
-        dqs=dqs, stats=stats, **options_for(c, options),
+        c["positions"],
+        c["offsets"],
+        c["bones"],
+        c["weights"],
+        c["deform"],
+        c["rest"],
+        dqs=dqs,
+        stats=stats,
+        **options_for(c, options),
     )
     return out, stats
 
@@ -243,8 +249,14 @@ def test_blend_matches_reference(seed, options):
     c = case(seed)
     factor = 0.8
     got = dqskin.skin(
-        c["positions"], influences_of(c), c["deform"], c["rest"], method="blend",
-        blend=c["blend_amount"], blend_factor=factor, **options_for(c, options),
+        c["positions"],
+        influences_of(c),
+        c["deform"],
+        c["rest"],
+        method="blend",
+        blend=c["blend_amount"],
+        blend_factor=factor,
+        **options_for(c, options),
     )
     lbs, _ = reference_result(seed, options, False)
     dq, _ = reference_result(seed, options, True)
@@ -428,7 +440,9 @@ def test_empty_mesh_and_rig(method):
     np.testing.assert_array_equal(dqskin.skin(positions, no_bones, none, none, method=method), positions)
     shift = np.eye(4, dtype=np.float32)
     shift[:3, 3] = [0, 0, 1]
-    np.testing.assert_array_equal(dqskin.skin(positions, no_bones, none, none, method=method, postmat=shift), positions + np.float32([0, 0, 1]))
+    np.testing.assert_array_equal(
+        dqskin.skin(positions, no_bones, none, none, method=method, postmat=shift), positions + np.float32([0, 0, 1])
+    )
 
 
 # ---------------------------------------------------------------------------------------------

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+import dqskin
 import numpy as np
 import pytest
-
-import dqskin
 
 F32 = np.float32
 
@@ -18,18 +17,26 @@ def axis_angle(axis, angle):
 def qmul(a, b):
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
 
 
 TIMES = F32([1, 11, 17, 31, 37])
-KEYS = np.stack([
-    axis_angle([1, 0, 0], 0.0),
-    axis_angle([1, 0, 0], 1.2),
-    qmul(axis_angle([1, 0, 0], 1.2), axis_angle([0, 1, 0], 1.4)).astype(F32),
-    qmul(axis_angle([0, 0, 1], -0.8), axis_angle([0, 1, 0], 0.6)).astype(F32),
-    axis_angle([0, 0, 1], 0.9),
-])
+KEYS = np.stack(
+    [
+        axis_angle([1, 0, 0], 0.0),
+        axis_angle([1, 0, 0], 1.2),
+        qmul(axis_angle([1, 0, 0], 1.2), axis_angle([0, 1, 0], 1.4)).astype(F32),
+        qmul(axis_angle([0, 0, 1], -0.8), axis_angle([0, 1, 0], 0.6)).astype(F32),
+        axis_angle([0, 0, 1], 0.9),
+    ]
+)
 
 
 @pytest.mark.parametrize("method", ["slerp", "squad"])
@@ -50,6 +57,7 @@ def test_squad_is_c1_in_time_and_slerp_is_not():
     def velocity_jump(method, t, h=0.02):
         """|one-sided angular speed before t − after t| in rad/frame, each Richardson-extrapolated
         (2·v(h) − v(2h)) since the acceleration jumps at keys."""
+
         def rot(x):
             return dqskin.sample_rotations(TIMES, KEYS, F32([x]), method=method)[0]
 
@@ -59,6 +67,7 @@ def test_squad_is_c1_in_time_and_slerp_is_not():
         left = 2 * speed(rot(t - h), rot(t), h) - speed(rot(t - 2 * h), rot(t), 2 * h)
         right = 2 * speed(rot(t), rot(t + h), h) - speed(rot(t), rot(t + 2 * h), 2 * h)
         return abs(left - right)
+
     # Tolerance: f32 round-off over 0.02-frame differences (~1e-5 rad / 0.02).
     for t in TIMES[1:-1]:
         assert velocity_jump("squad", float(t)) < 2e-3, t

@@ -19,8 +19,9 @@ from run_blenders import VERSIONS  # noqa: E402  (the Blender releases the Linux
 
 def test_the_workflow_is_a_valid_github_actions_workflow():
     checker = Path(sys.executable).with_name("check-jsonschema")
-    r = subprocess.run([str(checker), "--builtin-schema", "vendor.github-workflows", str(WORKFLOW)],
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [str(checker), "--builtin-schema", "vendor.github-workflows", str(WORKFLOW)], capture_output=True, text=True, timeout=120
+    )
     assert r.returncode == 0, r.stdout + r.stderr
 
 

@@ -120,7 +120,8 @@ pub unsafe fn read_deform_verts(
         for v in 0..n {
             let dv = dverts + v * layout.dvert_size;
             let count: i32 = read(dv + layout.dvert_totweight);
-            if !(0..MAX_WEIGHTS_PER_VERTEX).contains(&count) || (count > 0 && read::<usize>(dv + layout.dvert_dw) == 0) {
+            if !(0..MAX_WEIGHTS_PER_VERTEX).contains(&count) || (count > 0 && read::<usize>(dv + layout.dvert_dw) == 0)
+            {
                 return Err(ReadError::Implausible("weights per vertex"));
             }
             total += count as usize;
@@ -156,11 +157,32 @@ mod tests {
         dna.opaque("BLI_mempool", 0).opaque("CustomDataExternal", 0).opaque("ImplicitSharingInfoHandle", 0);
         dna.strukt(
             "CustomDataLayer",
-            &[("int", "type"), ("int", "offset"), ("int", "flag"), ("int", "active"), ("int", "active_rnd"), ("int", "active_clone"), ("int", "active_mask"), ("int", "uid"), ("char", "name[68]"), ("char", "_pad1[4]"), ("void", "*data"), ("ImplicitSharingInfoHandle", "*sharing_info")],
+            &[
+                ("int", "type"),
+                ("int", "offset"),
+                ("int", "flag"),
+                ("int", "active"),
+                ("int", "active_rnd"),
+                ("int", "active_clone"),
+                ("int", "active_mask"),
+                ("int", "uid"),
+                ("char", "name[68]"),
+                ("char", "_pad1[4]"),
+                ("void", "*data"),
+                ("ImplicitSharingInfoHandle", "*sharing_info"),
+            ],
         );
         dna.strukt(
             "CustomData",
-            &[("CustomDataLayer", "*layers"), ("int", "typemap[53]"), ("int", "totlayer"), ("int", "maxlayer"), ("int", "totsize"), ("BLI_mempool", "*pool"), ("CustomDataExternal", "*external")],
+            &[
+                ("CustomDataLayer", "*layers"),
+                ("int", "typemap[53]"),
+                ("int", "totlayer"),
+                ("int", "maxlayer"),
+                ("int", "totsize"),
+                ("BLI_mempool", "*pool"),
+                ("CustomDataExternal", "*external"),
+            ],
         );
         dna.strukt("MDeformWeight", &[("int", "def_nr"), ("float", "weight")]);
         dna.strukt("MDeformVert", &[("MDeformWeight", "*dw"), ("int", "totweight"), ("int", "flag")]);
@@ -205,8 +227,16 @@ mod tests {
     }
 
     fn fake(weights: &[Vec<(u32, f32)>], with_layer: bool) -> (FakeMesh, Vec<Layer>, Vec<DVert>, Vec<Vec<Weight>>) {
-        let lists: Vec<Vec<Weight>> = weights.iter().map(|l| l.iter().map(|&(g, w)| Weight { def_nr: g, weight: w }).collect()).collect();
-        let dverts: Vec<DVert> = lists.iter().map(|l| DVert { dw: if l.is_empty() { core::ptr::null() } else { l.as_ptr() }, totweight: l.len() as i32, flag: 0 }).collect();
+        let lists: Vec<Vec<Weight>> =
+            weights.iter().map(|l| l.iter().map(|&(g, w)| Weight { def_nr: g, weight: w }).collect()).collect();
+        let dverts: Vec<DVert> = lists
+            .iter()
+            .map(|l| DVert {
+                dw: if l.is_empty() { core::ptr::null() } else { l.as_ptr() },
+                totweight: l.len() as i32,
+                flag: 0,
+            })
+            .collect();
         let mut layers = vec![Layer { ty: 49, rest: [0; 100], data: core::ptr::null(), sharing: 0 }];
         if with_layer {
             layers.push(Layer { ty: CD_MDEFORMVERT, rest: [0; 100], data: dverts.as_ptr(), sharing: 0 });
@@ -215,7 +245,15 @@ mod tests {
             pad: [0; 8],
             verts: weights.len() as i32,
             flag: 0,
-            vdata: CData { layers: layers.as_ptr(), typemap: [0; 53], totlayer: layers.len() as i32, maxlayer: 0, totsize: 0, pool: 0, external: 0 },
+            vdata: CData {
+                layers: layers.as_ptr(),
+                typemap: [0; 53],
+                totlayer: layers.len() as i32,
+                maxlayer: 0,
+                totsize: 0,
+                pool: 0,
+                external: 0,
+            },
         };
         (mesh, layers, dverts, lists)
     }
@@ -261,7 +299,10 @@ mod tests {
         bad.vdata.totlayer = -3;
         // SAFETY: a live mesh of this layout; the bad count is refused before anything is read
         // through it.
-        assert_eq!(unsafe { read_deform_verts(&layout, &bad as *const _ as usize, 1) }, Err(ReadError::Implausible("layer count")));
+        assert_eq!(
+            unsafe { read_deform_verts(&layout, &bad as *const _ as usize, 1) },
+            Err(ReadError::Implausible("layer count"))
+        );
     }
 
     #[test]
@@ -277,6 +318,9 @@ mod tests {
         m.vdata.totlayer = 1;
         // SAFETY: a live mesh of this layout whose one layer points at live vertices; the bad
         // count is refused before their weights are read.
-        assert_eq!(unsafe { read_deform_verts(&layout, &m as *const _ as usize, 2) }, Err(ReadError::Implausible("weights per vertex")));
+        assert_eq!(
+            unsafe { read_deform_verts(&layout, &m as *const _ as usize, 2) },
+            Err(ReadError::Implausible("weights per vertex"))
+        );
     }
 }

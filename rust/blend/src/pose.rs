@@ -153,7 +153,11 @@ impl PoseLayout {
 /// else touches it). The object type, the channel count and every B-Bone segment count are
 /// checked before anything they lead to is followed, so a mismatched layout is reported rather
 /// than followed far.
-pub unsafe fn read_pose(layout: &PoseLayout, object: usize, expected_channels: usize) -> Result<Vec<PoseChannel>, ReadError> {
+pub unsafe fn read_pose(
+    layout: &PoseLayout,
+    object: usize,
+    expected_channels: usize,
+) -> Result<Vec<PoseChannel>, ReadError> {
     if object == 0 {
         return Err(ReadError::Null);
     }
@@ -174,7 +178,9 @@ pub unsafe fn read_pose(layout: &PoseLayout, object: usize, expected_channels: u
         }
         let bones_by_name = match layout.bone_link {
             BoneLink::Pointer { .. } => None,
-            BoneLink::ByName { object_data, .. } => Some(bones_by_name(layout, read(object + object_data), expected_channels)?),
+            BoneLink::ByName { object_data, .. } => {
+                Some(bones_by_name(layout, read(object + object_data), expected_channels)?)
+            }
         };
         let mut channels = Vec::with_capacity(expected_channels);
         let mut chan: usize = read(pose + layout.chanbase_first);
@@ -202,7 +208,11 @@ pub unsafe fn read_pose(layout: &PoseLayout, object: usize, expected_channels: u
 ///
 /// # Safety
 /// As [`read_pose`]; `armature` is read from the live object.
-unsafe fn bones_by_name<'a>(layout: &PoseLayout, armature: usize, limit: usize) -> Result<HashMap<&'a [u8], usize>, ReadError> {
+unsafe fn bones_by_name<'a>(
+    layout: &PoseLayout,
+    armature: usize,
+    limit: usize,
+) -> Result<HashMap<&'a [u8], usize>, ReadError> {
     let BoneLink::ByName { bonebase_first, bone_next, childbase_first, .. } = layout.bone_link else {
         unreachable!("only for the by-name link")
     };
@@ -250,7 +260,9 @@ unsafe fn read_channel(layout: &PoseLayout, chan: usize, bone: usize) -> Result<
         }
         let segments: i16 = read(bone + layout.bone_segments);
         let cache_segments: i32 = read(chan + layout.runtime_segments);
-        if !(0..=MAX_BBONE_SEGMENTS as i16).contains(&segments) || !(0..=MAX_BBONE_SEGMENTS as i32).contains(&cache_segments) {
+        if !(0..=MAX_BBONE_SEGMENTS as i16).contains(&segments)
+            || !(0..=MAX_BBONE_SEGMENTS as i32).contains(&cache_segments)
+        {
             return Err(ReadError::Implausible("B-Bone segment count"));
         }
         let segments = segments as u32;
@@ -294,7 +306,9 @@ unsafe fn read_bbone_cache(layout: &PoseLayout, chan: usize, segments: usize) ->
         if rest == 0 || deform == 0 {
             return Err(ReadError::Implausible("B-Bone cache without matrices"));
         }
-        let mats = |base: usize, range: core::ops::Range<usize>| -> Vec<Mat4> { range.map(|i| read_mat4(base + i * MAT4_SIZE)).collect() };
+        let mats = |base: usize, range: core::ops::Range<usize>| -> Vec<Mat4> {
+            range.map(|i| read_mat4(base + i * MAT4_SIZE)).collect()
+        };
         let boundaries: usize = read(chan + layout.runtime_boundaries);
         let boundaries = if boundaries == 0 {
             Vec::new()

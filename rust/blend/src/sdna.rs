@@ -114,7 +114,8 @@ impl<'a> Reader<'a> {
     fn cstr(&mut self, what: &'static str) -> Result<&'a str, DnaError> {
         let rest = &self.data[self.at.min(self.data.len())..];
         let len = rest.iter().position(|&b| b == 0).ok_or(DnaError::Truncated(what))?;
-        let s = core::str::from_utf8(&rest[..len]).map_err(|_| DnaError::Inconsistent(format!("{what} is not UTF-8")))?;
+        let s =
+            core::str::from_utf8(&rest[..len]).map_err(|_| DnaError::Inconsistent(format!("{what} is not UTF-8")))?;
         self.at += len + 1;
         Ok(s)
     }
@@ -383,7 +384,10 @@ mod tests {
             assert_eq!(sdna.field("Inner", &["p"]).unwrap(), Field { offset: 8, size: 8, pointer: true });
             assert_eq!(sdna.field("Outer", &["name"]).unwrap(), Field { offset: 0, size: 6, pointer: false });
             assert_eq!(sdna.field("Outer", &["in"]).unwrap().offset, 8);
-            assert_eq!(sdna.field("Outer", &["renamed", "list"]).unwrap(), Field { offset: 24, size: 8, pointer: true });
+            assert_eq!(
+                sdna.field("Outer", &["renamed", "list"]).unwrap(),
+                Field { offset: 24, size: 8, pointer: true }
+            );
         }
     }
 
@@ -412,7 +416,10 @@ mod tests {
     fn bad_files_are_refused_without_panicking() {
         let good = file_with(&sample_dna(), false);
         assert!(matches!(Sdna::from_blend_file(b"hello"), Err(DnaError::NotABlendFile(_))));
-        assert!(matches!(Sdna::from_blend_file(&[0x1f, 0x8b, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]), Err(DnaError::NotABlendFile(_))));
+        assert!(matches!(
+            Sdna::from_blend_file(&[0x1f, 0x8b, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]),
+            Err(DnaError::NotABlendFile(_))
+        ));
         let mut small = good.clone();
         small[7] = b'_';
         assert!(matches!(Sdna::from_blend_file(&small), Err(DnaError::Unsupported(_))));

@@ -50,7 +50,8 @@ impl Dna {
             }
             let t = self.type_index(ty);
             let unit = if pointer { 8 } else { self.types[t as usize].1 as usize };
-            let count: usize = field.split('[').skip(1).map(|d| d.trim_end_matches(']').parse::<usize>().unwrap()).product();
+            let count: usize =
+                field.split('[').skip(1).map(|d| d.trim_end_matches(']').parse::<usize>().unwrap()).product();
             size += unit * count;
             entries.push((t, self.name_index(field)));
         }

@@ -25,18 +25,16 @@ impl core::fmt::Display for BlendError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             BlendError::Empty => write!(f, "no transforms to blend"),
-            BlendError::LengthMismatch { transforms, weights } => write!(
-                f,
-                "{transforms} transforms but {weights} weights: there must be one weight per transform"
-            ),
+            BlendError::LengthMismatch { transforms, weights } => {
+                write!(f, "{transforms} transforms but {weights} weights: there must be one weight per transform")
+            }
             BlendError::InvalidWeight { index } => {
                 write!(f, "weight {index} is negative or not finite")
             }
             BlendError::ZeroWeightSum => write!(f, "the weights sum to zero"),
-            BlendError::NotATransform { index } => write!(
-                f,
-                "transform {index} has a zero or non-finite real part and is not a rigid transform"
-            ),
+            BlendError::NotATransform { index } => {
+                write!(f, "transform {index} has a zero or non-finite real part and is not a rigid transform")
+            }
         }
     }
 }
@@ -98,12 +96,7 @@ pub fn dib(
         let x = tangent_mean(&b, &units, &weights);
         let residual = x.tangent_length();
         if !(residual >= precision) || iterations >= max_iterations {
-            return Ok(DibResult {
-                blend: b,
-                iterations,
-                converged: !(residual >= precision),
-                residual,
-            });
+            return Ok(DibResult { blend: b, iterations, converged: !(residual >= precision), residual });
         }
         b = (b * x.exp()).normalize_or_identity();
         iterations += 1;
@@ -140,18 +133,12 @@ fn dlb_prepared(units: &[DualQuat], weights: &[f32]) -> DualQuat {
 }
 
 /// Normalizes transforms and weights, or says which input is bad.
-fn prepare(
-    transforms: &[DualQuat],
-    weights: &[f32],
-) -> Result<(Vec<DualQuat>, Vec<f32>), BlendError> {
+fn prepare(transforms: &[DualQuat], weights: &[f32]) -> Result<(Vec<DualQuat>, Vec<f32>), BlendError> {
     if transforms.is_empty() {
         return Err(BlendError::Empty);
     }
     if transforms.len() != weights.len() {
-        return Err(BlendError::LengthMismatch {
-            transforms: transforms.len(),
-            weights: weights.len(),
-        });
+        return Err(BlendError::LengthMismatch { transforms: transforms.len(), weights: weights.len() });
     }
     let mut total = 0.0f64;
     for (index, &w) in weights.iter().enumerate() {

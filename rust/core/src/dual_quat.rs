@@ -107,10 +107,7 @@ impl DualQuat {
     /// Inverse of [`Self::to_array_wxyz`].
     #[inline]
     pub fn from_array_wxyz(a: [f32; 8]) -> Self {
-        Self {
-            real: Quat::from_xyzw(a[1], a[2], a[3], a[0]),
-            dual: Quat::from_xyzw(a[5], a[6], a[7], a[4]),
-        }
+        Self { real: Quat::from_xyzw(a[1], a[2], a[3], a[0]), dual: Quat::from_xyzw(a[5], a[6], a[7], a[4]) }
     }
 
     /// Rotation `rotation` (any non-zero quaternion; it is normalized) followed by translation `t`.
@@ -219,8 +216,7 @@ impl DualQuat {
 
     /// Whether this is a unit dual quaternion within `tolerance`.
     pub fn is_unit(&self, tolerance: f32) -> bool {
-        (self.real.length_squared() - 1.0).abs() <= tolerance
-            && self.real.dot(self.dual).abs() <= tolerance
+        (self.real.length_squared() - 1.0).abs() <= tolerance && self.real.dot(self.dual).abs() <= tolerance
     }
 
     /// Divides by the dual-number norm, giving a unit dual quaternion, or `None` when the real
@@ -328,10 +324,7 @@ impl DualQuat {
         let moment = screw.moment - axis * axis.dot(screw.moment);
         let (sin_h, cos_h) = (0.5 * screw.angle).sin_cos();
         let k = 0.5 * screw.pitch;
-        Self {
-            real: quat(cos_h, axis * sin_h),
-            dual: quat(-k * sin_h, moment * sin_h + axis * (k * cos_h)),
-        }
+        Self { real: quat(cos_h, axis * sin_h), dual: quat(-k * sin_h, moment * sin_h + axis * (k * cos_h)) }
     }
 
     /// Logarithm of a unit dual quaternion: the pure dual quaternion `ŝ·θ̂/2` (zero scalar
@@ -353,13 +346,10 @@ impl DualQuat {
         }
         let sc = sinc(h);
         let a = v / sc; // axis·h
-        // b = moment·h + axis·pitch/2 with moment = ½·(t × axis + cot(h)·t⊥), rewritten in terms of
-        // v = axis·sin h so that it stays smooth as h → 0 (where b → t/2):
-        // b = ½·[(t × v)/sinc(h) + h·cot(h)·t + g(h)·(t·v)·v], g(h) = (1 − h·cot h)/sin²h.
-        let b = 0.5
-            * (t.cross(v) / sc
-                + t * x_cot_x(h)
-                + v * (one_minus_x_cot_x_over_sin_sq(h) * t.dot(v)));
+                        // b = moment·h + axis·pitch/2 with moment = ½·(t × axis + cot(h)·t⊥), rewritten in terms of
+                        // v = axis·sin h so that it stays smooth as h → 0 (where b → t/2):
+                        // b = ½·[(t × v)/sinc(h) + h·cot(h)·t + g(h)·(t·v)·v], g(h) = (1 − h·cot h)/sin²h.
+        let b = 0.5 * (t.cross(v) / sc + t * x_cot_x(h) + v * (one_minus_x_cot_x_over_sin_sq(h) * t.dot(v)));
         Self { real: pure(a), dual: pure(b) }
     }
 
@@ -373,10 +363,7 @@ impl DualQuat {
         let cos_h = h.cos();
         let sc = sinc(h);
         let ab = a.dot(b);
-        Self {
-            real: quat(cos_h, a * sc),
-            dual: quat(-ab * sc, b * sc + a * (ab * cos_minus_sinc_over_sq(h))),
-        }
+        Self { real: quat(cos_h, a * sc), dual: quat(-ab * sc, b * sc + a * (ab * cos_minus_sinc_over_sq(h))) }
     }
 
     /// `q^t = exp(t·log q)` for a unit dual quaternion: the screw motion scaled by `t` (same axis,
@@ -398,10 +385,7 @@ impl Mul for DualQuat {
     /// Composition: `(a·b)` applies `b` first, then `a` (like matrices).
     #[inline]
     fn mul(self, rhs: Self) -> Self {
-        Self {
-            real: self.real * rhs.real,
-            dual: self.real * rhs.dual + self.dual * rhs.real,
-        }
+        Self { real: self.real * rhs.real, dual: self.real * rhs.dual + self.dual * rhs.real }
     }
 }
 
@@ -475,11 +459,7 @@ pub(crate) fn is_orthonormal(m: &Mat3, tol: f32) -> bool {
 /// `mat4_to_quat` computes it: a matrix with a non-finite determinant gives the identity, one with
 /// a negative determinant is negated, a zero matrix gives the identity, and `w ≥ 0`.
 pub(crate) fn rotation_from_mat3(m: &Mat3) -> Quat {
-    let mut m = Mat3::from_cols(
-        normalize_or_zero(m.x_axis),
-        normalize_or_zero(m.y_axis),
-        normalize_or_zero(m.z_axis),
-    );
+    let mut m = Mat3::from_cols(normalize_or_zero(m.x_axis), normalize_or_zero(m.y_axis), normalize_or_zero(m.z_axis));
     let det = m.determinant();
     if !det.is_finite() {
         return Quat::IDENTITY;

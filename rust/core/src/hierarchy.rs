@@ -21,10 +21,9 @@ pub enum HierarchyError {
 impl core::fmt::Display for HierarchyError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            HierarchyError::LengthMismatch { parents, locals } => write!(
-                f,
-                "{parents} parents but {locals} local transforms: there must be one parent per bone"
-            ),
+            HierarchyError::LengthMismatch { parents, locals } => {
+                write!(f, "{parents} parents but {locals} local transforms: there must be one parent per bone")
+            }
             HierarchyError::ParentOutOfRange { bone, parent } => {
                 write!(f, "bone {bone} has parent {parent}, which is not a bone index (use -1 for a root)")
             }
@@ -41,10 +40,7 @@ impl std::error::Error for HierarchyError {}
 /// Global transforms from local ones. `parents[i]` is the index of bone `i`'s parent, or any
 /// negative number for a root. Bones may come in any order; a parent need not precede its
 /// children.
-pub fn forward_kinematics(
-    parents: &[i64],
-    locals: &[DualQuat],
-) -> Result<Vec<DualQuat>, HierarchyError> {
+pub fn forward_kinematics(parents: &[i64], locals: &[DualQuat]) -> Result<Vec<DualQuat>, HierarchyError> {
     let n = parents.len();
     if n != locals.len() {
         return Err(HierarchyError::LengthMismatch { parents: n, locals: locals.len() });
@@ -129,16 +125,10 @@ mod tests {
     #[test]
     fn rejects_bad_hierarchies() {
         let l = [DualQuat::IDENTITY; 3];
-        assert_eq!(
-            forward_kinematics(&[-1, 5, 0], &l),
-            Err(HierarchyError::ParentOutOfRange { bone: 1, parent: 5 })
-        );
+        assert_eq!(forward_kinematics(&[-1, 5, 0], &l), Err(HierarchyError::ParentOutOfRange { bone: 1, parent: 5 }));
         assert!(matches!(forward_kinematics(&[1, 2, 0], &l), Err(HierarchyError::Cycle { .. })));
         assert!(matches!(forward_kinematics(&[-1, 1, 0], &l), Err(HierarchyError::Cycle { bone: 1 })));
-        assert_eq!(
-            forward_kinematics(&[-1, 0], &l),
-            Err(HierarchyError::LengthMismatch { parents: 2, locals: 3 })
-        );
+        assert_eq!(forward_kinematics(&[-1, 0], &l), Err(HierarchyError::LengthMismatch { parents: 2, locals: 3 }));
         assert_eq!(
             forward_kinematics(&[-1, 0, 1], &[DualQuat::IDENTITY, DualQuat::ZERO, DualQuat::IDENTITY]),
             Err(HierarchyError::NotATransform { bone: 1 })

@@ -29,13 +29,17 @@ pub mod rigs;
 mod scalar;
 pub mod shape_keys;
 pub mod skin;
-pub mod tracks;
 #[cfg(test)]
 mod test_support;
+pub mod tracks;
 
 pub use blend::{dib, dlb, sclerp, BlendError, DibResult};
 pub use dual_quat::{DualNumber, DualQuat, NotRigid, Screw};
 pub use glam;
 pub use hierarchy::{forward_kinematics, HierarchyError};
 pub use quat_interp::{make_signs_continuous, slerp, Squad};
-pub use skin::{armature_spaces, centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_with_progress, deform_group_weights, kernel_copy, skin, skin_many, BBone, Centers, DeformGroups, ManyJob, MAX_BONES, MAX_INFLUENCES_PER_VERTEX, Effective, Envelope, Influence, Influences, Method, Pose, SkinError, SkinOptions};
+pub use skin::{
+    armature_spaces, centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_with_progress,
+    deform_group_weights, kernel_copy, skin, skin_many, BBone, Centers, DeformGroups, Effective, Envelope, Influence,
+    Influences, ManyJob, Method, Pose, SkinError, SkinOptions, MAX_BONES, MAX_INFLUENCES_PER_VERTEX,
+};

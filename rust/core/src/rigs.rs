@@ -32,13 +32,7 @@ pub const MAX_VERTICES: usize = 1 << 24;
 impl TwistCylinder {
     /// `rings ≥ 2` rings of `segments ≥ 3` vertices. Weights blend linearly from the lower bone
     /// to the upper one over the middle `blend_zone` fraction of the length.
-    pub fn new(
-        rings: usize,
-        segments: usize,
-        length: f32,
-        radius: f32,
-        blend_zone: f32,
-    ) -> Result<Self, SkinError> {
+    pub fn new(rings: usize, segments: usize, length: f32, radius: f32, blend_zone: f32) -> Result<Self, SkinError> {
         let bad = |msg: &str| Err(SkinError::InvalidInfluences(msg.to_string()));
         if rings < 2 || segments < 3 {
             return bad("a cylinder needs at least 2 rings of 3 segments");
@@ -209,7 +203,8 @@ impl Creature {
             });
         }
         // Tube spacing so the total is about `vertices`.
-        let surface: f32 = chains.iter().map(|c| chain_length(&c.joints) * core::f32::consts::PI * (c.radius.0 + c.radius.1)).sum();
+        let surface: f32 =
+            chains.iter().map(|c| chain_length(&c.joints) * core::f32::consts::PI * (c.radius.0 + c.radius.1)).sum();
         let h = (surface / vertices.max(1) as f32).sqrt();
 
         let mut rest = Vec::new();
@@ -234,7 +229,8 @@ impl Creature {
             // Bone k of the weighting chain covers arc length [k, k+1]·(bone length); the bone it
             // hangs from comes first, centred half a bone before the tube starts.
             let bone_length = length / bones as f32;
-            let mut weighting: Vec<(u32, f32)> = (0..bones).map(|b| ((first + b) as u32, (b as f32 + 0.5) * bone_length)).collect();
+            let mut weighting: Vec<(u32, f32)> =
+                (0..bones).map(|b| ((first + b) as u32, (b as f32 + 0.5) * bone_length)).collect();
             if let Some(p) = chain.attached_to {
                 weighting.insert(0, (p as u32, -0.5 * bone_length));
             }
@@ -249,7 +245,8 @@ impl Creature {
                     let p = centre + radius * (phi.cos() * u + phi.sin() * v);
                     positions.push(p.to_array());
                     // Painted weights drift a little around the tube.
-                    let s_painted = s + 0.12 * bone_length * (2.0 * phi).sin() + 0.05 * bone_length * (3.0 * phi + s).cos();
+                    let s_painted =
+                        s + 0.12 * bone_length * (2.0 * phi).sin() + 0.05 * bone_length * (3.0 * phi + s).cos();
                     lists.push(four_nearest(&weighting, s_painted, bone_length));
                 }
             }
@@ -356,7 +353,10 @@ mod tests {
         let mut bad = c.triangles.clone();
         bad[5][2] = c.positions.len() as u32;
         let e = mesh_volume(&c.positions, &bad).unwrap_err();
-        assert_eq!(e, SkinError::InvalidTriangle { index: 5, vertex: c.positions.len() as u32, vertex_count: c.positions.len() });
+        assert_eq!(
+            e,
+            SkinError::InvalidTriangle { index: 5, vertex: c.positions.len() as u32, vertex_count: c.positions.len() }
+        );
     }
 
     #[test]

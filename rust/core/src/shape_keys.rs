@@ -98,7 +98,12 @@ pub fn mix_relative(blocks: &[KeyBlock<'_>], reference: usize, out: &mut [[f32; 
 }
 
 /// The one key shown with *Shape Key Lock*, into `out`.
-pub fn mix_locked(blocks: &[KeyBlock<'_>], reference: usize, shown: usize, out: &mut [[f32; 3]]) -> Result<(), ShapeKeyError> {
+pub fn mix_locked(
+    blocks: &[KeyBlock<'_>],
+    reference: usize,
+    shown: usize,
+    out: &mut [[f32; 3]],
+) -> Result<(), ShapeKeyError> {
     check(blocks, reference, out.len())?;
     // Blender falls back to the reference key for a muted or missing shown key.
     let kb = match blocks.get(shown) {
@@ -151,7 +156,8 @@ mod tests {
         let mut muted = kb(&k, 0, 1.0);
         muted.muted = true;
         let mut out = [[5.0; 3]];
-        mix_relative(&[kb(&basis, 0, 1.0), muted, kb(&k, 0, 0.0), kb(&k, 7, 1.0), kb(&short, 0, 1.0)], 0, &mut out).unwrap();
+        mix_relative(&[kb(&basis, 0, 1.0), muted, kb(&k, 0, 0.0), kb(&k, 7, 1.0), kb(&short, 0, 1.0)], 0, &mut out)
+            .unwrap();
         assert_eq!(out, [[0.0; 3]]);
     }
 
@@ -190,11 +196,20 @@ mod tests {
     fn inconsistent_inputs_are_errors() {
         let basis = [[0.0; 3]];
         let mut out = [[0.0; 3]; 2];
-        assert_eq!(mix_relative(&[kb(&basis, 0, 0.0)], 0, &mut out), Err(ShapeKeyError::ReferencePoints { expected: 2, got: 1 }));
-        assert!(matches!(mix_relative(&[kb(&basis, 0, 0.0)], 3, &mut out[..1]), Err(ShapeKeyError::NoReference { .. })));
+        assert_eq!(
+            mix_relative(&[kb(&basis, 0, 0.0)], 0, &mut out),
+            Err(ShapeKeyError::ReferencePoints { expected: 2, got: 1 })
+        );
+        assert!(matches!(
+            mix_relative(&[kb(&basis, 0, 0.0)], 3, &mut out[..1]),
+            Err(ShapeKeyError::NoReference { .. })
+        ));
         let w = [1.0, 1.0];
         let mut k = kb(&basis, 0, 1.0);
         k.weights = Some(&w);
-        assert!(matches!(mix_relative(&[kb(&basis, 0, 0.0), k], 0, &mut out[..1]), Err(ShapeKeyError::WeightsLength { .. })));
+        assert!(matches!(
+            mix_relative(&[kb(&basis, 0, 0.0), k], 0, &mut out[..1]),
+            Err(ShapeKeyError::WeightsLength { .. })
+        ));
     }
 }

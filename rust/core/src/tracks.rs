@@ -31,7 +31,9 @@ pub enum TrackError {
 impl core::fmt::Display for TrackError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            TrackError::Shape(m) | TrackError::Times(m) | TrackError::Key(m) | TrackError::Settings(m) => f.write_str(m),
+            TrackError::Shape(m) | TrackError::Times(m) | TrackError::Key(m) | TrackError::Settings(m) => {
+                f.write_str(m)
+            }
             TrackError::Interrupted => f.write_str("interrupted"),
         }
     }
@@ -41,7 +43,11 @@ impl std::error::Error for TrackError {}
 
 fn check_times(times: &[f32], count: usize) -> Result<(), TrackError> {
     if times.len() != count {
-        return Err(TrackError::Shape(format!("{} key times for {} keys: there must be one time per key", times.len(), count)));
+        return Err(TrackError::Shape(format!(
+            "{} key times for {} keys: there must be one time per key",
+            times.len(),
+            count
+        )));
     }
     if count == 0 {
         return Err(TrackError::Shape("a track needs at least one key".into()));
@@ -50,7 +56,12 @@ fn check_times(times: &[f32], count: usize) -> Result<(), TrackError> {
         return Err(TrackError::Times(format!("times[{i}] is not finite")));
     }
     if let Some(i) = times.windows(2).position(|w| !(w[1] > w[0])) {
-        return Err(TrackError::Times(format!("times must increase strictly, but times[{}] = {} follows {}", i + 1, times[i + 1], times[i])));
+        return Err(TrackError::Times(format!(
+            "times must increase strictly, but times[{}] = {} follows {}",
+            i + 1,
+            times[i + 1],
+            times[i]
+        )));
     }
     Ok(())
 }
@@ -102,10 +113,7 @@ impl RotationTrack {
                 let v = (lp * (dn / dp) as f32 + ln * (dp / dn) as f32) / (dp + dn) as f32;
                 let out = (v * dn as f32 - ln) * 0.5;
                 let inc = (lp - v * dp as f32) * 0.5;
-                (
-                    normalize_quat(q * quat_exp(Quat::from_vec4(inc))),
-                    normalize_quat(q * quat_exp(Quat::from_vec4(out))),
-                )
+                (normalize_quat(q * quat_exp(Quat::from_vec4(inc))), normalize_quat(q * quat_exp(Quat::from_vec4(out))))
             })
             .collect();
         Ok(Self { times: times.to_vec(), keys, controls, flipped })
@@ -231,7 +239,12 @@ pub const MAX_SPRING_ITERATIONS: u32 = 1_000_000;
 
 /// [`spring`], calling `stop` now and then (about every millisecond of work) and returning
 /// [`TrackError::Interrupted`] as soon as it returns true.
-pub fn spring_with(times: &[f32], keys: &[Quat], settings: &SpringSettings, stop: &dyn Fn() -> bool) -> Result<Vec<Quat>, TrackError> {
+pub fn spring_with(
+    times: &[f32],
+    keys: &[Quat],
+    settings: &SpringSettings,
+    stop: &dyn Fn() -> bool,
+) -> Result<Vec<Quat>, TrackError> {
     let track = RotationTrack::new(times, keys)?;
     let s = settings;
     if !(s.step > 0.0 && s.step.is_finite()) || s.levels == 0 || !(s.key_weight > 0.0 && s.key_weight.is_finite()) {
@@ -291,7 +304,11 @@ pub fn spring_with(times: &[f32], keys: &[Quat], settings: &SpringSettings, stop
     let mut out = Vec::with_capacity(segs.iter().sum::<usize>() + 1);
     for (i, c) in curve.iter().enumerate() {
         let skip = usize::from(i > 0);
-        out.extend(c[skip..].iter().map(|q| normalize_quat(Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32))));
+        out.extend(
+            c[skip..]
+                .iter()
+                .map(|q| normalize_quat(Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32))),
+        );
     }
     Ok(out)
 }
@@ -349,7 +366,8 @@ fn descend(curve: &mut [Vec<[f64; 4]>], iterations: u32, key_weight: f64, stop: 
         if (iteration as usize).is_multiple_of(check_every) && stop() {
             return false;
         }
-        let kappa: Vec<[f64; 4]> = (0..n).map(|i| if i == 0 || i + 1 == n { [0.0; 4] } else { curvature(&q, i) }).collect();
+        let kappa: Vec<[f64; 4]> =
+            (0..n).map(|i| if i == 0 || i + 1 == n { [0.0; 4] } else { curvature(&q, i) }).collect();
         for i in 1..n - 1 {
             if is_key[i] {
                 continue;

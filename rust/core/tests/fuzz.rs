@@ -7,8 +7,9 @@ use dqskin_core::glam::{Mat4, Quat, Vec3};
 use dqskin_core::shape_keys::{self, KeyBlock};
 use dqskin_core::tracks::{self, RotationTrack, SpringSettings};
 use dqskin_core::{
-    armature_spaces, centers_of_rotation, centers_of_rotation_with_progress, deform_group_weights, dib, dlb, forward_kinematics, make_signs_continuous, sclerp, skin, skin_many,
-    DeformGroups, DualQuat, Influences, ManyJob, Method, Pose, SkinOptions, Squad,
+    armature_spaces, centers_of_rotation, centers_of_rotation_with_progress, deform_group_weights, dib, dlb,
+    forward_kinematics, make_signs_continuous, sclerp, skin, skin_many, DeformGroups, DualQuat, Influences, ManyJob,
+    Method, Pose, SkinOptions, Squad,
 };
 use proptest::prelude::*;
 

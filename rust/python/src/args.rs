@@ -21,12 +21,16 @@ fn is_numpy_bool(obj: &Bound<'_, PyAny>) -> bool {
 
 /// An integer in `[min, max]` (Python ints, numpy integers; not floats or bools).
 pub fn int(obj: &Bound<'_, PyAny>, name: &str, min: i64, max: i64) -> PyResult<i64> {
-    if obj.is_instance_of::<PyBool>() || obj.is_instance_of::<PyFloat>() || obj.is_instance_of::<PyString>() || is_numpy_bool(obj) {
+    if obj.is_instance_of::<PyBool>()
+        || obj.is_instance_of::<PyFloat>()
+        || obj.is_instance_of::<PyString>()
+        || is_numpy_bool(obj)
+    {
         return Err(PyTypeError::new_err(format!("{name} must be an integer, got {}", type_name(obj))));
     }
-    let index = obj.call_method0("__index__").map_err(|_| {
-        PyTypeError::new_err(format!("{name} must be an integer, got {}", type_name(obj)))
-    })?;
+    let index = obj
+        .call_method0("__index__")
+        .map_err(|_| PyTypeError::new_err(format!("{name} must be an integer, got {}", type_name(obj))))?;
     match index.extract::<i64>() {
         Ok(v) if (min..=max).contains(&v) => Ok(v),
         Ok(v) => Err(PyValueError::new_err(format!("{name} must be between {min} and {max}, got {v}"))),
@@ -45,7 +49,10 @@ pub fn float(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<f32> {
     }
     if let Ok(arr) = obj.cast::<numpy::PyUntypedArray>() {
         if numpy::PyUntypedArrayMethods::ndim(arr) > 0 {
-            return Err(PyTypeError::new_err(format!("{name} must be a number, got an array of shape {:?}", numpy::PyUntypedArrayMethods::shape(arr))));
+            return Err(PyTypeError::new_err(format!(
+                "{name} must be a number, got an array of shape {:?}",
+                numpy::PyUntypedArrayMethods::shape(arr)
+            )));
         }
     }
     if numpy_kind(obj).is_some_and(|k| k == "c") {
@@ -82,8 +89,8 @@ pub fn boolean(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<bool> {
     if obj.is_instance_of::<PyBool>() {
         return obj.extract::<bool>();
     }
-    let is_numpy_bool = is_numpy_bool(obj)
-        && obj.getattr("ndim").and_then(|n| n.extract::<usize>()).is_ok_and(|n| n == 0);
+    let is_numpy_bool =
+        is_numpy_bool(obj) && obj.getattr("ndim").and_then(|n| n.extract::<usize>()).is_ok_and(|n| n == 0);
     if is_numpy_bool {
         return obj.call_method0("__bool__")?.extract::<bool>();
     }
@@ -100,7 +107,11 @@ pub fn string(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<String> {
 }
 
 /// An optional argument: `None` (or absent) gives `default`.
-pub fn or<'py, T>(obj: Option<&Bound<'py, PyAny>>, default: T, f: impl FnOnce(&Bound<'py, PyAny>) -> PyResult<T>) -> PyResult<T> {
+pub fn or<'py, T>(
+    obj: Option<&Bound<'py, PyAny>>,
+    default: T,
+    f: impl FnOnce(&Bound<'py, PyAny>) -> PyResult<T>,
+) -> PyResult<T> {
     match obj {
         Some(o) if !o.is_none() => f(o),
         _ => Ok(default),

@@ -29,7 +29,11 @@ pub struct PyPoseMemory(PoseLayout);
 impl PyPoseMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| PoseLayout::new(&sdna_of(blend_file)?).map(Self).map_err(|e| PyValueError::new_err(format!("blend_file: {e}"))))
+        guard(|| {
+            PoseLayout::new(&sdna_of(blend_file)?)
+                .map(Self)
+                .map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
+        })
     }
 
     /// The pose of ``armature``, a ``bpy.types.Object`` of type ``'ARMATURE'`` with a pose
@@ -49,7 +53,9 @@ impl PyPoseMemory {
             }
             let kind: String = armature.getattr("type")?.extract()?;
             if kind != "ARMATURE" {
-                return Err(PyValueError::new_err(format!("armature must be an armature object, got one of type {kind}")));
+                return Err(PyValueError::new_err(format!(
+                    "armature must be an armature object, got one of type {kind}"
+                )));
             }
             let pose = armature.getattr("pose")?;
             if pose.is_none() {
@@ -59,7 +65,8 @@ impl PyPoseMemory {
             let ptr: usize = armature.call_method0("as_pointer")?.extract()?;
             // SAFETY: the address is `Object.as_pointer()` of a live armature object, read from a
             // handler or operator while Blender is not evaluating (see `read_pose`).
-            let channels = unsafe { read_pose(&self.0, ptr, channels) }.map_err(|e| PyValueError::new_err(format!("armature: {e}")))?;
+            let channels = unsafe { read_pose(&self.0, ptr, channels) }
+                .map_err(|e| PyValueError::new_err(format!("armature: {e}")))?;
             ArmaturePose::new(channels).map(PyPoseData).map_err(|e| PyValueError::new_err(format!("armature: {e}")))
         })
     }
@@ -148,7 +155,19 @@ impl PyPoseData {
 
 fn envelope_row(e: &Envelope) -> [f32; 11] {
     let (h, t) = (e.head, e.tail);
-    [h.x, h.y, h.z, t.x, t.y, t.z, e.head_radius, e.tail_radius, e.distance, e.weight, f32::from(u8::from(e.multiply_groups))]
+    [
+        h.x,
+        h.y,
+        h.z,
+        t.x,
+        t.y,
+        t.z,
+        e.head_radius,
+        e.tail_radius,
+        e.distance,
+        e.weight,
+        f32::from(u8::from(e.multiply_groups)),
+    ]
 }
 
 fn envelope_from_row(r: &[f32]) -> Envelope {
@@ -194,7 +213,12 @@ pub fn effective(groups: &Influences, a: EffectiveArgs<'_, '_>) -> PyResult<PyIn
             let ty = pose.get_type().name().map(|n| n.to_string()).unwrap_or_default();
             PyTypeError::new_err(format!("pose must be a dqskin.PoseData (from _PoseMemory.read), got {ty}"))
         })?;
-        let arrays_too = [("envelopes", a.envelopes), ("bbone_segments", a.bbone_segments), ("rest", a.rest), ("lengths", a.lengths)];
+        let arrays_too = [
+            ("envelopes", a.envelopes),
+            ("bbone_segments", a.bbone_segments),
+            ("rest", a.rest),
+            ("lengths", a.lengths),
+        ];
         if let Some((name, _)) = arrays_too.iter().find(|(_, o)| given(*o)) {
             return Err(PyValueError::new_err(format!("{name} is taken from pose: give one or the other")));
         }
@@ -217,7 +241,8 @@ pub fn effective(groups: &Influences, a: EffectiveArgs<'_, '_>) -> PyResult<PyIn
                 .extract()
                 .map_err(|_| PyTypeError::new_err("bbone_mapping values must be (index, blend) pairs of arrays"))?;
             let idx = arrays::readonly::<i32>(&idx, "bbone_mapping index", &[Some(v)], &["V"])?.as_slice()?.to_vec();
-            let blend = arrays::readonly::<f32>(&blend, "bbone_mapping blend", &[Some(v)], &["V"])?.as_slice()?.to_vec();
+            let blend =
+                arrays::readonly::<f32>(&blend, "bbone_mapping blend", &[Some(v)], &["V"])?.as_slice()?.to_vec();
             if bone >= b {
                 return Err(PyValueError::new_err(format!("bbone_mapping has bone {bone}, but there are {b} bones")));
             }
@@ -234,12 +259,16 @@ pub fn effective(groups: &Influences, a: EffectiveArgs<'_, '_>) -> PyResult<PyIn
         }
         _ => None,
     };
-    let given_mappings: Vec<(usize, &[i32], &[f32])> = mapped.iter().map(|(bone, i, f)| (*bone, i.as_slice(), f.as_slice())).collect();
+    let given_mappings: Vec<(usize, &[i32], &[f32])> =
+        mapped.iter().map(|(bone, i, f)| (*bone, i.as_slice(), f.as_slice())).collect();
     let (bbones, expanded) = match a.bbone_segments {
         Some(seg) if !seg.is_none() => {
             let segments = arrays::indices(seg, "bbone_segments")?;
             if segments.len() != b {
-                return Err(PyValueError::new_err(format!("bbone_segments must have {b} entries, got {}", segments.len())));
+                return Err(PyValueError::new_err(format!(
+                    "bbone_segments must have {b} entries, got {}",
+                    segments.len()
+                )));
             }
             let rest = a.rest.ok_or_else(|| PyValueError::new_err("rest is required with bbone_segments"))?;
             let rest = matrices(rest, "rest", Some(b))?;
@@ -249,7 +278,13 @@ pub fn effective(groups: &Influences, a: EffectiveArgs<'_, '_>) -> PyResult<PyIn
         }
         _ => (Vec::new(), b),
     };
-    let what = dqskin_core::Effective { envelopes: envelopes.as_deref(), use_vertex_groups, use_envelopes, bbones: &bbones, expanded_bone_count: expanded };
+    let what = dqskin_core::Effective {
+        envelopes: envelopes.as_deref(),
+        use_vertex_groups,
+        use_envelopes,
+        bbones: &bbones,
+        expanded_bone_count: expanded,
+    };
     let points = pos.as_slice()?.as_chunks::<3>().0;
     py.detach(|| groups.effective(points, premat, &what)).map(PyInfluences).map_err(skin_error)
 }

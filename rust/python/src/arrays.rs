@@ -4,8 +4,8 @@
 use dqskin_core::glam::{Mat4, Quat};
 use dqskin_core::DualQuat;
 use numpy::{
-    dtype, Element, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn,
-    PyReadwriteArrayDyn, PyUntypedArray, PyUntypedArrayMethods,
+    dtype, Element, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyReadwriteArrayDyn,
+    PyUntypedArray, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -31,14 +31,14 @@ fn check_shape(name: &str, got: &[usize], shape: Shape<'_>, names: &[&str]) -> P
     if ok {
         return Ok(());
     }
-    Err(PyValueError::new_err(format!(
-        "{name} must have shape {}, got {:?}",
-        describe_shape(shape, names),
-        got
-    )))
+    Err(PyValueError::new_err(format!("{name} must have shape {}, got {:?}", describe_shape(shape, names), got)))
 }
 
-pub fn as_numpy<'a, 'py>(obj: &'a Bound<'py, PyAny>, name: &str, want: &str) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
+pub fn as_numpy<'a, 'py>(
+    obj: &'a Bound<'py, PyAny>,
+    name: &str,
+    want: &str,
+) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
     obj.cast::<PyUntypedArray>().map_err(|_| {
         let ty = obj.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "?".into());
         PyTypeError::new_err(format!("{name} must be a numpy array of {want}, got {ty}"))
@@ -63,9 +63,7 @@ fn checked<'a, 'py, T: Element>(
     }
     check_shape(name, arr.shape(), shape, names)?;
     if !arr.is_c_contiguous() {
-        return Err(PyValueError::new_err(format!(
-            "{name} must be C-contiguous (use np.ascontiguousarray({name}))"
-        )));
+        return Err(PyValueError::new_err(format!("{name} must be C-contiguous (use np.ascontiguousarray({name}))")));
     }
     let typed = obj.cast::<PyArrayDyn<T>>()?;
     if !(typed.data() as usize).is_multiple_of(core::mem::align_of::<T>()) {
@@ -83,9 +81,9 @@ pub fn readonly<'py, T: Element>(
     shape: Shape<'_>,
     names: &[&str],
 ) -> PyResult<PyReadonlyArrayDyn<'py, T>> {
-    checked::<T>(obj, name, shape, names)?.try_readonly().map_err(|_| {
-        PyValueError::new_err(format!("{name} overlaps an array that is written by this call (out)"))
-    })
+    checked::<T>(obj, name, shape, names)?
+        .try_readonly()
+        .map_err(|_| PyValueError::new_err(format!("{name} overlaps an array that is written by this call (out)")))
 }
 
 /// Like [`readonly`] but writable; `out` must not overlap any input.
@@ -120,9 +118,8 @@ pub fn indices(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<u32>> {
         .iter()
         .enumerate()
         .map(|(i, &v)| {
-            u32::try_from(v).map_err(|_| {
-                PyValueError::new_err(format!("{name}[{i}] = {v} is out of range (must be 0 to 2^32-1)"))
-            })
+            u32::try_from(v)
+                .map_err(|_| PyValueError::new_err(format!("{name}[{i}] = {v} is out of range (must be 0 to 2^32-1)")))
         })
         .collect()
 }
@@ -159,9 +156,9 @@ pub fn small(obj: &Bound<'_, PyAny>, name: &str, shape: Shape<'_>, names: &[&str
         return Err(PyTypeError::new_err(format!("{name} must be an array of numbers, got a string")));
     }
     // Real numbers only: numpy would silently drop an imaginary part or parse strings.
-    let arr = np.call_method1("asarray", (obj,)).map_err(|e| {
-        PyTypeError::new_err(format!("{name} must be an array of numbers: {}", one_line(&e, obj.py())))
-    })?;
+    let arr = np
+        .call_method1("asarray", (obj,))
+        .map_err(|e| PyTypeError::new_err(format!("{name} must be an array of numbers: {}", one_line(&e, obj.py()))))?;
     let kind: String = arr.getattr("dtype")?.getattr("kind")?.extract()?;
     if !matches!(kind.as_str(), "i" | "u" | "f" | "b") {
         let what = match kind.as_str() {
@@ -202,9 +199,7 @@ pub fn one_line(e: &PyErr, py: Python<'_>) -> String {
 /// Whether a float32 array has a NaN or infinity; names the first flat index.
 pub fn check_finite(name: &str, data: &[f32]) -> PyResult<()> {
     match data.iter().position(|v| !v.is_finite()) {
-        Some(i) => Err(PyValueError::new_err(format!(
-            "{name} contains a NaN or infinite value (flat index {i})"
-        ))),
+        Some(i) => Err(PyValueError::new_err(format!("{name} contains a NaN or infinite value (flat index {i})"))),
         None => Ok(()),
     }
 }

@@ -27,7 +27,11 @@ pub struct PyMeshMemory(MeshLayout);
 impl PyMeshMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| MeshLayout::new(&sdna_of(blend_file)?).map(Self).map_err(|e| PyValueError::new_err(format!("blend_file: {e}"))))
+        guard(|| {
+            MeshLayout::new(&sdna_of(blend_file)?)
+                .map(Self)
+                .map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
+        })
     }
 
     /// ``(offsets, groups, weights)`` (``uint32``, ``uint32``, ``float32``): the weights of
@@ -49,7 +53,8 @@ impl PyMeshMemory {
             let n: usize = mesh.getattr("vertices")?.len()?;
             // SAFETY: the extension passes `Mesh.as_pointer()` of a live mesh from a handler or
             // operator, while Blender is not evaluating (see `read_deform_verts`).
-            let read = unsafe { read_deform_verts(&self.0, ptr, n) }.map_err(|e| PyValueError::new_err(format!("mesh_pointer: {e}")))?;
+            let read = unsafe { read_deform_verts(&self.0, ptr, n) }
+                .map_err(|e| PyValueError::new_err(format!("mesh_pointer: {e}")))?;
             match read {
                 None => Ok(None),
                 Some(d) => Ok(Some(PyTuple::new(
@@ -78,7 +83,11 @@ fn groups_arg<'py>(
     offsets: &Bound<'py, PyAny>,
     groups: &Bound<'py, PyAny>,
     weights: &Bound<'py, PyAny>,
-) -> PyResult<(numpy::PyReadonlyArrayDyn<'py, u32>, numpy::PyReadonlyArrayDyn<'py, u32>, numpy::PyReadonlyArrayDyn<'py, f32>)> {
+) -> PyResult<(
+    numpy::PyReadonlyArrayDyn<'py, u32>,
+    numpy::PyReadonlyArrayDyn<'py, u32>,
+    numpy::PyReadonlyArrayDyn<'py, f32>,
+)> {
     Ok((
         arrays::readonly::<u32>(offsets, "offsets", &[None], &["V+1"])?,
         arrays::readonly::<u32>(groups, "groups", &[None], &["N"])?,
@@ -140,9 +149,16 @@ fn deform_group_weights<'py>(
 /// basis key's index. ``shown``: with Shape Key Lock, the index of the key shown alone.
 #[pyfunction]
 #[pyo3(signature = (keys, reference, out, shown = None))]
-fn shape_key_mix(keys: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>, out: &Bound<'_, PyAny>, shown: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+fn shape_key_mix(
+    keys: &Bound<'_, PyAny>,
+    reference: &Bound<'_, PyAny>,
+    out: &Bound<'_, PyAny>,
+    shown: Option<&Bound<'_, PyAny>>,
+) -> PyResult<()> {
     guard(|| {
-        let keys = keys.cast::<PyList>().map_err(|_| PyTypeError::new_err("keys must be a list of (data, relative_to, value, muted, weights) tuples"))?;
+        let keys = keys.cast::<PyList>().map_err(|_| {
+            PyTypeError::new_err("keys must be a list of (data, relative_to, value, muted, weights) tuples")
+        })?;
         let reference = args::int(reference, "reference", 0, i32::MAX as i64)? as usize;
         let shown = match shown {
             Some(s) if !s.is_none() => Some(args::int(s, "shown", 0, i32::MAX as i64)?),
@@ -150,7 +166,9 @@ fn shape_key_mix(keys: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>, out: &Bo
         };
         let mut held = Vec::with_capacity(keys.len());
         for (i, item) in keys.iter().enumerate() {
-            let t = item.cast::<PyTuple>().map_err(|_| PyTypeError::new_err(format!("keys[{i}] must be a tuple (data, relative_to, value, muted, weights)")))?;
+            let t = item.cast::<PyTuple>().map_err(|_| {
+                PyTypeError::new_err(format!("keys[{i}] must be a tuple (data, relative_to, value, muted, weights)"))
+            })?;
             if t.len() != 5 {
                 return Err(PyValueError::new_err(format!("keys[{i}] must have 5 items, got {}", t.len())));
             }
@@ -159,7 +177,11 @@ fn shape_key_mix(keys: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>, out: &Bo
             let value = args::float(&t.get_item(2)?, &format!("keys[{i}].value"))?;
             let muted = args::boolean(&t.get_item(3)?, &format!("keys[{i}].muted"))?;
             let w = t.get_item(4)?;
-            let weights = if w.is_none() { None } else { Some(arrays::readonly::<f32>(&w, "keys[i].weights", &[Some(data.shape()[0])], &["N"])?) };
+            let weights = if w.is_none() {
+                None
+            } else {
+                Some(arrays::readonly::<f32>(&w, "keys[i].weights", &[Some(data.shape()[0])], &["N"])?)
+            };
             held.push((data, usize::try_from(relative).unwrap_or(usize::MAX), value, muted, weights));
         }
         let blocks = held
@@ -191,7 +213,11 @@ fn shape_key_mix(keys: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>, out: &Bo
 /// armature object's world matrices (row-major 4×4): ``postmat = inverse(object) · armature``,
 /// ``premat = inverse(postmat)``, in single precision as Blender computes them.
 #[pyfunction]
-fn armature_spaces<'py>(py: Python<'py>, object_world: &Bound<'py, PyAny>, armature_world: &Bound<'py, PyAny>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+fn armature_spaces<'py>(
+    py: Python<'py>,
+    object_world: &Bound<'py, PyAny>,
+    armature_world: &Bound<'py, PyAny>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
     guard(|| {
         let (o, _) = arrays::small(object_world, "object_world", &[Some(4), Some(4)], &[])?;
         let (a, _) = arrays::small(armature_world, "armature_world", &[Some(4), Some(4)], &[])?;
@@ -203,7 +229,9 @@ fn armature_spaces<'py>(py: Python<'py>, object_world: &Bound<'py, PyAny>, armat
         if !pre.is_finite() || !post.is_finite() {
             return Err(PyValueError::new_err("armature_world is not invertible (zero scale?)"));
         }
-        let m = |m| -> PyResult<Bound<'py, PyAny>> { Ok(PyArray1::from_slice(py, &mat4_to_row_major(&m)).reshape([4, 4])?.into_any()) };
+        let m = |m| -> PyResult<Bound<'py, PyAny>> {
+            Ok(PyArray1::from_slice(py, &mat4_to_row_major(&m)).reshape([4, 4])?.into_any())
+        };
         Ok((m(pre)?, m(post)?))
     })
 }

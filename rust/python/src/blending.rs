@@ -46,12 +46,7 @@ fn params(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Params> {
 }
 
 /// Evaluates `f` at each parameter, giving `(width,)` for a number or `(T, width)` for an array.
-fn evaluate<'py>(
-    py: Python<'py>,
-    t: Params,
-    width: usize,
-    f: impl Fn(f32) -> Vec<f32>,
-) -> PyResult<Bound<'py, PyAny>> {
+fn evaluate<'py>(py: Python<'py>, t: Params, width: usize, f: impl Fn(f32) -> Vec<f32>) -> PyResult<Bound<'py, PyAny>> {
     Ok(match t {
         Params::One(t) => PyArray1::from_vec(py, f(t)).into_any(),
         Params::Many(ts) => {
@@ -211,7 +206,10 @@ fn forward_kinematics<'py>(parents: &Bound<'py, PyAny>, locals: &Bound<'py, PyAn
 fn parents_arg(obj: &Bound<'_, PyAny>) -> PyResult<Vec<i64>> {
     let np = obj.py().import("numpy")?;
     let arr = np.call_method1("asarray", (obj,)).map_err(|e| {
-        pyo3::exceptions::PyTypeError::new_err(format!("parents must be an array of integers: {}", arrays::one_line(&e, obj.py())))
+        pyo3::exceptions::PyTypeError::new_err(format!(
+            "parents must be an array of integers: {}",
+            arrays::one_line(&e, obj.py())
+        ))
     })?;
     let kind: String = arr.getattr("dtype")?.getattr("kind")?.extract()?;
     if kind != "i" && kind != "u" {

@@ -6,8 +6,8 @@ use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use crate::arrays::{self, mat4_from_row_major, mat4_to_row_major, quat_from_wxyz, quat_to_wxyz};
 use crate::args;
+use crate::arrays::{self, mat4_from_row_major, mat4_to_row_major, quat_from_wxyz, quat_to_wxyz};
 use crate::guard;
 
 /// A dual quaternion ``real + ε·dual``; unit dual quaternions are rigid transforms.
@@ -32,7 +32,12 @@ pub struct PyScrew {
 #[pymethods]
 impl PyScrew {
     #[new]
-    fn new(axis: &Bound<'_, PyAny>, moment: &Bound<'_, PyAny>, angle: &Bound<'_, PyAny>, pitch: &Bound<'_, PyAny>) -> PyResult<Self> {
+    fn new(
+        axis: &Bound<'_, PyAny>,
+        moment: &Bound<'_, PyAny>,
+        angle: &Bound<'_, PyAny>,
+        pitch: &Bound<'_, PyAny>,
+    ) -> PyResult<Self> {
         guard(|| {
             let axis = vec3(axis, "axis")?;
             let moment = vec3(moment, "moment")?;
@@ -54,12 +59,7 @@ impl PyScrew {
 
 impl PyScrew {
     fn screw(&self) -> Screw {
-        Screw {
-            axis: Vec3::from(self.axis),
-            moment: Vec3::from(self.moment),
-            angle: self.angle,
-            pitch: self.pitch,
-        }
+        Screw { axis: Vec3::from(self.axis), moment: Vec3::from(self.moment), angle: self.angle, pitch: self.pitch }
     }
 }
 
@@ -100,7 +100,10 @@ impl PyDualQuat {
     /// Rotation (a quaternion ``(w, x, y, z)``, normalized here) followed by a translation.
     #[staticmethod]
     #[pyo3(signature = (rotation, translation = None))]
-    fn from_rotation_translation(rotation: &Bound<'_, PyAny>, translation: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+    fn from_rotation_translation(
+        rotation: &Bound<'_, PyAny>,
+        translation: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
         guard(|| {
             let (q, _) = arrays::small(rotation, "rotation", &[Some(4)], &[])?;
             let q = quat_from_wxyz(&q);
@@ -127,7 +130,11 @@ impl PyDualQuat {
     /// columns, as Blender's ``mat4_to_quat`` does.
     #[staticmethod]
     #[pyo3(signature = (matrix, check = None, tolerance = None))]
-    fn from_matrix(matrix: &Bound<'_, PyAny>, check: Option<&Bound<'_, PyAny>>, tolerance: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+    fn from_matrix(
+        matrix: &Bound<'_, PyAny>,
+        check: Option<&Bound<'_, PyAny>>,
+        tolerance: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
         guard(|| {
             let check = args::or(check, true, |o| args::boolean(o, "check"))?;
             let tolerance = args::or(tolerance, 1e-5, |o| args::float_in(o, "tolerance", 0.0, 1.0))?;
@@ -222,16 +229,18 @@ impl PyDualQuat {
 
     /// Divided by its dual-number norm; ``ValueError`` if the real part is zero.
     fn normalized(&self) -> PyResult<Self> {
-        self.0.try_normalize().map(Self).ok_or_else(|| {
-            PyValueError::new_err("cannot normalize a dual quaternion whose real part is zero")
-        })
+        self.0
+            .try_normalize()
+            .map(Self)
+            .ok_or_else(|| PyValueError::new_err("cannot normalize a dual quaternion whose real part is zero"))
     }
 
     /// The multiplicative inverse; ``ValueError`` if the real part is zero.
     fn inverse(&self) -> PyResult<Self> {
-        self.0.inverse().map(Self).ok_or_else(|| {
-            PyValueError::new_err("a dual quaternion whose real part is zero has no inverse")
-        })
+        self.0
+            .inverse()
+            .map(Self)
+            .ok_or_else(|| PyValueError::new_err("a dual quaternion whose real part is zero has no inverse"))
     }
 
     /// The same transform with ``real.w ≥ 0`` (shortest-path powers and interpolation).
@@ -277,9 +286,7 @@ impl PyDualQuat {
             let src = p.as_slice()?;
             let q = self.0.normalize_or_identity();
             let out: Vec<f32> = py.detach(|| {
-                src.chunks_exact(3)
-                    .flat_map(|c| q.transform_point3(Vec3::new(c[0], c[1], c[2])).to_array())
-                    .collect()
+                src.chunks_exact(3).flat_map(|c| q.transform_point3(Vec3::new(c[0], c[1], c[2])).to_array()).collect()
             });
             PyArray1::from_vec(py, out).reshape([src.len() / 3, 3])
         })

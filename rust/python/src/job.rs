@@ -66,7 +66,12 @@ fn sized_by_influences<T>(obj: &Bound<'_, PyAny>, rows: usize, what: &str, check
 }
 
 /// A float32 array with one row per vertex of the influences (`v`), borrowed read-only.
-fn per_vertex<'py>(obj: &Bound<'py, PyAny>, name: &str, shape: Shape<'_>, v: usize) -> PyResult<PyReadonlyArrayDyn<'py, f32>> {
+fn per_vertex<'py>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+    shape: Shape<'_>,
+    v: usize,
+) -> PyResult<PyReadonlyArrayDyn<'py, f32>> {
     sized_by_influences(obj, v, "vertices", arrays::readonly::<f32>(obj, name, shape, &["V"]))
 }
 
@@ -159,7 +164,12 @@ impl<'py> Args<'py> {
             (Some(_), false) => return Err(PyValueError::new_err("centers is only used with method='centers_of_rotation'")),
             (None, false) => None,
         };
-        let out = sized_by_influences(&self.out, v, "vertices", arrays::readwrite::<f32>(&self.out, "out", &[Some(v), Some(3)], &["V"]))?;
+        let out = sized_by_influences(
+            &self.out,
+            v,
+            "vertices",
+            arrays::readwrite::<f32>(&self.out, "out", &[Some(v), Some(3)], &["V"]),
+        )?;
         Ok(Borrowed {
             method,
             influences: self.influences.clone(),
@@ -235,7 +245,20 @@ fn skin<'py>(
     centers: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
-        let args = Args::from_call(positions, influences, deform, rest, method, blend, blend_factor, premat, postmat, mask, out, centers)?;
+        let args = Args::from_call(
+            positions,
+            influences,
+            deform,
+            rest,
+            method,
+            blend,
+            blend_factor,
+            premat,
+            postmat,
+            mask,
+            out,
+            centers,
+        )?;
         let mut borrowed = args.borrow()?;
         let mut job = borrowed.job()?;
         let result = positions.py().detach(|| dqskin_core::skin_many(std::slice::from_mut(&mut job)));
@@ -338,7 +361,20 @@ impl SkinJob {
         centers: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Self> {
         guard(|| {
-            let args = Args::from_call(positions, influences, deform, rest, method, blend, blend_factor, premat, postmat, mask, out, centers)?;
+            let args = Args::from_call(
+                positions,
+                influences,
+                deform,
+                rest,
+                method,
+                blend,
+                blend_factor,
+                premat,
+                postmat,
+                mask,
+                out,
+                centers,
+            )?;
             args.borrow()?;
             Ok(Self::keep(args))
         })

@@ -47,7 +47,8 @@ fn set_num_threads(threads: &Bound<'_, PyAny>) -> PyResult<()> {
     guard(|| {
         let max = dqskin_core::pool::max_threads();
         let n = args::int(threads, "threads", 1, max as i64)? as usize;
-        dqskin_core::pool::set_num_threads(n).map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("threads: {e}")))
+        dqskin_core::pool::set_num_threads(n)
+            .map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("threads: {e}")))
     })
 }
 

@@ -29,7 +29,12 @@ pub struct PyInfluences(pub Influences);
 #[pymethods]
 impl PyInfluences {
     #[new]
-    fn new(offsets: &Bound<'_, PyAny>, bones: &Bound<'_, PyAny>, weights: &Bound<'_, PyAny>, bone_count: &Bound<'_, PyAny>) -> PyResult<Self> {
+    fn new(
+        offsets: &Bound<'_, PyAny>,
+        bones: &Bound<'_, PyAny>,
+        weights: &Bound<'_, PyAny>,
+        bone_count: &Bound<'_, PyAny>,
+    ) -> PyResult<Self> {
         guard(|| {
             let bone_count = args::int(bone_count, "bone_count", 0, u32::MAX as i64)? as usize;
             let offsets = arrays::indices(offsets, "offsets")?;
@@ -43,14 +48,20 @@ impl PyInfluences {
     /// From dense ``(V, K)`` arrays, as glTF stores joints and weights: every vertex lists ``K``
     /// bones; pairs with zero weight are dropped (they never change the result).
     #[staticmethod]
-    fn from_dense(bones: &Bound<'_, PyAny>, weights: &Bound<'_, PyAny>, bone_count: &Bound<'_, PyAny>) -> PyResult<Self> {
+    fn from_dense(
+        bones: &Bound<'_, PyAny>,
+        weights: &Bound<'_, PyAny>,
+        bone_count: &Bound<'_, PyAny>,
+    ) -> PyResult<Self> {
         guard(|| {
             let bone_count = args::int(bone_count, "bone_count", 0, u32::MAX as i64)? as usize;
             let w = arrays::readonly::<f32>(weights, "weights", &[None, None], &["V", "K"])?;
             let (v, k) = (w.shape()[0], w.shape()[1]);
             let shape = arrays::as_numpy(bones, "bones", "integers")?.shape();
             if shape != [v, k] {
-                return Err(PyValueError::new_err(format!("bones must have the same shape as weights ({v}, {k}), got {shape:?}")));
+                return Err(PyValueError::new_err(format!(
+                    "bones must have the same shape as weights ({v}, {k}), got {shape:?}"
+                )));
             }
             let b = arrays::index_array(bones, "bones", &[Some(v), Some(k)], &[])?;
             Influences::from_dense(&b, w.as_slice()?, v, k, bone_count).map(Self).map_err(skin_error)
@@ -96,7 +107,18 @@ impl PyInfluences {
         bbone_mapping: Option<&Bound<'_, pyo3::types::PyDict>>,
     ) -> PyResult<Self> {
         guard(|| {
-            let a = crate::armature::EffectiveArgs { positions, premat, pose, envelopes, use_vertex_groups, use_envelopes, bbone_segments, rest, lengths, bbone_mapping };
+            let a = crate::armature::EffectiveArgs {
+                positions,
+                premat,
+                pose,
+                envelopes,
+                use_vertex_groups,
+                use_envelopes,
+                bbone_segments,
+                rest,
+                lengths,
+                bbone_mapping,
+            };
             crate::armature::effective(&self.0, a)
         })
     }
@@ -174,12 +196,22 @@ fn bbone_segment_matrices<'py>(
         let (p, pd) = arrays::small(pose_joints, "pose_joints", &[None, Some(4), Some(4)], &["N+1"])?;
         let (rj, rd) = arrays::small(rest_joints, "rest_joints", &[None, Some(4), Some(4)], &["N+1"])?;
         if pd[0] != rd[0] {
-            return Err(PyValueError::new_err(format!("pose_joints has {} matrices but rest_joints has {}", pd[0], rd[0])));
+            return Err(PyValueError::new_err(format!(
+                "pose_joints has {} matrices but rest_joints has {}",
+                pd[0], rd[0]
+            )));
         }
         let to = |d: &[f32]| d.chunks_exact(16).map(mat4_from_row_major).collect::<Vec<_>>();
-        let m = dqskin_core::skin::bbone_segment_matrices(mat4_from_row_major(&c), mat4_from_row_major(&r), &to(&p), &to(&rj));
+        let m = dqskin_core::skin::bbone_segment_matrices(
+            mat4_from_row_major(&c),
+            mat4_from_row_major(&r),
+            &to(&p),
+            &to(&rj),
+        );
         let n = m.len();
-        let flat = |f: fn(&(Mat4, Mat4)) -> Mat4| -> Vec<f32> { m.iter().flat_map(|x| arrays::mat4_to_row_major(&f(x))).collect() };
+        let flat = |f: fn(&(Mat4, Mat4)) -> Mat4| -> Vec<f32> {
+            m.iter().flat_map(|x| arrays::mat4_to_row_major(&f(x))).collect()
+        };
         Ok((
             PyArray1::from_vec(py, flat(|x| x.0)).reshape([n, 4, 4])?.into_any(),
             PyArray1::from_vec(py, flat(|x| x.1)).reshape([n, 4, 4])?.into_any(),
@@ -307,7 +339,9 @@ fn centers_of_rotation<'py>(
             Some(p) if !p.is_none() => {
                 if !p.is_callable() {
                     let ty = p.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-                    return Err(PyTypeError::new_err(format!("progress must be callable as progress(done, total), got {ty}")));
+                    return Err(PyTypeError::new_err(format!(
+                        "progress must be callable as progress(done, total), got {ty}"
+                    )));
                 }
                 Some(p.clone().unbind())
             }
@@ -341,7 +375,9 @@ fn centers_of_rotation<'py>(
                     }
                 })
             };
-            dqskin_core::centers_of_rotation_interruptible(points, &tris, infl, sigma, &mut progress, &mut || Python::attach(signalled))
+            dqskin_core::centers_of_rotation_interruptible(points, &tris, infl, sigma, &mut progress, &mut || {
+                Python::attach(signalled)
+            })
         });
         if let Some(e) = stopped.into_inner().unwrap_or_else(|p| p.into_inner()) {
             return Err(e);

@@ -75,7 +75,11 @@ fn sample_rotations<'py>(
 /// ``at`` along the ScLERP screw between neighbouring keys (constant angular and linear speed
 /// per segment). Returns ``(T, 8)``.
 #[pyfunction]
-fn sample_transforms<'py>(times: &Bound<'py, PyAny>, keys: &Bound<'py, PyAny>, at: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+fn sample_transforms<'py>(
+    times: &Bound<'py, PyAny>,
+    keys: &Bound<'py, PyAny>,
+    at: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
         let t = floats(times, "times")?;
         let (k, _) = arrays::small(keys, "keys", &[None, Some(8)], &["K"])?;
@@ -111,7 +115,9 @@ fn spring<'py>(
             return Err(PyValueError::new_err(format!("step must be positive, got {step}")));
         }
         let levels = args::or(levels, 3, |o| args::int(o, "levels", 1, 20))? as u32;
-        let iterations = args::or(iterations, 400, |o| args::int(o, "iterations", 0, i64::from(dqskin_core::tracks::MAX_SPRING_ITERATIONS)))? as u32;
+        let iterations = args::or(iterations, 400, |o| {
+            args::int(o, "iterations", 0, i64::from(dqskin_core::tracks::MAX_SPRING_ITERATIONS))
+        })? as u32;
         let key_weight = args::or(key_weight, 1.2, |o| args::float(o, "key_weight"))?;
         if !(key_weight > 0.0) {
             return Err(PyValueError::new_err(format!("key_weight must be positive, got {key_weight}")));

@@ -7,18 +7,58 @@ fn pose_sdna(by_name: bool) -> Sdna {
     let mut dna = Dna::new();
     dna.opaque("Mat4", 0);
     dna.strukt("ListBase", &[("void", "*first"), ("void", "*last")]);
-    dna.strukt("Object", &[("char", "_pad0[8]"), ("short", "type"), ("char", "_pad1[6]"), ("bPose", "*pose"), ("ID", "*data")]);
+    dna.strukt(
+        "Object",
+        &[("char", "_pad0[8]"), ("short", "type"), ("char", "_pad1[6]"), ("bPose", "*pose"), ("ID", "*data")],
+    );
     dna.strukt("bArmature", &[("char", "_pad[8]"), ("ListBase", "bonebase")]);
-    dna.strukt("bPoseChannel_BBoneSegmentBoundary", &[("float", "point[3]"), ("float", "plane_normal[3]"), ("float", "plane_offset"), ("float", "depth_scale")]);
+    dna.strukt(
+        "bPoseChannel_BBoneSegmentBoundary",
+        &[("float", "point[3]"), ("float", "plane_normal[3]"), ("float", "plane_offset"), ("float", "depth_scale")],
+    );
     dna.strukt(
         "bPoseChannel_Runtime",
-        &[("int", "bbone_segments"), ("float", "bbone_arc_length_reciprocal"), ("Mat4", "*bbone_rest_mats"), ("Mat4", "*bbone_pose_mats"), ("Mat4", "*bbone_deform_mats"), ("bPoseChannel_BBoneSegmentBoundary", "*bbone_segment_boundaries")],
+        &[
+            ("int", "bbone_segments"),
+            ("float", "bbone_arc_length_reciprocal"),
+            ("Mat4", "*bbone_rest_mats"),
+            ("Mat4", "*bbone_pose_mats"),
+            ("Mat4", "*bbone_deform_mats"),
+            ("bPoseChannel_BBoneSegmentBoundary", "*bbone_segment_boundaries"),
+        ],
     );
     let bone = if by_name { "*_bone_index_elsewhere" } else { "*bone" };
-    dna.strukt("bPoseChannel", &[("void", "*next"), ("void", "*prev"), ("char", "name[64]"), ("Bone", bone), ("float", "chan_mat[4][4]"), ("bPoseChannel_Runtime", "runtime")]);
+    dna.strukt(
+        "bPoseChannel",
+        &[
+            ("void", "*next"),
+            ("void", "*prev"),
+            ("char", "name[64]"),
+            ("Bone", bone),
+            ("float", "chan_mat[4][4]"),
+            ("bPoseChannel_Runtime", "runtime"),
+        ],
+    );
     dna.strukt(
         "Bone",
-        &[("Bone", "*next"), ("ListBase", "childbase"), ("char", "name[64]"), ("int", "flag"), ("float", "arm_head[3]"), ("float", "arm_tail[3]"), ("float", "arm_mat[4][4]"), ("float", "dist"), ("float", "weight"), ("float", "length"), ("float", "rad_head"), ("float", "rad_tail"), ("short", "segments"), ("char", "bbone_mapping_mode"), ("char", "_pad[1]"), ("char", "_pad2[4]")],
+        &[
+            ("Bone", "*next"),
+            ("ListBase", "childbase"),
+            ("char", "name[64]"),
+            ("int", "flag"),
+            ("float", "arm_head[3]"),
+            ("float", "arm_tail[3]"),
+            ("float", "arm_mat[4][4]"),
+            ("float", "dist"),
+            ("float", "weight"),
+            ("float", "length"),
+            ("float", "rad_head"),
+            ("float", "rad_tail"),
+            ("short", "segments"),
+            ("char", "bbone_mapping_mode"),
+            ("char", "_pad[1]"),
+            ("char", "_pad2[4]"),
+        ],
     );
     dna.strukt("bPose", &[("char", "_pad[8]"), ("ListBase", "chanbase")]);
     Sdna::parse(&dna.bytes()).unwrap()
@@ -128,7 +168,14 @@ fn channel(n: &str, bone: &FakeBone, seed: f32) -> FakeChannel {
         name: name(n),
         bone,
         chan_mat: matrix(seed),
-        runtime: FakeRuntime { segments: 0, arc_length_reciprocal: 0.0, rest: core::ptr::null(), pose: core::ptr::null(), deform: core::ptr::null(), boundaries: core::ptr::null() },
+        runtime: FakeRuntime {
+            segments: 0,
+            arc_length_reciprocal: 0.0,
+            rest: core::ptr::null(),
+            pose: core::ptr::null(),
+            deform: core::ptr::null(),
+            boundaries: core::ptr::null(),
+        },
     }
 }
 
@@ -147,7 +194,13 @@ struct Fixture {
 
 fn fixture() -> Box<Fixture> {
     let mut f = Box::new(Fixture {
-        object: FakeObject { pad0: [0; 8], ty: OB_ARMATURE, pad1: [0; 6], pose: core::ptr::null(), data: core::ptr::null() },
+        object: FakeObject {
+            pad0: [0; 8],
+            ty: OB_ARMATURE,
+            pad1: [0; 6],
+            pose: core::ptr::null(),
+            data: core::ptr::null(),
+        },
         _pose: Box::new(FakePose { pad: [0; 8], first: core::ptr::null(), last: core::ptr::null() }),
         armature: Box::new(FakeArmature { pad: [0; 8], first: core::ptr::null(), last: core::ptr::null() }),
         channels: Vec::new(),
@@ -155,7 +208,14 @@ fn fixture() -> Box<Fixture> {
         rest: (0..4).map(|i| matrix(10.0 * i as f32)).collect(),
         deform: (0..5).map(|i| matrix(-10.0 * i as f32)).collect(),
         // Blender initializes depth_scale down to the search depth only (3 for 3 segments).
-        boundaries: (0..4).map(|i| FakeBoundary { point: [0.0, i as f32, 0.0], normal: [0.0, 1.0, 0.0], offset: i as f32, depth_scale: if i < 3 { 0.5 } else { f32::NAN } }).collect(),
+        boundaries: (0..4)
+            .map(|i| FakeBoundary {
+                point: [0.0, i as f32, 0.0],
+                normal: [0.0, 1.0, 0.0],
+                offset: i as f32,
+                depth_scale: if i < 3 { 0.5 } else { f32::NAN },
+            })
+            .collect(),
     });
     f.channels = vec![channel("Root", &f.bones[0], 1.0), channel("Spine", &f.bones[1], 2.0)];
     let next: *const FakeChannel = &f.channels[1];
@@ -201,7 +261,10 @@ fn layout_matches_the_c_structs() {
     let layout = PoseLayout::new(&pose_sdna(false)).unwrap();
     assert_eq!(layout.bone_link, BoneLink::Pointer { chan_bone: 80 });
     let by_name = PoseLayout::new(&pose_sdna(true)).unwrap();
-    assert_eq!(by_name.bone_link, BoneLink::ByName { object_data: 24, bonebase_first: 8, bone_next: 0, childbase_first: 8 });
+    assert_eq!(
+        by_name.bone_link,
+        BoneLink::ByName { object_data: 24, bonebase_first: 8, bone_next: 0, childbase_first: 8 }
+    );
     assert_eq!(layout.object_pose, 16);
     assert_eq!(layout.chanbase_first, 8);
     assert_eq!(layout.chan_mat, 88);
@@ -243,7 +306,11 @@ fn reads_channels_bones_and_the_b_bone_cache() {
     assert_eq!(cache.boundaries.len(), 4);
     assert_eq!(cache.boundaries[3].point, Vec3::new(0.0, 3.0, 0.0));
     assert_eq!((cache.boundaries[2].offset, cache.boundaries[2].depth_scale), (2.0, 0.5));
-    assert_eq!((cache.boundaries[3].offset, cache.boundaries[3].depth_scale), (3.0, 0.0), "uninitialized padding is not read");
+    assert_eq!(
+        (cache.boundaries[3].offset, cache.boundaries[3].depth_scale),
+        (3.0, 0.0),
+        "uninitialized padding is not read"
+    );
     assert_eq!(cache.arc_length_reciprocal, 1.0 / 3.0);
 }
 

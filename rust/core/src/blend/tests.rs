@@ -152,7 +152,9 @@ fn bad_blend_inputs_are_named() {
 #[test]
 fn dib_reports_non_convergence_at_the_iteration_cap() {
     let qs: Vec<_> = (0..5)
-        .map(|i| DualQuat::from_rotation_translation(Quat::from_rotation_z(0.7 * i as f32), Vec3::new(i as f32, 0.0, 1.0)))
+        .map(|i| {
+            DualQuat::from_rotation_translation(Quat::from_rotation_z(0.7 * i as f32), Vec3::new(i as f32, 0.0, 1.0))
+        })
         .collect();
     let r = dib(&qs, &[1.0; 5], 0.0, 3).unwrap();
     assert_eq!(r.iterations, 3);

@@ -243,4 +243,3 @@ fn rotation_from_matrix_matches_blender_conventions() {
         assert!(rotation_from_mat3(&-Mat3::from_quat(q)).dot(q).abs() > 1.0 - 1e-6);
     }
 }
-

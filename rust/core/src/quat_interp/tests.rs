@@ -76,10 +76,13 @@ fn a_chain_of_slerps_is_not_c1_but_squad_is() {
     let keys = [Quat::IDENTITY, Quat::from_rotation_x(1.0), Quat::from_rotation_x(1.0) * Quat::from_rotation_y(1.0)];
     let dt = 1e-3;
     let chain = |u: f32| if u <= 1.0 { slerp(keys[0], keys[1], u) } else { slerp(keys[1], keys[2], u - 1.0) };
-    let jump = (angular_velocity(chain(1.0 - dt), chain(1.0), dt) - angular_velocity(chain(1.0), chain(1.0 + dt), dt)).length();
+    let jump = (angular_velocity(chain(1.0 - dt), chain(1.0), dt) - angular_velocity(chain(1.0), chain(1.0 + dt), dt))
+        .length();
     assert!(jump > 1.0, "slerp chain jump {jump}");
     let s = Squad::new(&keys);
-    let jump = (angular_velocity(s.evaluate(1.0 - dt), s.evaluate(1.0), dt) - angular_velocity(s.evaluate(1.0), s.evaluate(1.0 + dt), dt)).length();
+    let jump = (angular_velocity(s.evaluate(1.0 - dt), s.evaluate(1.0), dt)
+        - angular_velocity(s.evaluate(1.0), s.evaluate(1.0 + dt), dt))
+    .length();
     assert!(jump < 2e-2, "squad jump {jump}");
 }
 

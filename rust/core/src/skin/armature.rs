@@ -57,7 +57,15 @@ impl PoseChannel {
             channel: Mat4::IDENTITY,
             rest: Mat4::IDENTITY,
             length: 0.0,
-            envelope: Envelope { head: glam::Vec3::ZERO, tail: glam::Vec3::ZERO, head_radius: 0.0, tail_radius: 0.0, distance: 0.0, weight: 0.0, multiply_groups: false },
+            envelope: Envelope {
+                head: glam::Vec3::ZERO,
+                tail: glam::Vec3::ZERO,
+                head_radius: 0.0,
+                tail_radius: 0.0,
+                distance: 0.0,
+                weight: 0.0,
+                multiply_groups: false,
+            },
             segments: 1,
             curved: false,
             bbone: None,
@@ -83,7 +91,9 @@ impl ArmaturePose {
     /// joint (`segments + 1`, the deform matrices and the Curved boundaries alike).
     pub fn new(channels: Vec<PoseChannel>) -> Result<Self, SkinError> {
         for (i, c) in channels.iter().enumerate() {
-            let bad = |problem: String| Err(SkinError::InvalidInfluences(format!("pose channel {i} ({}): {problem}", c.name)));
+            let bad = |problem: String| {
+                Err(SkinError::InvalidInfluences(format!("pose channel {i} ({}): {problem}", c.name)))
+            };
             let e = &c.envelope;
             let finite = c.channel.is_finite()
                 && c.rest.is_finite()
@@ -97,7 +107,12 @@ impl ArmaturePose {
             if let Some(b) = &c.bbone {
                 let joints = c.segments as usize + 1;
                 if c.segments < 2 || b.deform.len() != joints || b.rest_joints.len() != joints {
-                    return bad(format!("a B-Bone of {} segments needs {joints} joints, got {} and {}", c.segments, b.deform.len(), b.rest_joints.len()));
+                    return bad(format!(
+                        "a B-Bone of {} segments needs {joints} joints, got {} and {}",
+                        c.segments,
+                        b.deform.len(),
+                        b.rest_joints.len()
+                    ));
                 }
                 if !(b.boundaries.is_empty() || b.boundaries.len() == joints) {
                     return bad(format!("the Curved mapping needs {joints} boundaries, got {}", b.boundaries.len()));
@@ -111,7 +126,8 @@ impl ArmaturePose {
             }
         }
         let bones: Vec<usize> = channels.iter().enumerate().filter(|(_, c)| c.deform).map(|(i, _)| i).collect();
-        let segments: Vec<u32> = bones.iter().map(|&i| channels[i].bbone.as_ref().map_or(1, |_| channels[i].segments)).collect();
+        let segments: Vec<u32> =
+            bones.iter().map(|&i| channels[i].bbone.as_ref().map_or(1, |_| channels[i].segments)).collect();
         let (starts, expanded) = bbone_joint_starts(&segments);
         let mut pose = Self { channels, bones, starts, expanded, binding_signature: 0, pose_signature: 0 };
         pose.binding_signature = pose.binding_digest();

@@ -130,7 +130,8 @@ impl VectorOps for Avx2 {
             // SAFETY: the caller guarantees the records and the offset are in range; AVX as in
             // `instructions!`.
             unsafe {
-                let (lo, hi) = (lane_record(table, records[l]).add(offset), lane_record(table, records[l + 4]).add(offset));
+                let (lo, hi) =
+                    (lane_record(table, records[l]).add(offset), lane_record(table, records[l + 4]).add(offset));
                 _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(lo)), _mm_loadu_ps(hi))
             }
         };
@@ -143,7 +144,9 @@ impl VectorOps for Avx2 {
         let f = points.as_ptr() as *const f32;
         // SAFETY: eight points are 24 floats (checked); AVX as in `instructions!`.
         unsafe {
-            let half = |lo: usize| _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(f.add(lo))), _mm_loadu_ps(f.add(lo + 12)));
+            let half = |lo: usize| {
+                _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(f.add(lo))), _mm_loadu_ps(f.add(lo + 12)))
+            };
             // Each 128-bit half now holds four points: x0 y0 z0 x1 | y1 z1 x2 y2 | z2 x3 y3 z3.
             let (a, b, c) = (half(0), half(4), half(8));
             let xy = _mm256_shuffle_ps::<0x9E>(b, c); // x2 y2 x3 y3
@@ -193,7 +196,10 @@ impl VectorOps for Avx2 {
         // Rows are loaded in adjacent pairs; an odd last row with the four floats after it
         // (ignored), which must lie in the record too. Known at compile time.
         for j in 0..ROWS.div_ceil(2) {
-            assert!(2 * j + 1 >= ROWS || offsets[2 * j + 1] == offsets[2 * j] + 4, "the window's rows come in adjacent pairs");
+            assert!(
+                2 * j + 1 >= ROWS || offsets[2 * j + 1] == offsets[2 * j] + 4,
+                "the window's rows come in adjacent pairs"
+            );
             assert!(offsets[2 * j] + 8 <= stride, "the window's pairs of rows lie inside the record");
         }
         debug_assert!(signed.is_none_or(|s| s.len() == slots.len()));

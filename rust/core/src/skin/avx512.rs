@@ -222,15 +222,20 @@ const fn interleave_indices(part: usize) -> ([i32; 16], [i32; 16]) {
         let f = part * 16 + k;
         let lane = (f / 3) as i32;
         let axis = f % 3;
-        first[k] = if axis == 0 { lane } else if axis == 1 { lane + 16 } else { 0 };
+        first[k] = if axis == 0 {
+            lane
+        } else if axis == 1 {
+            lane + 16
+        } else {
+            0
+        };
         second[k] = if axis == 2 { lane + 16 } else { k as i32 };
         k += 1;
     }
     (first, second)
 }
 
-const INTERLEAVE: [([i32; 16], [i32; 16]); 3] =
-    [interleave_indices(0), interleave_indices(1), interleave_indices(2)];
+const INTERLEAVE: [([i32; 16], [i32; 16]); 3] = [interleave_indices(0), interleave_indices(1), interleave_indices(2)];
 
 #[inline]
 #[target_feature(enable = "avx512f")]
@@ -390,8 +395,13 @@ pub(super) unsafe fn batch<const KIND: u8>(
     });
     let dqs = (KIND != LINEAR).then(|| {
         // SAFETY: as this function's own contract.
-        let ([x, y, z, w], [d0, d1, d2, d3], contrib) =
-            unsafe { if job.scaled { scaled_sums(p, slots, job.pivot) } else { rigid_sums(slots, job.dq) } };
+        let ([x, y, z, w], [d0, d1, d2, d3], contrib) = unsafe {
+            if job.scaled {
+                scaled_sums(p, slots, job.pivot)
+            } else {
+                rigid_sums(slots, job.dq)
+            }
+        };
         // Blender's `mul_v3m3_dq` as `p + u·(2a/|q|²)` (see `dual_quaternion` in `batch.rs`).
         let ([tx, ty, tz], t0) = ([d0, d1, d2], d3);
         let fma = |a, b, c| _mm512_fmadd_ps(a, b, c);
@@ -622,7 +632,11 @@ pub(super) unsafe fn batch_centers<const SCALED: bool>(
     let fr = if SCALED { inv2 } else { mul(inv2, contrib) };
     // The rigid anchor is Σ wᵢ·(Mᵢ·c − c); the scaled one Σ wᵢ·Mᵢ·c, whose share is taken
     // as (anchor + o − contrib·co).
-    let anchor: [__m512; 3] = if SCALED { core::array::from_fn(|k| fnma(p[k], contrib, _mm512_add_ps(anchor[k], offset[k]))) } else { anchor };
+    let anchor: [__m512; 3] = if SCALED {
+        core::array::from_fn(|k| fnma(p[k], contrib, _mm512_add_ps(anchor[k], offset[k])))
+    } else {
+        anchor
+    };
     let moved: [__m512; 3] = core::array::from_fn(|k| fma(anchor[k], fa, fma(u[k], fr, p[k])));
     // SAFETY: as this function's own contract.
     unsafe { write_batch(job, moved, a, o, out) }

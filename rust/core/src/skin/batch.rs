@@ -470,7 +470,14 @@ fn rotation_terms<V: VectorOps>(v: V, q: &[V::F; 4], d: [V::F; 3]) -> [V::F; 3] 
 /// `u = w·b + v × b − t₀·v`, `b = v × p + t⃗` (since `M·p = |q|²·p + 2·(w·(v × p) + v × (v × p))`):
 /// 17 operations per lane instead of the matrix's 40, and `p`'s own term exact.
 #[inline(always)]
-fn dual_quaternion<V: VectorOps>(v: V, real: [V::F; 4], dual: [V::F; 4], contrib: V::F, p: [V::F; 3], a: V::F) -> [V::F; 3] {
+fn dual_quaternion<V: VectorOps>(
+    v: V,
+    real: [V::F; 4],
+    dual: [V::F; 4],
+    contrib: V::F,
+    p: [V::F; 3],
+    a: V::F,
+) -> [V::F; 3] {
     let [x, y, z, _] = real;
     let [tx, ty, tz, t0] = dual;
     // b = v × p + t⃗
@@ -520,7 +527,15 @@ fn centers_rigid<V: VectorOps>(
 /// the strength: `p + (sum − contrib·p)·(a/contrib) + u·(2a/(|q|²·contrib))`; `p` where
 /// `contrib ≤ 0.0001` or the sum is zero.
 #[inline(always)]
-fn centers_scaled<V: VectorOps>(v: V, sum: [V::F; 3], u: [V::F; 3], real: [V::F; 4], contrib: V::F, p: [V::F; 3], a: V::F) -> [V::F; 3] {
+fn centers_scaled<V: VectorOps>(
+    v: V,
+    sum: [V::F; 3],
+    u: [V::F; 3],
+    real: [V::F; 4],
+    contrib: V::F,
+    p: [V::F; 3],
+    a: V::F,
+) -> [V::F; 3] {
     let len2 = length_squared(v, &real);
     let valid = v.and(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.gt(len2, v.splat(0.0)));
     let inv = v.select(valid, v.div(a, v.mul(len2, contrib)), v.splat(0.0));

@@ -117,9 +117,8 @@ impl BBone<'_> {
                     )
                 })
             }
-            Mapping::Given { index, blend } => {
-                (index.len() != vertices || blend.len() != vertices).then(|| "needs one mapped segment per vertex".into())
-            }
+            Mapping::Given { index, blend } => (index.len() != vertices || blend.len() != vertices)
+                .then(|| "needs one mapped segment per vertex".into()),
         }
     }
 }

@@ -100,7 +100,17 @@ pub fn centers_of_rotation_interruptible(
     progress: &mut dyn FnMut(usize, usize) -> bool,
     interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<Centers, SkinError> {
-    centers_counted(Simd::detect(), Some(cells::TOLERANCE), positions, triangles, influences, sigma, progress, interrupted).map(|(c, _)| c)
+    centers_counted(
+        Simd::detect(),
+        Some(cells::TOLERANCE),
+        positions,
+        triangles,
+        influences,
+        sigma,
+        progress,
+        interrupted,
+    )
+    .map(|(c, _)| c)
 }
 
 /// The precompute on a given compiled copy of the inner loop, with the fast path's tolerance on
@@ -138,7 +148,8 @@ pub(super) fn centers_counted(
     let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
 
     // Parts of roughly equal work, so progress advances evenly and cancelling is quick.
-    let work: Vec<usize> = crate::pool::run(|| classes.members.par_iter().map(|c| index.work(&weights, c.first)).collect());
+    let work: Vec<usize> =
+        crate::pool::run(|| classes.members.par_iter().map(|c| index.work(&weights, c.first)).collect());
     check()?;
     let total: usize = work.iter().sum();
     let part_work = (total / 100).max(1 << 16);
@@ -171,9 +182,7 @@ pub(super) fn centers_counted(
         if part_work < (1 << 14) {
             slots.iter_mut().enumerate().map(|(i, o)| (range.start + i, o)).for_each(one);
         } else {
-            crate::pool::run(|| {
-                slots.par_iter_mut().enumerate().map(|(i, o)| (range.start + i, o)).for_each(one)
-            });
+            crate::pool::run(|| slots.par_iter_mut().enumerate().map(|(i, o)| (range.start + i, o)).for_each(one));
         }
         done += part_work;
         if !progress(done, total) {
@@ -208,7 +217,9 @@ impl WeightVectors {
         let mut list: Vec<(u32, f64)> = Vec::new();
         for v in 0..influences.vertex_count() {
             list.clear();
-            list.extend(influences.of_vertex(v).iter().filter(|i| i.weight > 0.0).map(|i| (i.bone, f64::from(i.weight))));
+            list.extend(
+                influences.of_vertex(v).iter().filter(|i| i.weight > 0.0).map(|i| (i.bone, f64::from(i.weight))),
+            );
             add_up_repeated_bones(&mut list);
             let total: f64 = list.iter().map(|e| e.1).sum();
             if total > f64::from(MIN_TOTAL_WEIGHT) {
@@ -420,7 +431,15 @@ impl PairIndex {
         check()?;
         // Equal (bⱼ, bₖ) in one list merged; padded to WIDTH; split into cells.
         let fast = tolerance.is_some() && inv_sigma2 <= SHIFT_THRESHOLD;
-        let mut index = Self { ids, exact: Soa::new(), raw: Soa::new(), cell_starts: vec![0], cells: Vec::new(), fast, tolerance: tolerance.unwrap_or(0.0) };
+        let mut index = Self {
+            ids,
+            exact: Soa::new(),
+            raw: Soa::new(),
+            cell_starts: vec![0],
+            cells: Vec::new(),
+            fast,
+            tolerance: tolerance.unwrap_or(0.0),
+        };
         // Lists are independent: sorted, merged and split in parallel, then packed in order.
         let prepared: Vec<(Vec<Entry>, Vec<Entry>, Vec<cells::CellGroup>)> = crate::pool::run(|| {
             lists
@@ -486,7 +505,13 @@ impl PairIndex {
             let mut bound = 0.0;
             for (id, aj, ak) in self.pairs(weights, v) {
                 let s = sums::pair_sums(simd, &self.raw.list(id), aj, ak, inv_sigma2, 0.0);
-                let (c, b) = cells::cell_sums(simd, &self.cells[self.cell_starts[id]..self.cell_starts[id + 1]], aj, ak, inv_sigma);
+                let (c, b) = cells::cell_sums(
+                    simd,
+                    &self.cells[self.cell_starts[id]..self.cell_starts[id + 1]],
+                    aj,
+                    ak,
+                    inv_sigma,
+                );
                 let f = 2.0 * aj * ak;
                 for k in 0..4 {
                     total[k] += f * (s[k] + c[k]);
@@ -509,8 +534,15 @@ impl PairIndex {
         // With exponents that could underflow (tiny σ), factor out the largest exp(−u²/σ²) so it
         // becomes 1; the factor cancels in the ratio.
         let shift = if inv_sigma2 > SHIFT_THRESHOLD {
-            let m = self.pairs(weights, v).map(|(id, aj, ak)| sums::min_cross_squared(&self.exact.list(id), aj, ak)).fold(f64::INFINITY, f64::min);
-            if m.is_finite() { m * inv_sigma2 } else { 0.0 }
+            let m = self
+                .pairs(weights, v)
+                .map(|(id, aj, ak)| sums::min_cross_squared(&self.exact.list(id), aj, ak))
+                .fold(f64::INFINITY, f64::min);
+            if m.is_finite() {
+                m * inv_sigma2
+            } else {
+                0.0
+            }
         } else {
             0.0
         };

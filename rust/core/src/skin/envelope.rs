@@ -93,7 +93,11 @@ impl Influences {
         }
         if let Some(envelopes) = what.envelopes {
             if envelopes.len() != bones {
-                return Err(SkinError::LengthMismatch { what: "envelopes (one per bone)", expected: bones, got: envelopes.len() });
+                return Err(SkinError::LengthMismatch {
+                    what: "envelopes (one per bone)",
+                    expected: bones,
+                    got: envelopes.len(),
+                });
             }
             if let Some(i) = envelopes.iter().position(|e| {
                 !(e.head.is_finite()
@@ -104,7 +108,11 @@ impl Influences {
             }
         }
         if !what.bbones.is_empty() && what.bbones.len() != bones {
-            return Err(SkinError::LengthMismatch { what: "B-Bones (one entry per bone)", expected: bones, got: what.bbones.len() });
+            return Err(SkinError::LengthMismatch {
+                what: "B-Bones (one entry per bone)",
+                expected: bones,
+                got: what.bbones.len(),
+            });
         }
         if what.expanded_bone_count < bones {
             return Err(SkinError::InvalidInfluences("the expanded bone list is shorter than the bone list".into()));
@@ -156,7 +164,14 @@ impl Influences {
     }
 
     /// Appends vertex `v`'s pairs for [`Self::effective`] (inputs already checked).
-    fn effective_vertex(&self, v: usize, position: [f32; 3], premat: Option<Mat4>, what: &Effective<'_>, out: &mut Vec<Influence>) {
+    fn effective_vertex(
+        &self,
+        v: usize,
+        position: [f32; 3],
+        premat: Option<Mat4>,
+        what: &Effective<'_>,
+        out: &mut Vec<Influence>,
+    ) {
         let co = {
             let p = Vec3::from_array(position);
             premat.map_or(p, |m| m.transform_point3(p))
@@ -175,7 +190,9 @@ impl Influences {
         if what.use_vertex_groups && !own.is_empty() {
             for i in own {
                 let factor = match what.envelopes.map(|e| &e[i.bone as usize]) {
-                    Some(e) if e.multiply_groups => distance_factor(co, e.head, e.tail, e.head_radius, e.tail_radius, e.distance),
+                    Some(e) if e.multiply_groups => {
+                        distance_factor(co, e.head, e.tail, e.head_radius, e.tail_radius, e.distance)
+                    }
                     _ => 1.0,
                 };
                 push(i.bone, i.weight * factor);

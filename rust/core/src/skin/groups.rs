@@ -139,7 +139,11 @@ mod tests {
 
     #[test]
     fn spaces_invert_each_other() {
-        let ob = Mat4::from_scale_rotation_translation(glam::Vec3::new(1.0, 2.0, 0.5), glam::Quat::from_rotation_z(0.3), glam::Vec3::new(1.0, -2.0, 3.0));
+        let ob = Mat4::from_scale_rotation_translation(
+            glam::Vec3::new(1.0, 2.0, 0.5),
+            glam::Quat::from_rotation_z(0.3),
+            glam::Vec3::new(1.0, -2.0, 3.0),
+        );
         let arm = Mat4::from_rotation_translation(glam::Quat::from_rotation_x(1.1), glam::Vec3::new(0.0, 4.0, 0.0));
         let (pre, post) = armature_spaces(ob, arm);
         assert!((pre * post).abs_diff_eq(Mat4::IDENTITY, 1e-5));

@@ -80,12 +80,7 @@ pub struct Influences {
 
 impl Influences {
     /// Validates CSR arrays: `offsets` (length V+1), `bones` and `weights` (one per entry).
-    pub fn from_csr(
-        offsets: &[u32],
-        bones: &[u32],
-        weights: &[f32],
-        bone_count: usize,
-    ) -> Result<Self, SkinError> {
+    pub fn from_csr(offsets: &[u32], bones: &[u32], weights: &[f32], bone_count: usize) -> Result<Self, SkinError> {
         let invalid = |what: String| Err(SkinError::InvalidInfluences(what));
         if offsets.is_empty() {
             return invalid("offsets must have one entry per vertex plus one (got an empty array)".into());
@@ -133,16 +128,10 @@ impl Influences {
             ));
         }
         if let Some(i) = bones.iter().position(|&b| b as usize >= bone_count) {
-            return invalid(format!(
-                "bones[{i}] = {} is out of range: bone_count = {bone_count}",
-                bones[i]
-            ));
+            return invalid(format!("bones[{i}] = {} is out of range: bone_count = {bone_count}", bones[i]));
         }
         if let Some(i) = weights.iter().position(|w| !(*w >= 0.0) || !w.is_finite()) {
-            return invalid(format!(
-                "weights[{i}] = {} is not a finite non-negative number",
-                weights[i]
-            ));
+            return invalid(format!("weights[{i}] = {} is not a finite non-negative number", weights[i]));
         }
         let entries: Vec<Influence> =
             bones.iter().zip(weights).map(|(&bone, &weight)| Influence { bone, weight }).collect();
@@ -191,9 +180,10 @@ impl Influences {
                     kept_weights.push(weights[i]);
                 }
             }
-            offsets.push(u32::try_from(kept_bones.len()).map_err(|_| {
-                SkinError::InvalidInfluences("more than 2^32-1 influences".into())
-            })?);
+            offsets.push(
+                u32::try_from(kept_bones.len())
+                    .map_err(|_| SkinError::InvalidInfluences("more than 2^32-1 influences".into()))?,
+            );
         }
         Self::from_csr(&offsets, &kept_bones, &kept_weights, bone_count)
     }
@@ -208,9 +198,10 @@ impl Influences {
                 bones.push(b);
                 weights.push(w);
             }
-            offsets.push(u32::try_from(bones.len()).map_err(|_| {
-                SkinError::InvalidInfluences("more than 2^32-1 influences".into())
-            })?);
+            offsets.push(
+                u32::try_from(bones.len())
+                    .map_err(|_| SkinError::InvalidInfluences("more than 2^32-1 influences".into()))?,
+            );
         }
         Self::from_csr(&offsets, &bones, &weights, bone_count)
     }
@@ -306,9 +297,11 @@ fn pack_lanes(offsets: &[u32], entries: &[Influence]) -> Result<(Vec<Slot>, Vec<
                 slots[base + k].weights[lane] = e.weight;
             }
         }
-        batch_starts.push(u32::try_from(slots.len()).map_err(|_| {
-            SkinError::InvalidInfluences("too many influences to pack (more than 2^32 slots)".into())
-        })?);
+        batch_starts.push(
+            u32::try_from(slots.len()).map_err(|_| {
+                SkinError::InvalidInfluences("too many influences to pack (more than 2^32 slots)".into())
+            })?,
+        );
     }
     Ok((slots, batch_starts))
 }

@@ -196,7 +196,9 @@ impl Simd {
             // AVX2 copy's own function, not its body inside the AVX-512 one, which ran 17 % slower.
             // SAFETY: a `Simd` of this set exists only where AVX-512F, AVX2 and FMA were detected.
             #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx512 if job.kind == Kind::DualQuaternion && job.pose.any_scaled() => unsafe { chunk_avx2(job, start, out) },
+            InstructionSet::Avx512 if job.kind == Kind::DualQuaternion && job.pose.any_scaled() => unsafe {
+                chunk_avx2(job, start, out)
+            },
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
             InstructionSet::Avx512 => unsafe { chunk_avx512(job, start, out) },
@@ -290,7 +292,14 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
                 // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction
                 // sets were detected; the job's influences and pose fit together (`Job::new`), so
                 // every bone index of the batch's slots indexes every table the method reads.
-                unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, inputs, out.try_into().expect("a full batch"), &mut scratch) };
+                unsafe {
+                    full_batch::<ISA, KIND, SCALED>(
+                        &simd_job,
+                        inputs,
+                        out.try_into().expect("a full batch"),
+                        &mut scratch,
+                    )
+                };
             } else {
                 // The last, partial batch goes through the same SIMD body, padded (the padding
                 // lanes' slots have weight 0 and their results are dropped): a vertex's result
@@ -412,10 +421,14 @@ unsafe fn full_batch<const ISA: u8, const KIND: u8, const SCALED: bool>(
             match ISA {
                 // SAFETY: the caller's contract.
                 #[cfg(target_arch = "x86_64")]
-                ISA_AVX2 => unsafe { skin_batch::<_, KIND, SCALED, 2>(super::avx2::Avx2::new(), simd_job, batch, scratch) },
+                ISA_AVX2 => unsafe {
+                    skin_batch::<_, KIND, SCALED, 2>(super::avx2::Avx2::new(), simd_job, batch, scratch)
+                },
                 // SAFETY: the caller's contract.
                 #[cfg(target_arch = "aarch64")]
-                ISA_NEON => unsafe { skin_batch::<_, KIND, SCALED, 4>(super::neon::Neon::new(), simd_job, batch, scratch) },
+                ISA_NEON => unsafe {
+                    skin_batch::<_, KIND, SCALED, 4>(super::neon::Neon::new(), simd_job, batch, scratch)
+                },
                 _ => unreachable!("no SIMD kernels for copy {ISA}"),
             }
         }

@@ -30,20 +30,24 @@ mod envelope;
 mod groups;
 mod influences;
 mod kernels;
-mod portable;
 #[cfg(target_arch = "aarch64")]
 mod neon;
+mod portable;
 mod pose;
 
 pub use armature::{ArmaturePose, BBoneCache, PoseChannel};
-pub use bbone::{bbone_joint_starts, bbone_segment_matrices, bbones_from_rest, bsp_depth, curved_segment, BBone, Mapping, SegmentBoundary, MAX_BBONE_SEGMENTS};
-pub use centers::{centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA};
+pub use bbone::{
+    bbone_joint_starts, bbone_segment_matrices, bbones_from_rest, bsp_depth, curved_segment, BBone, Mapping,
+    SegmentBoundary, MAX_BBONE_SEGMENTS,
+};
+pub use centers::{
+    centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA,
+};
 pub use envelope::{distance_factor, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};
 pub use influences::{Influence, Influences, MAX_BONES, MAX_INFLUENCES_PER_VERTEX};
-pub use pose::{affine_problem, Pose};
 use pose::Tables;
-
+pub use pose::{affine_problem, Pose};
 
 use glam::Mat4;
 
@@ -297,9 +301,8 @@ fn check_len(what: &'static str, expected: usize, got: usize) -> Result<(), Skin
 fn first_not_finite(points: &[[f32; 3]]) -> Option<usize> {
     const BLOCK: usize = 1024;
     const EXPONENT: u32 = 0x7f80_0000;
-    let bad = |block: &[[f32; 3]]| {
-        block.as_flattened().iter().fold(0u32, |m, x| m.max(x.to_bits() & EXPONENT)) == EXPONENT
-    };
+    let bad =
+        |block: &[[f32; 3]]| block.as_flattened().iter().fold(0u32, |m, x| m.max(x.to_bits() & EXPONENT)) == EXPONENT;
     let block = if points.len() <= kernels::CHUNK {
         points.chunks(BLOCK).position(bad)
     } else {

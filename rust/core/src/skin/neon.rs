@@ -133,7 +133,10 @@ impl VectorOps for Neon {
         table: &[T],
         offsets: [usize; ROWS],
     ) -> [[F; 4]; ROWS] {
-        debug_assert!(offsets.iter().all(|&r| r + 4 <= core::mem::size_of::<T>() / 4) && signed.is_none_or(|s| s.len() == slots.len()));
+        debug_assert!(
+            offsets.iter().all(|&r| r + 4 <= core::mem::size_of::<T>() / 4)
+                && signed.is_none_or(|s| s.len() == slots.len())
+        );
         let zero = self.splat(0.0);
         let mut acc = [[zero; ROWS]; 4];
         for (s, slot) in slots.iter().enumerate() {

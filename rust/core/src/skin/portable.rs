@@ -296,11 +296,8 @@ fn finish_dual_quaternion(co: &Points, s: &DqSum, strength: &Lanes) -> Points {
         let (tx, ty, tz, t0) = (s.dual[0][l], s.dual[1][l], s.dual[2][l], s.dual[3][l]);
         let p = [co.x[l], co.y[l], co.z[l]];
         // b = v × p + t⃗, u = w·b + v × b − t₀·v
-        let b = [
-            madd(-z, p[1], madd(y, p[2], tx)),
-            madd(-x, p[2], madd(z, p[0], ty)),
-            madd(-y, p[0], madd(x, p[1], tz)),
-        ];
+        let b =
+            [madd(-z, p[1], madd(y, p[2], tx)), madd(-x, p[2], madd(z, p[0], ty)), madd(-y, p[0], madd(x, p[1], tz))];
         let t = turn(q, b);
         let u = [madd(-t0, x, t[0]), madd(-t0, y, t[1]), madd(-t0, z, t[2])];
         let len2 = length_squared(q);
@@ -411,11 +408,7 @@ unsafe fn accumulate_centers<const SCALED: bool>(
 #[inline(always)]
 fn rotation_offset(q: Vec4, h: Vec4, p: [f32; 3]) -> [f32; 3] {
     let v = [q.x, q.y, q.z];
-    let a = [
-        madd(v[1], p[2], -(v[2] * p[1])),
-        madd(v[2], p[0], -(v[0] * p[2])),
-        madd(v[0], p[1], -(v[1] * p[0])),
-    ];
+    let a = [madd(v[1], p[2], -(v[2] * p[1])), madd(v[2], p[0], -(v[0] * p[2])), madd(v[0], p[1], -(v[1] * p[0]))];
     let b = [
         madd(v[1], a[2], -madd(v[2], a[1], -h.x)),
         madd(v[2], a[0], -madd(v[0], a[2], -h.y)),

@@ -185,7 +185,8 @@ impl Pose {
         for (bone, m) in deform.iter().enumerate() {
             check_affine("deform", bone, m)?;
         }
-        let linear = deform.iter().map(|m| LinearBone { matrix: AffineRows::from_mat4(m), padding: [0.0; 4] }).collect();
+        let linear =
+            deform.iter().map(|m| LinearBone { matrix: AffineRows::from_mat4(m), padding: [0.0; 4] }).collect();
         let (mut dq, mut pivot, mut pivot_dual, mut cor, mut cor_rigid, mut scaled) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         if let Some(rest) = rest {
@@ -199,11 +200,7 @@ impl Pose {
             for (bone, (m, b)) in deform.iter().zip(rest).enumerate() {
                 check_affine("rest", bone, b)?;
                 if b.determinant().abs() < 1e-12 {
-                    return Err(SkinError::InvalidMatrix {
-                        what: "rest",
-                        bone,
-                        problem: "is not invertible",
-                    });
+                    return Err(SkinError::InvalidMatrix { what: "rest", bone, problem: "is not invertible" });
                 }
                 if tables == Tables::Linear {
                     continue;
@@ -227,7 +224,8 @@ impl Pose {
                 if tables != Tables::Centers {
                     continue;
                 }
-                let stretch = if is_scaled { Mat3::from_quat(q).transpose() * Mat3::from_mat4(*m) } else { Mat3::IDENTITY };
+                let stretch =
+                    if is_scaled { Mat3::from_quat(q).transpose() * Mat3::from_mat4(*m) } else { Mat3::IDENTITY };
                 let (s0, s1, s2) = (stretch.row(0), stretch.row(1), stretch.row(2));
                 let [r0, r1, r2] = AffineRows::from_mat4(m).rows;
                 cor.push(CorBone {
@@ -406,17 +404,11 @@ mod tests {
             }
         );
         let nan = Mat4::from_translation(Vec3::new(f32::NAN, 0.0, 0.0));
-        assert!(matches!(
-            Pose::new(&[nan], None),
-            Err(SkinError::InvalidMatrix { bone: 0, .. })
-        ));
+        assert!(matches!(Pose::new(&[nan], None), Err(SkinError::InvalidMatrix { bone: 0, .. })));
         assert!(matches!(
             Pose::new(&[Mat4::IDENTITY], Some(&[Mat4::ZERO])),
             Err(SkinError::InvalidMatrix { what: "rest", .. })
         ));
-        assert!(matches!(
-            Pose::new(&[Mat4::IDENTITY], Some(&[])),
-            Err(SkinError::LengthMismatch { .. })
-        ));
+        assert!(matches!(Pose::new(&[Mat4::IDENTITY], Some(&[])), Err(SkinError::LengthMismatch { .. })));
     }
 }

@@ -61,7 +61,11 @@ mod reference {
 
     pub fn mat4_to_dquat(basemat: &DMat4, mat: &DMat4) -> BDq {
         let base_rs = *mat * *basemat;
-        let size = DVec3::new(base_rs.x_axis.truncate().length(), base_rs.y_axis.truncate().length(), base_rs.z_axis.truncate().length());
+        let size = DVec3::new(
+            base_rs.x_axis.truncate().length(),
+            base_rs.y_axis.truncate().length(),
+            base_rs.z_axis.truncate().length(),
+        );
         let dscale = size - DVec3::ONE;
         let (r, scale, scale_weight);
         if !is_orthonormal(&DMat3::from_mat4(*mat)) || mat.determinant() < 0.0 || dscale.length_squared() > 1e-8 {
@@ -154,7 +158,8 @@ mod reference {
     /// Blender's `armature_vert_task_with_dvert` for vertex groups only; `dqs` picks Preserve
     /// Volume. Returns mesh-space positions.
     pub fn skin(inputs: &Inputs<'_>, dqs: bool) -> Vec<DVec3> {
-        let dqs_bones: Vec<BDq> = inputs.deform.iter().zip(inputs.rest).map(|(m, b)| mat4_to_dquat(&d(b), &d(m))).collect();
+        let dqs_bones: Vec<BDq> =
+            inputs.deform.iter().zip(inputs.rest).map(|(m, b)| mat4_to_dquat(&d(b), &d(m))).collect();
         inputs
             .positions
             .iter()
@@ -289,14 +294,21 @@ fn case() -> impl Strategy<Value = Case> {
             proptest::collection::vec(vec3(3.0).prop_map(|v| v.to_array()), 40),
             lists(40, b),
             proptest::collection::vec(prop_oneof![Just(0.0f32), Just(1.0f32), 0.0f32..1.0], 40),
-            (unit_quat(), vec3(2.0), 0.5f32..2.0).prop_map(|(q, t, s)| Mat4::from_scale_rotation_translation(Vec3::splat(s), q, t)),
+            (unit_quat(), vec3(2.0), 0.5f32..2.0)
+                .prop_map(|(q, t, s)| Mat4::from_scale_rotation_translation(Vec3::splat(s), q, t)),
         )
     })
 }
 
 /// Skins with every compiled copy of the kernels this CPU can run; they must agree to round-off
 /// (FMA contraction differs between copies) and the last one's result is returned.
-fn run(method: Method<'_>, positions: &[[f32; 3]], lists: &[Vec<(u32, f32)>], rig: &Rig, options: &SkinOptions<'_>) -> Vec<[f32; 3]> {
+fn run(
+    method: Method<'_>,
+    positions: &[[f32; 3]],
+    lists: &[Vec<(u32, f32)>],
+    rig: &Rig,
+    options: &SkinOptions<'_>,
+) -> Vec<[f32; 3]> {
     let influences = Influences::from_lists(lists, rig.rest.len()).unwrap();
     let pose = Pose::new(&rig.deform, Some(&rig.rest)).unwrap();
     skin_all(method, positions, &influences, &pose, options)
@@ -304,7 +316,13 @@ fn run(method: Method<'_>, positions: &[[f32; 3]], lists: &[Vec<(u32, f32)>], ri
 
 /// Skins with every compiled copy of the kernels (they must agree to round-off); returns the
 /// last one's result.
-pub(in crate::skin) fn skin_all(method: Method<'_>, positions: &[[f32; 3]], influences: &Influences, pose: &Pose, options: &SkinOptions<'_>) -> Vec<[f32; 3]> {
+pub(in crate::skin) fn skin_all(
+    method: Method<'_>,
+    positions: &[[f32; 3]],
+    influences: &Influences,
+    pose: &Pose,
+    options: &SkinOptions<'_>,
+) -> Vec<[f32; 3]> {
     let mut results = Vec::new();
     for simd in kernels::Simd::available() {
         let mut out = vec![[f32::NAN; 3]; positions.len()];
@@ -436,8 +454,13 @@ fn the_order_of_influences_decides_dqs_signs_as_in_blender() {
     let lists = vec![vec![(0, 0.5), (1, 0.3), (2, 0.2)], vec![(0, 0.5), (2, 0.2), (1, 0.3)]];
     let out = run(Method::DualQuaternion, &positions, &lists, &rig, &SkinOptions::default());
     let inputs = reference::Inputs {
-        positions: &positions, lists: &lists, deform: &deform, rest: &rest,
-        premat: Mat4::IDENTITY, postmat: Mat4::IDENTITY, mask: None,
+        positions: &positions,
+        lists: &lists,
+        deform: &deform,
+        rest: &rest,
+        premat: Mat4::IDENTITY,
+        postmat: Mat4::IDENTITY,
+        mask: None,
     };
     let want = reference::skin(&inputs, true);
     assert_close(&out, &want, 1e-5).unwrap();
@@ -525,11 +548,17 @@ fn bad_inputs_are_rejected_before_anything_is_written() {
         err(skin(Method::Linear, &positions, &influences, &pose, &opts, &mut out[..1])),
         SkinError::LengthMismatch { what: "out", expected: 2, got: 1 }
     );
-    assert_eq!(err(skin(Method::DualQuaternion, &positions, &influences, &linear_only, &opts, &mut out)), SkinError::MissingRestMatrices);
+    assert_eq!(
+        err(skin(Method::DualQuaternion, &positions, &influences, &linear_only, &opts, &mut out)),
+        SkinError::MissingRestMatrices
+    );
     assert!(skin(Method::Linear, &positions, &influences, &linear_only, &opts, &mut out).is_ok());
     out = vec![[7.0; 3]; 2];
     let three = Pose::new(&[Mat4::IDENTITY; 3], None).unwrap();
-    assert!(matches!(err(skin(Method::Linear, &positions, &influences, &three, &opts, &mut out)), SkinError::LengthMismatch { .. }));
+    assert!(matches!(
+        err(skin(Method::Linear, &positions, &influences, &three, &opts, &mut out)),
+        SkinError::LengthMismatch { .. }
+    ));
     let mask = [0.5, 1.5];
     let masked = SkinOptions { mask: Some(&mask), ..opts };
     assert_eq!(
@@ -538,7 +567,14 @@ fn bad_inputs_are_rejected_before_anything_is_written() {
     );
     let amount = [f32::NAN, 0.5];
     assert!(matches!(
-        err(skin(Method::Blend { amount: Some(&amount), factor: 1.0 }, &positions, &influences, &pose, &opts, &mut out)),
+        err(skin(
+            Method::Blend { amount: Some(&amount), factor: 1.0 },
+            &positions,
+            &influences,
+            &pose,
+            &opts,
+            &mut out
+        )),
         SkinError::OutOfRange { what: "blend amount", index: Some(0), .. }
     ));
     assert!(matches!(
@@ -613,7 +649,6 @@ fn results_do_not_depend_on_the_thread_count() {
     assert_eq!(a, b);
 }
 
-
 #[test]
 fn skin_many_equals_one_call_per_mesh_and_reports_each_error() {
     use super::{skin_many, ManyJob};
@@ -629,9 +664,33 @@ fn skin_many_equals_one_call_per_mesh_and_reports_each_error() {
     let mut out2 = vec![[9.0f32; 3]; p2.len()];
     let mut bad_out = vec![[7.0f32; 3]; 4];
     let mut jobs = vec![
-        ManyJob { method: Method::DualQuaternion, positions: &positions, influences: &influences, deform: &deform, rest: Some(&rest), options: SkinOptions::default(), out: &mut out1 },
-        ManyJob { method: Method::Linear, positions: &p2, influences: &i2, deform: &d2, rest: Some(&r2), options: SkinOptions::default(), out: &mut out2 },
-        ManyJob { method: Method::Linear, positions: &p2, influences: &i2, deform: &d2, rest: None, options: SkinOptions::default(), out: &mut bad_out },
+        ManyJob {
+            method: Method::DualQuaternion,
+            positions: &positions,
+            influences: &influences,
+            deform: &deform,
+            rest: Some(&rest),
+            options: SkinOptions::default(),
+            out: &mut out1,
+        },
+        ManyJob {
+            method: Method::Linear,
+            positions: &p2,
+            influences: &i2,
+            deform: &d2,
+            rest: Some(&r2),
+            options: SkinOptions::default(),
+            out: &mut out2,
+        },
+        ManyJob {
+            method: Method::Linear,
+            positions: &p2,
+            influences: &i2,
+            deform: &d2,
+            rest: None,
+            options: SkinOptions::default(),
+            out: &mut bad_out,
+        },
     ];
     let results = skin_many(&mut jobs);
     drop(jobs);
@@ -652,11 +711,18 @@ pub(crate) fn batch_fixture(n: usize, bones: usize, k: usize) -> (Vec<[f32; 3]>,
         (seed % 10_000) as f32 / 10_000.0
     };
     let positions: Vec<[f32; 3]> = (0..n).map(|_| [rnd() * 4.0 - 2.0, rnd() * 4.0 - 2.0, rnd() * 4.0]).collect();
-    let lists: Vec<Vec<(u32, f32)>> = (0..n).map(|_| (0..k).map(|_| (((rnd() * bones as f32) as u32).min(bones as u32 - 1), rnd())).collect()).collect();
+    let lists: Vec<Vec<(u32, f32)>> = (0..n)
+        .map(|_| (0..k).map(|_| (((rnd() * bones as f32) as u32).min(bones as u32 - 1), rnd())).collect())
+        .collect();
     let influences = Influences::from_lists(&lists, bones).unwrap();
     let rest: Vec<Mat4> = (0..bones).map(|b| Mat4::from_translation(glam::Vec3::new(0.0, 0.0, b as f32))).collect();
     let deform: Vec<Mat4> = (0..bones)
-        .map(|_| Mat4::from_rotation_translation(glam::Quat::from_axis_angle(glam::Vec3::new(rnd(), rnd(), rnd() + 0.1).normalize(), rnd() * 3.0), glam::Vec3::new(rnd(), rnd(), rnd())))
+        .map(|_| {
+            Mat4::from_rotation_translation(
+                glam::Quat::from_axis_angle(glam::Vec3::new(rnd(), rnd(), rnd() + 0.1).normalize(), rnd() * 3.0),
+                glam::Vec3::new(rnd(), rnd(), rnd()),
+            )
+        })
         .collect();
     (positions, influences, deform, rest)
 }

@@ -45,7 +45,8 @@ fn squad_track_passes_through_keys_and_is_c1_in_time_with_uneven_keys() {
     // to remove the first-order error of one-sided differences (acceleration jumps at keys).
     let dt = 2e-2;
     let one_sided = |f: &dyn Fn(f32) -> Quat, t: f32, sign: f32| {
-        let v = |h: f32| if sign < 0.0 { angular_velocity(f(t - h), f(t), h) } else { angular_velocity(f(t), f(t + h), h) };
+        let v =
+            |h: f32| if sign < 0.0 { angular_velocity(f(t - h), f(t), h) } else { angular_velocity(f(t), f(t + h), h) };
         v(dt) * 2.0 - v(2.0 * dt)
     };
     for &t in &times[1..times.len() - 1] {

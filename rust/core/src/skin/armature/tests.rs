@@ -26,8 +26,12 @@ fn plain(name: &str, head: Vec3, angle: f32) -> PoseChannel {
 fn bbone(name: &str, head: Vec3, segments: u32, curved: bool) -> PoseChannel {
     let mut c = plain(name, head, 0.3);
     let joints = segments as usize + 1;
-    let rest_joints: Vec<Mat4> =
-        (0..joints).map(|a| Mat4::from_translation(Vec3::new(0.0, a as f32 / segments as f32, 0.0)) * Mat4::from_scale(Vec3::new(1.5, 1.0, 0.5))).collect();
+    let rest_joints: Vec<Mat4> = (0..joints)
+        .map(|a| {
+            Mat4::from_translation(Vec3::new(0.0, a as f32 / segments as f32, 0.0))
+                * Mat4::from_scale(Vec3::new(1.5, 1.0, 0.5))
+        })
+        .collect();
     let deform: Vec<Mat4> = (0..joints).map(|a| Mat4::from_rotation_x(0.1 * a as f32)).collect();
     let boundaries = if curved {
         (0..joints)
@@ -41,14 +45,26 @@ fn bbone(name: &str, head: Vec3, segments: u32, curved: bool) -> PoseChannel {
     };
     c.segments = segments;
     c.curved = curved;
-    c.bbone = Some(BBoneCache { inverse_rest: c.rest.inverse(), deform, rest_joints, boundaries, arc_length_reciprocal: 1.0 });
+    c.bbone = Some(BBoneCache {
+        inverse_rest: c.rest.inverse(),
+        deform,
+        rest_joints,
+        boundaries,
+        arc_length_reciprocal: 1.0,
+    });
     c
 }
 
 fn sample() -> ArmaturePose {
     let mut hidden = plain("Helper", Vec3::ZERO, 0.0);
     hidden.deform = false;
-    ArmaturePose::new(vec![plain("Root", Vec3::ZERO, 0.2), hidden, bbone("Spine", Vec3::Y, 3, false), bbone("Neck", 2.0 * Vec3::Y, 2, true)]).unwrap()
+    ArmaturePose::new(vec![
+        plain("Root", Vec3::ZERO, 0.2),
+        hidden,
+        bbone("Spine", Vec3::Y, 3, false),
+        bbone("Neck", 2.0 * Vec3::Y, 2, true),
+    ])
+    .unwrap()
 }
 
 #[test]

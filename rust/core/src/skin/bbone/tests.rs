@@ -24,7 +24,13 @@ fn straight_mapping_follows_blender() {
 fn b_bone_influences_split_over_two_joints() {
     let groups = Influences::from_lists(&[vec![(0, 0.6), (1, 0.4)]], 2).unwrap();
     let bbones = [None, Some(straight(2, 3, 3.0))];
-    let what = crate::Effective { envelopes: None, use_vertex_groups: true, use_envelopes: false, bbones: &bbones, expanded_bone_count: 6 };
+    let what = crate::Effective {
+        envelopes: None,
+        use_vertex_groups: true,
+        use_envelopes: false,
+        bbones: &bbones,
+        expanded_bone_count: 6,
+    };
     let e = groups.effective(&[[0.0, 1.25, 0.0]], None, &what).unwrap();
     let got: Vec<(u32, f32)> = e.of_vertex(0).iter().map(|i| (i.bone, i.weight)).collect();
     assert_eq!(got, vec![(0, 0.6), (3, 0.4 * 0.75), (4, 0.4 * 0.25)]);
@@ -33,9 +39,12 @@ fn b_bone_influences_split_over_two_joints() {
     let what_bad = crate::Effective { bbones: &bad, ..what };
     assert!(groups.effective(&[[0.0; 3]], None, &what_bad).is_err());
     // A mapping computed elsewhere wins where given; a negative index falls back to Straight.
-    for (index, expected) in [(2i32, vec![(0, 0.6), (4, 0.4 * 0.5), (5, 0.4 * 0.5)]), (-1, vec![(0, 0.6), (3, 0.4 * 0.75), (4, 0.4 * 0.25)])] {
+    for (index, expected) in
+        [(2i32, vec![(0, 0.6), (4, 0.4 * 0.5), (5, 0.4 * 0.5)]), (-1, vec![(0, 0.6), (3, 0.4 * 0.75), (4, 0.4 * 0.25)])]
+    {
         let (index, blend) = ([index], [0.5f32]);
-        let mapped = [None, Some(BBone { mapping: Mapping::Given { index: &index, blend: &blend }, ..straight(2, 3, 3.0) })];
+        let mapped =
+            [None, Some(BBone { mapping: Mapping::Given { index: &index, blend: &blend }, ..straight(2, 3, 3.0) })];
         let what = crate::Effective { bbones: &mapped, ..what };
         let e = groups.effective(&[[0.0, 1.25, 0.0]], None, &what).unwrap();
         let got: Vec<(u32, f32)> = e.of_vertex(0).iter().map(|i| (i.bone, i.weight)).collect();
@@ -220,7 +229,10 @@ fn curved_mapping_runs_along_the_curve() {
     assert_eq!(curved_segment(&boundaries, reciprocal, after.as_vec3()), (segments as u32 - 1, 1.0));
     // Points along the curve map monotonically.
     let curve = bezier_joints(curved_bone(1.2), 200);
-    let mapped: Vec<f64> = curve.iter().map(|(p, _)| head_tail_of(curved_segment(&boundaries, reciprocal, p.as_vec3()), segments as u32)).collect();
+    let mapped: Vec<f64> = curve
+        .iter()
+        .map(|(p, _)| head_tail_of(curved_segment(&boundaries, reciprocal, p.as_vec3()), segments as u32))
+        .collect();
     assert!(mapped.windows(2).all(|w| w[1] >= w[0] - 1e-6), "{mapped:?}");
     // Off the curve it differs from the straight mapping: the planes follow the curve.
     let straight_bone = straight(0, segments as u32, 2.0);
@@ -235,18 +247,28 @@ fn curved_mapping_runs_along_the_curve() {
 #[test]
 fn bad_b_bones_are_refused_with_a_reason() {
     let (boundaries, reciprocal) = boundaries_of(&bezier_joints(curved_bone(0.5), 4));
-    let good = BBone { mapping: Mapping::Curved { boundaries: &boundaries, arc_length_reciprocal: reciprocal }, ..straight(1, 4, 2.0) };
+    let good = BBone {
+        mapping: Mapping::Curved { boundaries: &boundaries, arc_length_reciprocal: reciprocal },
+        ..straight(1, 4, 2.0)
+    };
     assert_eq!(good.problem(3, 6), None);
-    let short = BBone { mapping: Mapping::Curved { boundaries: &boundaries[..4], arc_length_reciprocal: reciprocal }, ..good };
+    let short =
+        BBone { mapping: Mapping::Curved { boundaries: &boundaries[..4], arc_length_reciprocal: reciprocal }, ..good };
     assert!(short.problem(3, 6).unwrap().contains("one finite boundary per joint"));
     // Blender leaves the depth scales past the search depth uninitialized: they are not read.
     let mut padding = boundaries.clone();
     assert_eq!(bsp_depth(4), 3);
     padding[3].depth_scale = f32::NAN;
     padding[4].depth_scale = f32::INFINITY;
-    assert_eq!(BBone { mapping: Mapping::Curved { boundaries: &padding, arc_length_reciprocal: reciprocal }, ..good }.problem(3, 6), None);
+    assert_eq!(
+        BBone { mapping: Mapping::Curved { boundaries: &padding, arc_length_reciprocal: reciprocal }, ..good }
+            .problem(3, 6),
+        None
+    );
     padding[2].depth_scale = f32::NAN;
-    assert!(BBone { mapping: Mapping::Curved { boundaries: &padding, arc_length_reciprocal: reciprocal }, ..good }.problem(3, 6).is_some());
+    assert!(BBone { mapping: Mapping::Curved { boundaries: &padding, arc_length_reciprocal: reciprocal }, ..good }
+        .problem(3, 6)
+        .is_some());
     let mut nan = boundaries.clone();
     nan[2].normal.x = f32::NAN;
     let nan = BBone { mapping: Mapping::Curved { boundaries: &nan, arc_length_reciprocal: reciprocal }, ..good };

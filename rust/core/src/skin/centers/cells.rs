@@ -61,7 +61,12 @@ pub(super) struct CellGroup {
 
 impl CellGroup {
     fn empty() -> Self {
-        Self { b0: [[0.0; LANES]; 2], half: [[0.0; LANES]; 2], mass: [0.0; LANES], moments: [[[0.0; LANES]; 4]; MOMENTS] }
+        Self {
+            b0: [[0.0; LANES]; 2],
+            half: [[0.0; LANES]; 2],
+            mass: [0.0; LANES],
+            moments: [[[0.0; LANES]; 4]; MOMENTS],
+        }
     }
 }
 
@@ -69,7 +74,8 @@ impl CellGroup {
 /// expanded (in groups of [`LANES`]), the entries of the others are returned as they are.
 pub(super) fn build(entries: &[Entry], sigma: f64) -> (Vec<Entry>, Vec<CellGroup>) {
     let side = CELL * sigma;
-    let mut keyed: Vec<((i64, i64), &Entry)> = entries.iter().map(|e| (((e.bj / side).floor() as i64, (e.bk / side).floor() as i64), e)).collect();
+    let mut keyed: Vec<((i64, i64), &Entry)> =
+        entries.iter().map(|e| (((e.bj / side).floor() as i64, (e.bk / side).floor() as i64), e)).collect();
     keyed.sort_unstable_by_key(|k| k.0);
     let sorted: Vec<&Entry> = keyed.iter().map(|k| k.1).collect();
     let key = |e: &Entry| ((e.bj / side).floor() as i64, (e.bk / side).floor() as i64);

@@ -51,18 +51,8 @@ pub(super) fn min_cross_squared(list: &PairList<'_>, aj: f64, ak: f64) -> f64 {
 }
 
 /// The polynomial of [`exp_nonpositive`], highest degree first, for the SIMD copies.
-const EXP_POLY: [f64; 10] = [
-    1.0 / 362880.0,
-    1.0 / 40320.0,
-    1.0 / 5040.0,
-    1.0 / 720.0,
-    1.0 / 120.0,
-    1.0 / 24.0,
-    1.0 / 6.0,
-    1.0 / 2.0,
-    1.0,
-    1.0,
-];
+const EXP_POLY: [f64; 10] =
+    [1.0 / 362880.0, 1.0 / 40320.0, 1.0 / 5040.0, 1.0 / 720.0, 1.0 / 120.0, 1.0 / 24.0, 1.0 / 6.0, 1.0 / 2.0, 1.0, 1.0];
 const LOG2_E: f64 = core::f64::consts::LOG2_E;
 /// ln 2 in two parts (fdlibm's): `k·LN2_HI` is exact for the k used here.
 const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
@@ -81,7 +71,8 @@ const MIN_EXPONENT: f64 = -708.0;
 #[target_feature(enable = "avx2,fma")]
 unsafe fn sums_avx2(list: &PairList<'_>, aj: f64, ak: f64, inv_sigma2: f64, shift: f64) -> [f64; 4] {
     use core::arch::x86_64::*;
-    let (vaj, vak, vinv, vshift) = (_mm256_set1_pd(aj), _mm256_set1_pd(ak), _mm256_set1_pd(inv_sigma2), _mm256_set1_pd(shift));
+    let (vaj, vak, vinv, vshift) =
+        (_mm256_set1_pd(aj), _mm256_set1_pd(ak), _mm256_set1_pd(inv_sigma2), _mm256_set1_pd(shift));
     let exp = |x: __m256d| -> __m256d {
         let x = _mm256_min_pd(_mm256_max_pd(x, _mm256_set1_pd(MIN_EXPONENT)), _mm256_setzero_pd());
         let t = _mm256_fmadd_pd(x, _mm256_set1_pd(LOG2_E), _mm256_set1_pd(ROUND));
@@ -128,7 +119,8 @@ unsafe fn sums_avx2(list: &PairList<'_>, aj: f64, ak: f64, inv_sigma2: f64, shif
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn sums_avx512(list: &PairList<'_>, aj: f64, ak: f64, inv_sigma2: f64, shift: f64) -> [f64; 4] {
     use core::arch::x86_64::*;
-    let (vaj, vak, vinv, vshift) = (_mm512_set1_pd(aj), _mm512_set1_pd(ak), _mm512_set1_pd(inv_sigma2), _mm512_set1_pd(shift));
+    let (vaj, vak, vinv, vshift) =
+        (_mm512_set1_pd(aj), _mm512_set1_pd(ak), _mm512_set1_pd(inv_sigma2), _mm512_set1_pd(shift));
     let mut acc = [_mm512_setzero_pd(); 4];
     let n = list.p.len();
     let mut i = 0;
@@ -183,7 +175,9 @@ unsafe fn sums_neon(list: &PairList<'_>, aj: f64, ak: f64, inv_sigma2: f64, shif
     let zero = vdupq_n_f64(0.0);
     let mut acc = [[zero; 4]; 4];
     let n = list.p.len();
-    assert!(list.bj.len() == n && list.bk.len() == n && list.pc.iter().all(|c| c.len() == n) && n.is_multiple_of(WIDTH));
+    assert!(
+        list.bj.len() == n && list.bk.len() == n && list.pc.iter().all(|c| c.len() == n) && n.is_multiple_of(WIDTH)
+    );
     let mut i = 0;
     while i < n {
         for h in 0..4 {

@@ -11,13 +11,24 @@ use proptest::prelude::*;
 
 /// The precompute straight from the formula: every vertex against every triangle, dense weight
 /// vectors, the library `exp`, f64 throughout.
-fn naive_centers(positions: &[[f32; 3]], triangles: &[[u32; 3]], influences: &Influences, sigma: f64) -> Vec<Option<DVec3>> {
+fn naive_centers(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f64,
+) -> Vec<Option<DVec3>> {
     let all: Vec<usize> = (0..influences.vertex_count()).collect();
     naive_centers_of(positions, triangles, influences, sigma, &all)
 }
 
 /// [`naive_centers`] of the given vertices only.
-fn naive_centers_of(positions: &[[f32; 3]], triangles: &[[u32; 3]], influences: &Influences, sigma: f64, vertices: &[usize]) -> Vec<Option<DVec3>> {
+fn naive_centers_of(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f64,
+    vertices: &[usize],
+) -> Vec<Option<DVec3>> {
     let bones = influences.bone_count();
     let dense: Vec<Vec<f64>> = (0..influences.vertex_count())
         .map(|v| {
@@ -86,7 +97,17 @@ fn check_against_naive(positions: &[[f32; 3]], triangles: &[[u32; 3]], influence
     let diag = diagonal(positions).max(1e-30);
     let mut results = Vec::new();
     for simd in Simd::available() {
-        let (got, _) = centers_counted(simd, Some(cells::TOLERANCE), positions, triangles, influences, sigma, &mut |_, _| true, &mut || false).unwrap();
+        let (got, _) = centers_counted(
+            simd,
+            Some(cells::TOLERANCE),
+            positions,
+            triangles,
+            influences,
+            sigma,
+            &mut |_, _| true,
+            &mut || false,
+        )
+        .unwrap();
         for (v, (w, (c, has))) in want.iter().zip(got.centers.iter().zip(&got.has_center)).enumerate() {
             match w {
                 Some(w) => {
@@ -143,12 +164,15 @@ fn the_fast_path_is_within_its_certified_bound_where_it_is_used() {
     let c = Creature::new(15_000).unwrap();
     let diag = diagonal(&c.positions);
     let (p, t, i) = (&c.positions, &c.triangles, &c.influences);
-    let (exact, none) = centers_counted(Simd::detect(), None, p, t, i, DEFAULT_SIGMA, &mut |_, _| true, &mut || false).unwrap();
+    let (exact, none) =
+        centers_counted(Simd::detect(), None, p, t, i, DEFAULT_SIGMA, &mut |_, _| true, &mut || false).unwrap();
     assert_eq!(none, 0);
     // The certificate allows 1e-7 × diagonal; f32 rounding of the centers adds ~1e-7 of their size.
     let tolerance = 1e-6 * diag;
     for simd in Simd::available() {
-        let (fast, count) = centers_counted(simd, Some(cells::TOLERANCE), p, t, i, DEFAULT_SIGMA, &mut |_, _| true, &mut || false).unwrap();
+        let (fast, count) =
+            centers_counted(simd, Some(cells::TOLERANCE), p, t, i, DEFAULT_SIGMA, &mut |_, _| true, &mut || false)
+                .unwrap();
         // Nearly every vertex has its own weights; most should take the fast path.
         assert!(count * 10 >= 8 * p.len(), "{simd:?}: only {count} of {} on the fast path", p.len());
         assert_eq!(fast.has_center, exact.has_center);
@@ -156,11 +180,15 @@ fn the_fast_path_is_within_its_certified_bound_where_it_is_used() {
         for (a, b) in fast.centers.iter().zip(&exact.centers) {
             worst = worst.max((Vec3::from_array(*a).as_dvec3() - Vec3::from_array(*b).as_dvec3()).length());
         }
-        eprintln!("{simd:?}: {count} weight vectors on the fast path, largest difference to the exact sums {:.2e} × diagonal", worst / diag);
+        eprintln!(
+            "{simd:?}: {count} weight vectors on the fast path, largest difference to the exact sums {:.2e} × diagonal",
+            worst / diag
+        );
         assert!(worst <= tolerance, "{simd:?}: {worst} > {tolerance}");
     }
     // A tolerance tight enough that some vertices fall back to the exact sums.
-    let (mixed, count) = centers_counted(Simd::detect(), Some(1e-10), p, t, i, DEFAULT_SIGMA, &mut |_, _| true, &mut || false).unwrap();
+    let (mixed, count) =
+        centers_counted(Simd::detect(), Some(1e-10), p, t, i, DEFAULT_SIGMA, &mut |_, _| true, &mut || false).unwrap();
     assert!(count > 0 && count * 10 < 9 * p.len(), "{count} of {} on the fast path", p.len());
     for (a, b) in mixed.centers.iter().zip(&exact.centers) {
         assert!((Vec3::from_array(*a).as_dvec3() - Vec3::from_array(*b).as_dvec3()).length() <= tolerance);
@@ -209,7 +237,13 @@ fn equal_weight_vectors_share_a_center_and_scaling_weights_changes_nothing() {
     let base = centers_of_rotation(&cyl.positions, &cyl.triangles, &cyl.influences, 0.1).unwrap();
     // The same weights times 3, with a repeated bone split in two.
     let lists: Vec<Vec<(u32, f32)>> = (0..cyl.positions.len())
-        .map(|v| cyl.influences.of_vertex(v).iter().flat_map(|i| [(i.bone, 1.5 * i.weight), (i.bone, 1.5 * i.weight)]).collect())
+        .map(|v| {
+            cyl.influences
+                .of_vertex(v)
+                .iter()
+                .flat_map(|i| [(i.bone, 1.5 * i.weight), (i.bone, 1.5 * i.weight)])
+                .collect()
+        })
         .collect();
     let scaled = Influences::from_lists(&lists, 2).unwrap();
     let other = centers_of_rotation(&cyl.positions, &cyl.triangles, &scaled, 0.1).unwrap();
@@ -307,7 +341,16 @@ fn bad_precompute_inputs_are_rejected_naming_them() {
 /// The per-frame formula in f64: `v' = Σ wⱼ·Mⱼ·c + R·Σ wⱼ·Sⱼ·(v − c)` in armature space, with
 /// `R` from the sign-aligned quaternion sum and `Sⱼ = Rⱼᵀ·M₃ⱼ` (identity for rigid bones).
 #[allow(clippy::too_many_arguments)] // the kernel's inputs, one by one
-fn reference(positions: &[[f32; 3]], centers: &[[f32; 3]], lists: &[Vec<(u32, f32)>], deform: &[Mat4], pose: &Pose, premat: Mat4, postmat: Mat4, mask: Option<&[f32]>) -> Vec<DVec3> {
+fn reference(
+    positions: &[[f32; 3]],
+    centers: &[[f32; 3]],
+    lists: &[Vec<(u32, f32)>],
+    deform: &[Mat4],
+    pose: &Pose,
+    premat: Mat4,
+    postmat: Mat4,
+    mask: Option<&[f32]>,
+) -> Vec<DVec3> {
     let (pre, post) = (premat.as_dmat4(), postmat.as_dmat4());
     positions
         .iter()
@@ -320,13 +363,18 @@ fn reference(positions: &[[f32; 3]], centers: &[[f32; 3]], lists: &[Vec<(u32, f3
             }
             let co = pre.transform_point3(p);
             let c = pre.transform_point3(Vec3::from_array(centers[v]).as_dvec3());
-            let (mut anchor, mut offset, mut q, mut contrib) = (DVec3::ZERO, DVec3::ZERO, DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0), 0.0);
+            let (mut anchor, mut offset, mut q, mut contrib) =
+                (DVec3::ZERO, DVec3::ZERO, DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0), 0.0);
             for &(b, w) in &lists[v] {
                 let w = f64::from(w);
                 let b = b as usize;
                 let m = deform[b].as_dmat4();
                 let qb = pose.bone_rotation(b).unwrap().as_dquat();
-                let stretch = if pose.scaled_bones()[b] { DMat3::from_quat(qb).transpose() * DMat3::from_mat4(m) } else { DMat3::IDENTITY };
+                let stretch = if pose.scaled_bones()[b] {
+                    DMat3::from_quat(qb).transpose() * DMat3::from_mat4(m)
+                } else {
+                    DMat3::IDENTITY
+                };
                 anchor += w * m.transform_point3(c);
                 offset += w * (stretch * (co - c));
                 let sign = if qb.dot(q) < 0.0 { -1.0 } else { 1.0 };
@@ -357,28 +405,30 @@ fn vec3(extent: f32) -> impl Strategy<Value = Vec3> {
 /// Rest and deform matrices; with `scaled`, some bones get scale, shear or a mirror.
 fn rig(bones: std::ops::Range<usize>, scaled: bool) -> impl Strategy<Value = (Vec<Mat4>, Vec<Mat4>)> {
     let kind = if scaled { 0u8..4 } else { 0u8..1 };
-    proptest::collection::vec((unit_quat(), vec3(2.0), unit_quat(), vec3(2.0), kind, vec3(0.6)), bones).prop_map(|specs| {
-        let mut rest = Vec::new();
-        let mut deform = Vec::new();
-        for (rq, rt, pq, pt, kind, extra) in specs {
-            let b = Mat4::from_rotation_translation(rq, rt);
-            let mut posed = Mat4::from_rotation_translation(pq, pt);
-            match kind {
-                1 => posed *= Mat4::from_scale(Vec3::ONE + extra.abs() * 2.0),
-                2 => {
-                    let mut shear = Mat4::IDENTITY;
-                    shear.y_axis.x = extra.x;
-                    shear.z_axis.y = extra.y;
-                    posed *= shear;
+    proptest::collection::vec((unit_quat(), vec3(2.0), unit_quat(), vec3(2.0), kind, vec3(0.6)), bones).prop_map(
+        |specs| {
+            let mut rest = Vec::new();
+            let mut deform = Vec::new();
+            for (rq, rt, pq, pt, kind, extra) in specs {
+                let b = Mat4::from_rotation_translation(rq, rt);
+                let mut posed = Mat4::from_rotation_translation(pq, pt);
+                match kind {
+                    1 => posed *= Mat4::from_scale(Vec3::ONE + extra.abs() * 2.0),
+                    2 => {
+                        let mut shear = Mat4::IDENTITY;
+                        shear.y_axis.x = extra.x;
+                        shear.z_axis.y = extra.y;
+                        posed *= shear;
+                    }
+                    3 => posed *= Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0 + extra.z.abs())),
+                    _ => {}
                 }
-                3 => posed *= Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0 + extra.z.abs())),
-                _ => {}
+                deform.push(posed * b.inverse());
+                rest.push(b);
             }
-            deform.push(posed * b.inverse());
-            rest.push(b);
-        }
-        (rest, deform)
-    })
+            (rest, deform)
+        },
+    )
 }
 
 type Case = ((Vec<Mat4>, Vec<Mat4>), Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<Vec<(u32, f32)>>, Vec<f32>, Mat4);
@@ -393,7 +443,8 @@ fn case(scaled: bool) -> impl Strategy<Value = Case> {
             proptest::collection::vec(vec3(3.0).prop_map(|v| v.to_array()), 37),
             proptest::collection::vec(proptest::collection::vec(entry, 0..=6), 37),
             proptest::collection::vec(prop_oneof![Just(0.0f32), Just(1.0f32), 0.0f32..1.0], 37),
-            (unit_quat(), vec3(2.0), 0.5f32..2.0).prop_map(|(q, t, s)| Mat4::from_scale_rotation_translation(Vec3::splat(s), q, t)),
+            (unit_quat(), vec3(2.0), 0.5f32..2.0)
+                .prop_map(|(q, t, s)| Mat4::from_scale_rotation_translation(Vec3::splat(s), q, t)),
         )
     })
 }
@@ -499,15 +550,27 @@ proptest! {
 fn bones_sharing_one_sheared_matrix_move_vertices_by_that_matrix() {
     // Same rest matrices too: a scaled bone's rotation (Blender's) depends on its rest matrix.
     let rest = vec![Mat4::from_rotation_translation(Quat::from_rotation_x(0.5), Vec3::Z); 2];
-    let mut shear = Mat4::from_scale_rotation_translation(Vec3::new(1.3, 0.7, 2.0), Quat::from_rotation_z(0.8), Vec3::new(0.2, -1.0, 0.5));
+    let mut shear = Mat4::from_scale_rotation_translation(
+        Vec3::new(1.3, 0.7, 2.0),
+        Quat::from_rotation_z(0.8),
+        Vec3::new(0.2, -1.0, 0.5),
+    );
     shear.y_axis.x = 0.4;
     let deform = vec![shear; 2];
     let pose = Pose::new(&deform, Some(&rest)).unwrap();
     assert!(pose.any_scaled());
     let positions = vec![[1.0, 2.0, 3.0], [-0.5, 0.1, 0.9], [2.0, -1.0, 0.0]];
     let centers = vec![[0.0, 1.0, 0.0], [0.3, 0.3, 0.3], [2.0, -1.0, 0.0]];
-    let influences = Influences::from_lists(&[vec![(0, 0.3), (1, 0.7)], vec![(1, 0.5), (0, 0.5)], vec![(0, 1.0), (1, 1.0)]], 2).unwrap();
-    let got = skin_all(Method::CentersOfRotation { centers: &centers }, &positions, &influences, &pose, &SkinOptions::default());
+    let influences =
+        Influences::from_lists(&[vec![(0, 0.3), (1, 0.7)], vec![(1, 0.5), (0, 0.5)], vec![(0, 1.0), (1, 1.0)]], 2)
+            .unwrap();
+    let got = skin_all(
+        Method::CentersOfRotation { centers: &centers },
+        &positions,
+        &influences,
+        &pose,
+        &SkinOptions::default(),
+    );
     for (g, p) in got.iter().zip(&positions) {
         let want = shear.transform_point3(Vec3::from_array(*p));
         assert!((Vec3::from_array(*g) - want).length() < 1e-5, "{g:?} vs {want}");
@@ -540,7 +603,8 @@ fn twisting_180_degrees_keeps_the_middle_cross_section() {
 /// relative to the radius.
 fn elbow_deviation(cyl: &TwistCylinder, method: Method<'_>, degrees: f32) -> (f64, f64) {
     let joint = cyl.rest[1].w_axis.truncate();
-    let bend = Mat4::from_translation(joint) * Mat4::from_rotation_x(degrees.to_radians()) * Mat4::from_translation(-joint);
+    let bend =
+        Mat4::from_translation(joint) * Mat4::from_rotation_x(degrees.to_radians()) * Mat4::from_translation(-joint);
     let deform = [Mat4::IDENTITY, bend];
     let pose = Pose::new(&deform, Some(&cyl.rest)).unwrap();
     let out = skin_all(method, &cyl.positions, &cyl.influences, &pose, &SkinOptions::default());
@@ -593,10 +657,14 @@ fn bad_kernel_inputs_are_rejected_before_anything_is_written() {
     let opts = SkinOptions::default();
     let centers = [[0.0f32; 3]; 2];
     let err = |c: &[[f32; 3]], pose: &Pose, out: &mut [[f32; 3]]| {
-        super::super::skin(Method::CentersOfRotation { centers: c }, &positions, &influences, pose, &opts, out).unwrap_err()
+        super::super::skin(Method::CentersOfRotation { centers: c }, &positions, &influences, pose, &opts, out)
+            .unwrap_err()
     };
     assert_eq!(err(&centers[..1], &pose, &mut out), SkinError::LengthMismatch { what: "centers", expected: 2, got: 1 });
-    assert_eq!(err(&[[0.0, f32::NAN, 0.0], [0.0; 3]], &pose, &mut out), SkinError::NotFinite { what: "centers", index: 0 });
+    assert_eq!(
+        err(&[[0.0, f32::NAN, 0.0], [0.0; 3]], &pose, &mut out),
+        SkinError::NotFinite { what: "centers", index: 0 }
+    );
     assert_eq!(err(&centers, &linear_only, &mut out), SkinError::MissingRestMatrices);
     assert_eq!(out, vec![[7.0f32; 3]; 2]);
 }
@@ -613,8 +681,24 @@ fn skin_many_runs_centers_of_rotation() {
     let mut out = vec![[0.0f32; 3]; c.positions.len()];
     let mut short = vec![[7.0f32; 3]; 3];
     let mut jobs = vec![
-        super::super::ManyJob { method, positions: &c.positions, influences: &c.influences, deform: &deform, rest: Some(&c.rest), options: SkinOptions::default(), out: &mut out },
-        super::super::ManyJob { method, positions: &c.positions, influences: &c.influences, deform: &deform, rest: None, options: SkinOptions::default(), out: &mut short },
+        super::super::ManyJob {
+            method,
+            positions: &c.positions,
+            influences: &c.influences,
+            deform: &deform,
+            rest: Some(&c.rest),
+            options: SkinOptions::default(),
+            out: &mut out,
+        },
+        super::super::ManyJob {
+            method,
+            positions: &c.positions,
+            influences: &c.influences,
+            deform: &deform,
+            rest: None,
+            options: SkinOptions::default(),
+            out: &mut short,
+        },
     ];
     let results = super::super::skin_many(&mut jobs);
     drop(jobs);

@@ -11,7 +11,7 @@ PLATFORM ?= linux-x64
 STAMPS := .stamps
 RUST_SOURCES := $(shell find rust bench -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: setup build addon platforms test test-rust test-clippy test-python test-blender test-blenders test-windows test-arm demo bench clean
+.PHONY: setup build addon platforms test test-format test-rust test-clippy test-python test-blender test-blenders test-windows test-arm demo bench clean
 
 setup: $(STAMPS)/deps $(STAMPS)/module $(STAMPS)/addon
 
@@ -53,7 +53,15 @@ platforms: setup
 
 build: setup
 
-test: setup test-rust test-clippy test-python test-blender
+test: setup test-format test-rust test-clippy test-python test-blender
+
+# Formatting and lints first (the quickest to fail): rustfmt (rustfmt.toml) over the Rust code, and
+# ruff's lint and formatter (pyproject.toml) over every Python file.
+test-format: $(STAMPS)/deps
+	rustup component list --installed | grep -q '^rustfmt' || rustup component add rustfmt
+	cargo fmt --check
+	$(VENV_BIN)/ruff check
+	$(VENV_BIN)/ruff format --check
 
 # Property tests use a fixed seed here so that CI is deterministic; plain `cargo test` draws new
 # random cases every run (and replays rust/core/proptest-regressions/ first).

@@ -245,11 +245,11 @@ class HandlerParts:
     (`skin_many`) and writing the result (`results.write_positions`), per call."""
 
     PARTS = {
-        "read_pose": ("pose", "armature_signature"),
-        "pose_frame": ("pose", "frame"),
-        "influences": ("pose", "influences"),
+        "read_pose": ("blender.pose", "armature_signature"),
+        "pose_frame": ("blender.pose", "frame"),
+        "influences": ("blender.pose", "influences"),
         "kernel": ("dqskin", "skin_many"),
-        "write": ("results", "write_positions"),
+        "write": ("routes.results", "write_positions"),
     }
 
     def __init__(self):
@@ -259,7 +259,9 @@ class HandlerParts:
 
     def install(self):
         for key, (module, name) in self.PARTS.items():
-            owner = getattr(self.addon, module)
+            owner = self.addon
+            for part in module.split("."):
+                owner = getattr(owner, part)
             original = getattr(owner, name)
             self.saved.append((owner, name, original))
 
@@ -306,8 +308,8 @@ def kernel_ms(obj, runs: int) -> dict:
     """`dqskin.skin_many` alone on the job the modifier last ran (its inputs, spaces and
     output), Linear and Dual Quaternion."""
     addon = sys.modules[ADDON]
-    mod = addon.modifier.dq_skin_modifiers(obj)[0]
-    job = addon.modifier.state_of(obj, mod).output.job
+    mod = addon.engine.context.dq_skin_modifiers(obj)[0]
+    job = addon.SESSION.state_of(obj, mod).output.job
     res = {}
     for method in ("linear", "dual_quaternion"):
         j = addon.dqskin.SkinJob(
@@ -525,8 +527,8 @@ class InEvaluation:
         import tempfile
 
         addon = sys.modules[ADDON]
-        mod = addon.modifier.dq_skin_modifiers(dq)[0]
-        st = addon.modifier.state_of(dq, mod)
+        mod = addon.engine.context.dq_skin_modifiers(dq)[0]
+        st = addon.SESSION.state_of(dq, mod)
         assert st.status.live and st.output.job is not None, st.status.message
         self.obj = body.copy()
         self.obj.data = body.data.copy()
@@ -549,8 +551,8 @@ class InEvaluation:
         self.bone_names = list(binding.bone_names)
         namespace = bpy.app.driver_namespace
         self.calls = 0
-        frame, skin_many = addon.pose.frame, addon.dqskin.skin_many  # (before `HandlerParts` wraps them)
-        pose_matrices, live = addon.rig.pose_matrices, st.needs_effective
+        frame, skin_many = addon.blender.pose.frame, addon.dqskin.skin_many  # (before `HandlerParts` wraps them)
+        pose_matrices, live = addon.blender.rig.pose_matrices, st.needs_effective
         indices = binding.bone_indices
         all_bones = len(indices) == len(rig.pose.bones)
 
@@ -592,7 +594,7 @@ def add_bone_driver(modifier, rig, bone_names, expression: str) -> int:
 
 def order_after_bones(driver, rig, bone_names, prefix: str = "b") -> int:
     """The add-on's own ordering of a driver after the bound bones (`feed.order_after_bones`)."""
-    return sys.modules[ADDON].feed.order_after_bones(driver, rig, list(bone_names), prefix)
+    return sys.modules[ADDON].routes.feed.order_after_bones(driver, rig, list(bone_names), prefix)
 
 
 class BatchedInEvaluation:
@@ -625,7 +627,7 @@ class BatchedInEvaluation:
         batch.type = "SCRIPTED"
         self.variables = 0
         for k, (d, (body, rig)) in enumerate(zip(dq, pairs)):
-            st = addon.modifier.state_of(d, addon.modifier.dq_skin_modifiers(d)[0])
+            st = addon.SESSION.state_of(d, addon.engine.context.dq_skin_modifiers(d)[0])
             assert st.status.live and st.output.job is not None and not st.needs_effective, st.status.message
             binding = st.binding.binding
             states.append(st)
@@ -668,7 +670,7 @@ class BatchedInEvaluation:
             self.results = [st.output.result for st in states]
         self.calls = 0
         namespace = bpy.app.driver_namespace
-        skin_many, pose_matrices = addon.dqskin.skin_many, addon.rig.pose_matrices
+        skin_many, pose_matrices = addon.dqskin.skin_many, addon.blender.rig.pose_matrices
         fds, sizes = self.fds, self.header_sizes
 
         def skin(*_):
@@ -805,7 +807,7 @@ def case_regenerate(quick: bool) -> dict:
 
     def live() -> bool:
         addon = sys.modules[ADDON]
-        return all(addon.modifier.state_of(o, addon.modifier.dq_skin_modifiers(o)[0]).status.live for o in (body, second))
+        return all(addon.SESSION.state_of(o, addon.engine.context.dq_skin_modifiers(o)[0]).status.live for o in (body, second))
 
     times = {"with_extension": [], "without_extension": []}
     skinned = []

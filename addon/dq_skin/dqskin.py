@@ -7,6 +7,7 @@ installed (not a copy), so there is one `dqskin` in the process."""
 import sys
 
 import dqskin
+import dqskin.memory  # noqa: F401  (the memory readers: `dqskin.memory`)
 import dqskin.pc2  # noqa: F401  (an attribute of the package, for `from .dqskin import pc2`)
 
 sys.modules[__name__] = dqskin

@@ -24,32 +24,19 @@ from __future__ import annotations
 import contextlib
 import sys
 
-_active: list[str] = []  # the exporters running now (nested exports are possible)
-_on_change = []  # called with no arguments when an export starts or ends (see `handlers`)
-
-
-def active() -> str:
-    """The panel's reason while an exporter runs, else ""."""
-    return f"Exporting ({_active[-1]}): the exporter skins from Blender's Armature modifier" if _active else ""
+from .session import SESSION
 
 
 @contextlib.contextmanager
 def exporting(name: str):
-    _active.append(name)
-    _changed()
+    state = SESSION.exports
+    state.running.append(name)
+    state.changed()
     try:
         yield
     finally:
-        _active.remove(name)
-        _changed()
-
-
-def _changed() -> None:
-    for fn in _on_change:
-        fn()
-
-
-_gltf_scopes: list = []
+        state.running.remove(name)
+        state.changed()
 
 
 def glTF2_pre_export_callback(export_settings):
@@ -58,12 +45,12 @@ def glTF2_pre_export_callback(export_settings):
         return
     scope = exporting("glTF")
     scope.__enter__()
-    _gltf_scopes.append(scope)
+    SESSION.exports.scopes.append(scope)
 
 
 def glTF2_post_export_callback(export_settings):
-    if _gltf_scopes:
-        _gltf_scopes.pop().__exit__(None, None, None)
+    if SESSION.exports.scopes:
+        SESSION.exports.scopes.pop().__exit__(None, None, None)
 
 
 # -- operators without extension points --------------------------------------------------------

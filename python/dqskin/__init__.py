@@ -19,7 +19,7 @@ precomputed once per mesh by :func:`centers_of_rotation`. Many meshes are skinne
 :func:`skin_many` from a :class:`SkinJob` each.
 """
 
-from ._dqskin import (  # noqa: F401  (the Blender extension's pose reader)
+from ._dqskin import (  # noqa: F401
     MAX_BONES,
     MAX_INFLUENCES_PER_VERTEX,
     Cancelled,
@@ -31,9 +31,7 @@ from ._dqskin import (  # noqa: F401  (the Blender extension's pose reader)
     SkinJob,
     TwistCylinder,
     __version__,
-    _MeshMemory,  # noqa: F401  (the Blender extension's vertex-group reader)
     _panic_for_tests,  # noqa: F401  (tests check panics become RuntimeError)
-    _PoseMemory,
     angular_speeds,
     armature_spaces,
     bbone_segment_matrices,

@@ -397,18 +397,6 @@ def shape_key_mix(
 def armature_spaces(object_world: ArrayLike, armature_world: ArrayLike) -> tuple[F32Array, F32Array]:
     """``(premat, postmat)`` of the Armature modifier from the two world matrices."""
 
-class _MeshMemory:
-    """Internal to the Blender extension: reads vertex-group weights from Blender's memory."""
-    def __init__(self, blend_file: bytes) -> None: ...
-    def deform_verts(self, mesh: object) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], F32Array] | None:
-        """The vertex-group weights of a ``bpy.types.Mesh`` in CSR form (None without any)."""
-
-class _PoseMemory:
-    """Internal to the Blender extension: reads armature poses from Blender's memory."""
-    def __init__(self, blend_file: bytes) -> None: ...
-    def read(self, armature: object) -> PoseData:
-        """The pose of a ``bpy.types.Object`` of type ``'ARMATURE'`` (evaluated for this frame)."""
-
 @final
 class PoseData:
     """One frame of an armature's deforming bones (``pose.bones`` order) as the Armature

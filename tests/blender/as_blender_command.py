@@ -13,7 +13,8 @@ EXTENSION = "bl_ext.user_default.dq_skin"
 
 if addon_utils.enable(EXTENSION, default_set=True) is None:
     sys.exit(f"{EXTENSION} is not installed")
-cli = sys.modules[f"{EXTENSION}.cli"]
+cli = sys.modules[f"{EXTENSION}.cli.command"]
+session = sys.modules[EXTENSION].SESSION
 # Blender accepted the registration (register_cli_command raises otherwise) under this name.
-assert cli.COMMAND == "dq_skin" and len(cli._registered) == 1, cli._registered
+assert cli.COMMAND == "dq_skin" and len(session.commands) == 1, session.commands
 sys.exit(cli.execute(sys.argv[1:]))

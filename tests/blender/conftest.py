@@ -70,9 +70,9 @@ def empty_scene(dq_skin):
 
 def feed_every_size(dq_skin, monkeypatch) -> None:
     """The feed takes meshes of every size on every rig (by default only where it is faster
-    than the frame handler, `modifier.feeds_faster`: Rigify-sized rigs), so that the small test
+    than the frame handler, `decisions.feeds_faster`: Rigify-sized rigs), so that the small test
     characters exercise it."""
-    monkeypatch.setattr(dq_skin.modifier, "FEED_VERTICES_PER_BONE", 1 << 40)
+    monkeypatch.setattr(dq_skin.model.decisions, "FEED_VERTICES_PER_BONE", 1 << 40)
 
 
 @pytest.fixture(autouse=True)

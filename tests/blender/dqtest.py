@@ -221,7 +221,7 @@ def select_only(*objs):
 
 def status(dq_skin, obj, mod=None):
     """What DQ Skin's panel knows about a modifier (`state.Status`)."""
-    return dq_skin.modifier.status_of(obj, mod or dq_skin_mods(obj)[0])
+    return dq_skin.SESSION.status_of(obj, mod or dq_skin_mods(obj)[0])
 
 
 def assert_fed(dq_skin, obj, fed: bool = True) -> None:
@@ -229,10 +229,10 @@ def assert_fed(dq_skin, obj, fed: bool = True) -> None:
     evaluation (B-Bone and envelope characters), after one frame change."""
     bpy.context.scene.frame_set(bpy.context.scene.frame_current)
     for mod in dq_skin_mods(obj):
-        result = dq_skin.modifier.state_of(obj, mod).output.result
+        result = dq_skin.SESSION.state_of(obj, mod).output.result
         st = status(dq_skin, obj, mod)
         assert st.live, f"{obj.name}: {st.message}"
-        assert (dq_skin.feed.fed(result) is not None) == fed, f"{obj.name}: {'not ' if fed else ''}fed"
+        assert (dq_skin.SESSION.route.feeds.fed(result) is not None) == fed, f"{obj.name}: {'not ' if fed else ''}fed"
 
 
 class _Recorder:
@@ -272,7 +272,7 @@ def draw_panel(dq_skin, obj):
     lines = []
     panel = type("P", (), {"layout": _Recorder(lines)})()
     context = type("C", (), {"object": obj})()
-    dq_skin.ui.OBJECT_PT_dq_skin.draw(panel, context)
+    dq_skin.panel.OBJECT_PT_dq_skin.draw(panel, context)
     return lines
 
 

@@ -18,7 +18,8 @@ F32 = np.float32
 
 @pytest.fixture
 def dq(dq_skin):
-    from bl_ext.user_default.dq_skin import dqskin, keys
+    from bl_ext.user_default.dq_skin import dqskin
+    from bl_ext.user_default.dq_skin.tools import keys
 
     return dqskin, keys
 
@@ -275,7 +276,7 @@ def test_tools_are_in_the_animation_menus(dq_skin):
     menu = type(
         "M", (), {"layout": type("L", (), {"operator": lambda self, idname, **_: lines.append(idname), "separator": lambda self: None})()}
     )()
-    dq_skin.ui.VIEW3D_MT_dq_skin_animation.draw(menu, bpy.context)
+    dq_skin.panel.VIEW3D_MT_dq_skin_animation.draw(menu, bpy.context)
     assert lines == [
         "anim.dq_blend_transforms",
         "anim.dq_screw_inbetweens",

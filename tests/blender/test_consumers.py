@@ -560,7 +560,7 @@ def test_hair_curves_on_the_surface(dq_skin, assets, method, rig):
     with rest_position(body, ref):
         curves = [hair_curves(obj) for obj in (body, ref)]
     play((1, 8, 17, 30), lambda f: same(curve_points(curves[0]), curve_points(curves[1]), f"hair curves at frame {f}"))
-    simulates = any(dq_skin.consumers.simulation_label(m) for m in curves[0].modifiers if m.show_viewport)
+    simulates = any(dq_skin.blender.consumers.simulation_label(m) for m in curves[0].modifiers if m.show_viewport)
     assert status(dq_skin, body).mode.value == ("handed over" if simulates else "live")
     bpy.context.scene.frame_set(1)
     a = curve_points(curves[0])

@@ -151,9 +151,9 @@ def copy_by_script(src, dst, dq_skin):
         if m.type == "NODES":
             new.node_group = m.node_group
             for name in [i.name for i in m.node_group.interface.items_tree if getattr(i, "in_out", "") == "INPUT" and i.name != "Geometry"]:
-                dq_skin.nodes.put(new, name, dq_skin.nodes.get(m, name))
+                dq_skin.blender.nodes.put(new, name, dq_skin.blender.nodes.get(m, name))
             for name in ("Mask", "Blend Amount"):
-                dq_skin.nodes.put_attribute(new, name, dq_skin.nodes.get_attribute(m, name))
+                dq_skin.blender.nodes.put_attribute(new, name, dq_skin.blender.nodes.get_attribute(m, name))
         else:
             for p in (
                 "object",
@@ -185,7 +185,7 @@ def test_modifiers_copied_to_another_character(dq_skin, assets, how):
         copy_by_script(a, b, dq_skin)
     assert [m.type for m in b.modifiers] == ["NODES", "ARMATURE"]
     # The copy plays the other armature, as the Armature modifier would after retargeting.
-    dq_skin.nodes.put(dq_skin_mods(b)[0], "Armature", b_arm)
+    dq_skin.blender.nodes.put(dq_skin_mods(b)[0], "Armature", b_arm)
     bpy.context.view_layer.update()
     pairs = [(a, twin(a, share_mesh=False)), (b, twin(b, share_mesh=False))]
     check_frames(pairs, frames=(2, 9, 15, 3))
@@ -287,7 +287,7 @@ def test_scripts_editing_bones_then_changing_frames(dq_skin, method, rig, edit):
             m = o.modifiers["Armature"] if o is tw else None
             if m is not None:
                 m.use_bone_envelopes = True
-        dq_skin.nodes.put(dq_skin_mods(obj)[0], "Use Envelopes", True)
+        dq_skin.blender.nodes.put(dq_skin_mods(obj)[0], "Use Envelopes", True)
     scene.frame_set(9)  # no update in between
     assert_same(obj, tw, f"after '{edit}'")
     scene.frame_set(14)
@@ -367,12 +367,12 @@ def test_fallbacks_print_no_traceback(dq_skin, capfd):
     mod = add_dq_skin(obj, "DUAL_QUATERNION")
     empty = bpy.data.objects.new("Not an armature", None)
     bpy.context.scene.collection.objects.link(empty)
-    dq_skin.nodes.put(mod, "Armature", empty)
+    dq_skin.blender.nodes.put(mod, "Armature", empty)
     bpy.context.view_layer.update()
     for f in (2, 3, 4):
         bpy.context.scene.frame_set(f)
     assert "not an armature" in status(dq_skin, obj).message
-    dq_skin.nodes.put(mod, "Armature", arm)
+    dq_skin.blender.nodes.put(mod, "Armature", arm)
     bpy.context.view_layer.update()
     arm.pose.bones[0].scale = (float("nan"), 1.0, 1.0)
     for f in (5, 6, 7):
@@ -439,8 +439,8 @@ def test_rigify_regenerate_with_dq_skin_characters_skins_once_when_it_settles(dq
         add_dq_skin(o, "DUAL_QUATERNION")
     bpy.context.scene.frame_set(8)
     skinned = []
-    real = dq_skin.modifier.dqskin.skin_many
-    monkeypatch.setattr(dq_skin.modifier.dqskin, "skin_many", lambda jobs: skinned.append(len(jobs)) or real(jobs))
+    real = dq_skin.dqskin.skin_many
+    monkeypatch.setattr(dq_skin.dqskin, "skin_many", lambda jobs: skinned.append(len(jobs)) or real(jobs))
     select_only(metarig)
     assert bpy.ops.pose.rigify_generate() == {"FINISHED"}  # (an override of the context would pin Rigify's)
     assert sum(skinned) == 0, f"skinned {sum(skinned)} times while the rig was rebuilt"

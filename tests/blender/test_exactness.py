@@ -34,9 +34,18 @@ def kernel_deviation(rig, mesh_obj, mod, method: str, binding=None) -> tuple[flo
 
 @pytest.fixture
 def rig(dq_skin):
-    from bl_ext.user_default.dq_skin import rig as module
+    """The add-on's rig reader, binding an object's mesh as the session reads it."""
+    module, session = dq_skin.blender.rig, dq_skin.SESSION
 
-    return module
+    class Rig:
+        mesh_positions = staticmethod(module.mesh_positions)
+        skin = staticmethod(module.skin)
+
+        @staticmethod
+        def bind(obj, armature, *args):
+            return module.bind(session.meshes.get(obj, session.readers.mesh), armature, *args)
+
+    return Rig
 
 
 def check_both(rig, mesh_obj, mod):

@@ -182,7 +182,7 @@ def test_an_empty_mesh_under_dq_skin_says_so(dq_skin):
     obj.data.clear_geometry()
     bpy.context.view_layer.update()
     bpy.context.scene.frame_set(3)
-    st = dq_skin.modifier.status_of(obj, mod)
+    st = dq_skin.SESSION.status_of(obj, mod)
     assert "no vertices" in st.message, st.message
     lines = draw_panel(dq_skin, obj)
     assert any("no vertices" in line for line in lines)
@@ -195,12 +195,12 @@ def test_renaming_an_object_200_times_keeps_one_entry(dq_skin):
 
     obj, arm, _ = rig_tube()
     add_dq_skin(obj)
-    states = dq_skin.state.STATES
+    states = dq_skin.SESSION.states
     before = len(states)
     for i in range(200):
         obj.name = f"Renamed {i}"
         bpy.context.view_layer.update()
         bpy.context.scene.frame_set(1 + i % 5)
     assert len(states) == before
-    assert len(dq_skin.registry.REGISTRY.records) == 1
+    assert len(dq_skin.SESSION.tracker.records) == 1
     assert len([o for o in bpy.data.objects if o.get("dq_skin_result")]) == 1

@@ -41,7 +41,7 @@ def fed_character(dq_skin, method: str):
 
 def result_of(dq_skin, obj):
     mod = dq_skin_mods(obj)[0]
-    return dq_skin.modifier.state_of(obj, mod).output.result
+    return dq_skin.SESSION.state_of(obj, mod).output.result
 
 
 class Writes:
@@ -49,26 +49,26 @@ class Writes:
 
     def __init__(self, dq_skin, monkeypatch):
         self.count = 0
-        original = dq_skin.results.write_positions
+        original = dq_skin.routes.results.write_positions
 
         def counted(result, positions):
             self.count += 1
             original(result, positions)
 
-        monkeypatch.setattr(dq_skin.results, "write_positions", counted)
+        monkeypatch.setattr(dq_skin.routes.results, "write_positions", counted)
 
 
 @pytest.mark.parametrize("method", ["LINEAR", "DUAL_QUATERNION"])
 def test_b_bone_frames_are_skinned_in_the_first_evaluation(dq_skin, monkeypatch, method):
     obj, arm, reference = fed_character(dq_skin, method)
     result = result_of(dq_skin, obj)
-    assert dq_skin.feed.fed(result) is not None, status(dq_skin, obj).message
+    assert dq_skin.SESSION.route.feeds.fed(result) is not None, status(dq_skin, obj).message
     writes = Writes(dq_skin, monkeypatch)
-    runs = dq_skin.feed.runs(result)
+    runs = dq_skin.SESSION.route.feeds.runs(result)
     for k, f in enumerate((5, 9, 14, 18), start=1):
         bpy.context.scene.frame_set(f)
         assert_same(obj, reference, f"frame {f}")
-        assert dq_skin.feed.runs(result) == runs + k, "the driver skins once per frame"
+        assert dq_skin.SESSION.route.feeds.runs(result) == runs + k, "the driver skins once per frame"
     assert writes.count == 0, "the frame handler wrote a result the driver had made"
 
 
@@ -79,7 +79,7 @@ def test_what_the_pose_alone_does_not_say_is_caught(dq_skin):
     scene = bpy.context.scene
     mod = dq_skin_mods(obj)[0]
     ref_mod = next(m for m in reference.modifiers if m.type == "ARMATURE")
-    dq_skin.nodes.put_method(mod, "Dual Quaternion")
+    dq_skin.blender.nodes.put_method(mod, "Dual Quaternion")
     ref_mod.use_deform_preserve_volume = True
     scene.frame_set(6)
     assert_same(obj, reference, "after the method changed")
@@ -95,14 +95,14 @@ def test_what_the_pose_alone_does_not_say_is_caught(dq_skin):
     arm.data.bones["Bone1"].bbone_segments = 3
     scene.frame_set(12)
     assert_same(obj, reference, "after a B-Bone lost segments")
-    dq_skin.nodes.put(mod, "Use Envelopes", True)
+    dq_skin.blender.nodes.put(mod, "Use Envelopes", True)
     ref_mod.use_bone_envelopes = True
     arm.data.bones["Bone2"].envelope_distance = 0.4
     scene.frame_set(15)
     assert_same(obj, reference, "with envelopes on")
     scene.frame_set(17)
     assert_same(obj, reference, "the next frame")
-    assert dq_skin.feed.fed(result_of(dq_skin, obj)) is not None
+    assert dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)) is not None
 
 
 def test_what_the_object_alone_says_is_caught(dq_skin):
@@ -125,7 +125,7 @@ def test_what_the_object_alone_says_is_caught(dq_skin):
         o.vertex_groups["Renamed"].name = "Bone1"
     scene.frame_set(9)
     assert_same(obj, reference, "after it was named back")
-    assert dq_skin.feed.fed(result_of(dq_skin, obj)) is not None
+    assert dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)) is not None
     for o in (obj, reference):
         d = o.modifiers.new("Displace", "DISPLACE")
         d.strength = 0.2
@@ -143,7 +143,7 @@ def test_what_the_object_alone_says_is_caught(dq_skin):
         o.modifiers.remove(o.modifiers["Displace"])
     scene.frame_set(12)
     assert_same(obj, reference, "after it was removed")
-    c = obj.modifiers[dq_skin.nodes.get_companion(mod)["name"]]
+    c = obj.modifiers[dq_skin.blender.nodes.get_companion(mod)["name"]]
     c.show_viewport = True  # the user asks for Blender's deformation
     scene.frame_set(13)
     assert not mod.show_viewport and status(dq_skin, obj).mode.value != "live"
@@ -170,7 +170,7 @@ def test_a_render_of_another_frame_shows_that_frame(dq_skin, tmp_path):
     obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
     scene = setup_scene()
     scene.camera.location = (0.0, -9.0, 2.0)
-    assert dq_skin.feed.fed(result_of(dq_skin, obj)) is not None
+    assert dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)) is not None
 
     def show(which):
         obj.hide_render = which is not obj
@@ -187,19 +187,21 @@ def test_a_render_of_another_frame_shows_that_frame(dq_skin, tmp_path):
 
 def test_files_hold_nothing_of_it_and_removing_dq_skin_removes_it(dq_skin, tmp_path):
     obj, arm, reference = fed_character(dq_skin, "LINEAR")
-    path = dq_skin.feed.fed(result_of(dq_skin, obj)).path
+    path = dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)).path
     assert os.path.exists(path)
     blend = tmp_path / "fed.blend"
     names = obj.name, reference.name
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     bpy.ops.wm.open_mainfile(filepath=str(blend))
-    assert not [o.name for o in bpy.data.objects if any(m.type == "MESH_CACHE" for m in o.modifiers) and not dq_skin.results.is_result(o)]
+    assert not [
+        o.name for o in bpy.data.objects if any(m.type == "MESH_CACHE" for m in o.modifiers) and not dq_skin.routes.results.is_result(o)
+    ]
     obj, reference = (bpy.data.objects[n] for n in names)
     for f in (4, 7, 11):
         bpy.context.scene.frame_set(f)
         assert_same(obj, reference, f"reopened, frame {f}")
     result = result_of(dq_skin, obj)
-    feed = dq_skin.feed.fed(result)
+    feed = dq_skin.SESSION.route.feeds.fed(result)
     assert feed is not None
     path = feed.path
     select_only(obj)
@@ -214,7 +216,7 @@ def test_files_hold_nothing_of_it_and_removing_dq_skin_removes_it(dq_skin, tmp_p
 
 def test_a_deleted_cache_file_is_made_again(dq_skin):
     obj, arm, reference = fed_character(dq_skin, "LINEAR")
-    feed = dq_skin.feed.fed(result_of(dq_skin, obj))
+    feed = dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj))
     os.unlink(feed.path)
     for f in (6, 10):
         bpy.context.scene.frame_set(f)
@@ -229,5 +231,5 @@ def test_vertex_group_characters_are_not_fed(dq_skin):
     obj, arm, _ = animated_tube()
     add_dq_skin(obj, "LINEAR")
     bpy.context.scene.frame_set(3)
-    assert dq_skin.feed.fed(result_of(dq_skin, obj)) is None
+    assert dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)) is None
     assert get_input(dq_skin_mods(obj)[0], "Result") is not None

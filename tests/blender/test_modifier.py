@@ -54,7 +54,7 @@ def test_follows_every_frame_of_every_animation_exactly(dq_skin, assets, asset, 
             frames += 1
     assert worst <= REL_TOL, f"{asset}: worst {worst:.2e} over {frames} frames"
     assert moved > 1e-3  # the character really moves
-    assert dq_skin.modifier.status_of(obj, mod).message == ""
+    assert dq_skin.SESSION.status_of(obj, mod).message == ""
 
 
 def test_follows_posing_without_a_frame_change(dq_skin):
@@ -124,7 +124,7 @@ def test_settings_come_from_the_armature_modifier(dq_skin):
     arm_mod.invert_vertex_group = True
     arm_mod.use_deform_preserve_volume = False
     mod = add_dq_skin(obj)
-    s = dq_skin.settings.read(mod)
+    s = dq_skin.blender.settings.read(mod)
     assert (s.armature, s.method.name, s.mask_group, s.invert_mask) == (arm, "LINEAR", "Mask", True)
     assert list(obj.modifiers).index(mod) == 0  # where the Armature modifier was
 
@@ -136,7 +136,7 @@ def test_armature_in_edit_mode_is_reported_and_passes_the_mesh_through(dq_skin):
     bpy.context.view_layer.objects.active = arm
     bpy.ops.object.mode_set(mode="EDIT")
     bpy.context.scene.frame_set(5)
-    st = dq_skin.modifier.status_of(obj, mod)
+    st = dq_skin.SESSION.status_of(obj, mod)
     assert "Edit Mode" in st.message
     rest = np.empty(len(obj.data.vertices) * 3, np.float32)
     obj.data.vertices.foreach_get("co", rest)
@@ -153,7 +153,7 @@ def test_blend_between_linear_and_dual_quaternion(dq_skin):
     lbs_ref = reference_copy(obj, False)
     dqs_ref = reference_copy(obj, True)
     mod = add_dq_skin(obj, "BLEND")
-    from bl_ext.user_default.dq_skin.operators import set_attribute, set_input
+    from bl_ext.user_default.dq_skin.ops.modifiers import set_attribute, set_input
 
     set_attribute(mod, "Blend Amount", "Amount")
     set_input(mod, "Blend Factor", 0.8)
@@ -179,7 +179,7 @@ def test_several_objects_keep_their_own_settings_through_save_and_load(dq_skin, 
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     a, b = (bpy.data.objects[n] for n in names)
-    methods = [dq_skin.settings.read(next(m for m in o.modifiers if m.type == "NODES")).method.name for o in (a, b)]
+    methods = [dq_skin.blender.settings.read(next(m for m in o.modifiers if m.type == "NODES")).method.name for o in (a, b)]
     assert methods == ["LINEAR", "DUAL_QUATERNION"]
     bpy.context.scene.frame_set(7)
     for obj, pv in ((a, False), (b, True)):
@@ -221,7 +221,7 @@ def test_envelopes_match_the_armature_modifier(dq_skin, case, method, preserve_v
     reference = reference_copy(obj, preserve_volume)
     mod = add_dq_skin(obj, method)
     bpy.context.scene.frame_set(8)
-    assert dq_skin.modifier.status_of(obj, mod).message == ""
+    assert dq_skin.SESSION.status_of(obj, mod).message == ""
     ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
     dev = deviation(ours, theirs)
     assert dev <= REL_TOL, dev
@@ -259,7 +259,7 @@ def test_b_bones_match_the_armature_modifier(dq_skin, method, preserve_volume, m
     reference = reference_copy(obj, preserve_volume)
     mod = add_dq_skin(obj, method)
     bpy.context.scene.frame_set(9)
-    assert dq_skin.modifier.status_of(obj, mod).message == ""
+    assert dq_skin.SESSION.status_of(obj, mod).message == ""
     ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
     dev = deviation(ours, theirs)
     assert dev <= REL_TOL, dev
@@ -299,7 +299,7 @@ def test_vertex_count_changed_by_an_earlier_modifier_is_reported(dq_skin):
     with bpy.context.temp_override(object=obj, active_object=obj):
         bpy.ops.object.modifier_move_to_index(modifier=subsurf.name, index=0)
     bpy.context.scene.frame_set(4)
-    assert "changed the vertex count" in dq_skin.modifier.status_of(obj, mod).message
+    assert "changed the vertex count" in dq_skin.SESSION.status_of(obj, mod).message
     assert len(evaluated_positions(obj)) > len(obj.data.vertices)  # passed through, not broken
 
 
@@ -307,9 +307,9 @@ def test_missing_armature_is_reported_and_passes_the_mesh_through(dq_skin):
     obj, arm, arm_mod = rig_tube()
     arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 1.0)
     mod = add_dq_skin(obj)
-    from bl_ext.user_default.dq_skin.operators import set_input
+    from bl_ext.user_default.dq_skin.ops.modifiers import set_input
 
     set_input(mod, "Armature", None)
     bpy.context.scene.frame_set(5)
-    assert dq_skin.modifier.status_of(obj, mod).message == "No armature object set"
+    assert dq_skin.SESSION.status_of(obj, mod).message == "No armature object set"
     np.testing.assert_allclose(evaluated_positions(obj), rig_positions(obj), atol=1e-6)

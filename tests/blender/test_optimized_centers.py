@@ -17,11 +17,15 @@ import bpy
 from mathutils import Quaternion
 
 
+def _mesh(dq_skin, obj):
+    return dq_skin.SESSION.meshes.get(obj, dq_skin.SESSION.readers.mesh)
+
+
 def expected(dq_skin, obj, arm):
     """Centers-of-rotation skinning of `obj` computed directly with the bundled module."""
-    rig, centers = dq_skin.rig, dq_skin.centers
+    rig, centers = dq_skin.blender.rig, dq_skin.engine.centers
     mod = next(m for m in obj.modifiers if m.type == "ARMATURE")
-    binding = rig.bind(obj, arm, mod.vertex_group, mod.invert_vertex_group)
+    binding = rig.bind(_mesh(dq_skin, obj), arm, mod.vertex_group, mod.invert_vertex_group)
     positions = rig.mesh_positions(obj.data)
     c = dq_skin.dqskin.centers_of_rotation(positions, centers.triangles_of(obj.data), binding.influences)
     f = rig.frame(binding, obj, arm)
@@ -42,13 +46,13 @@ def expected(dq_skin, obj, arm):
 def counted(dq_skin, monkeypatch):
     """Counts the centers actually computed (not found in memory or on disk)."""
     calls = []
-    real = dq_skin.centers.compute
+    real = dq_skin.SESSION.centers.compute
 
     def compute(*args, **kwargs):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(dq_skin.centers, "compute", compute)
+    monkeypatch.setattr(dq_skin.SESSION.centers, "compute", compute)
     return calls
 
 
@@ -56,13 +60,13 @@ def test_modifier_equals_the_module_on_a_character(dq_skin, assets):
     obj, arm_mod = import_character(assets / "CesiumMan.glb")
     arm = arm_mod.object
     add_dq_skin(obj, "CENTERS_OF_ROTATION")
-    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
-    assert dq_skin.nodes.get_method(mod) == "Optimized Centers"
+    mod = dq_skin.engine.context.dq_skin_modifiers(obj)[0]
+    assert dq_skin.blender.nodes.get_method(mod) == "Optimized Centers"
     for frame in (1, 12, 30):
         bpy.context.scene.frame_set(frame)
         ours = evaluated_positions(obj)
         assert deviation(ours, expected(dq_skin, obj, arm)) <= REL_TOL
-    st = dq_skin.modifier.status_of(obj, mod)
+    st = dq_skin.SESSION.status_of(obj, mod)
     assert st.live and st.method == "Optimized Centers"
 
 
@@ -77,7 +81,8 @@ def test_rest_pose_is_unchanged_and_translations_are_linear(dq_skin):
     arm.pose.bones["Bone2"].location = (-0.4, 0.1, 0.2)
     bpy.context.view_layer.update()
     ours = evaluated_positions(obj)
-    linear = dq_skin.rig.skin(dq_skin.rig.bind(obj, arm, "", False), obj, arm, dq_skin.rig.mesh_positions(obj.data), "linear")
+    rig = dq_skin.blender.rig
+    linear = rig.skin(rig.bind(_mesh(dq_skin, obj), arm, "", False), obj, arm, rig.mesh_positions(obj.data), "linear")
     assert deviation(ours, linear) <= REL_TOL
 
 
@@ -115,9 +120,9 @@ def test_candy_wrapper_and_elbow_against_linear_and_dual_quaternion(dq_skin):
 def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_skin, assets, tmp_path, counted, monkeypatch):
     folder = tmp_path / "cache"
     folder.mkdir()
-    monkeypatch.setattr(dq_skin.centers, "_folder", lambda: folder)  # a cache of its own
+    monkeypatch.setattr(dq_skin.engine.centers, "_folder", lambda: folder)  # a cache of its own
     obj, arm_mod = import_character(assets / "CesiumMan.glb")
-    dq_skin.centers._memory.clear()
+    dq_skin.SESSION.centers.forget_memory()
     add_dq_skin(obj, "CENTERS_OF_ROTATION")
     bpy.context.scene.frame_set(5)
     evaluated_positions(obj)
@@ -134,13 +139,13 @@ def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_ski
     # Save, forget everything this session knew, open again: found on disk, not recomputed.
     path, name = tmp_path / "centers.blend", obj.name
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    dq_skin.centers._memory.clear()
+    dq_skin.SESSION.centers.forget_memory()
     bpy.ops.wm.open_mainfile(filepath=str(path))
     obj = bpy.data.objects[name]
     bpy.context.scene.frame_set(7)
     evaluated_positions(obj)
-    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
-    assert dq_skin.modifier.status_of(obj, mod).live
+    mod = dq_skin.engine.context.dq_skin_modifiers(obj)[0]
+    assert dq_skin.SESSION.status_of(obj, mod).live
     assert len(counted) == first
     # A weight change is a new binding: new centers.
     obj.vertex_groups[0].add([0], 0.5, "REPLACE")
@@ -165,40 +170,41 @@ def slow_down(monkeypatch, centers, seconds: float) -> None:
 
 
 def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancelled(dq_skin, monkeypatch):
-    centers = dq_skin.centers
+    centers = dq_skin.engine.centers
+    store = dq_skin.SESSION.centers
     monkeypatch.setattr(centers, "INLINE_VERTICES", 10)
     monkeypatch.setattr(centers, "in_background", lambda: False)  # as in an interactive session
-    centers._memory.clear()
+    store.forget_memory()
     obj, arm, _ = rig_tube(rings=80, segments=48, bones=3, length=6.0)
     monkeypatch.setattr(centers, "_folder", lambda: None)  # not found on disk either
     slow_down(monkeypatch, centers, 0.01)  # about a second: still running when checked
     add_dq_skin(obj, "CENTERS_OF_ROTATION")
     arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), math.radians(90))
     bpy.context.view_layer.update()
-    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
-    st = dq_skin.modifier.status_of(obj, mod)
+    mod = dq_skin.engine.context.dq_skin_modifiers(obj)[0]
+    st = dq_skin.SESSION.status_of(obj, mod)
     # Until the centers are ready, Blender's own deformation stands in and the modifier says so.
     assert st.mode.value == "fallback" and "Optimized Centers: computing" in st.message
-    job = centers.running()[0] if centers.running() else next(iter(centers._jobs.values()))
+    job = store.running()[0] if store.running() else store.jobs()[-1]
     assert obj.name in job.owners or job.finished
     for _ in range(600):
         if job.finished:
             break
         time.sleep(0.05)
     assert job.finished and not job.error
-    centers._poll()  # the timer: re-evaluates the waiting objects
+    store.poll()  # the timer: re-evaluates the waiting objects
     bpy.context.view_layer.update()
     evaluated_positions(obj)
-    assert dq_skin.modifier.status_of(obj, mod).live
+    assert dq_skin.SESSION.status_of(obj, mod).live
     assert deviation(evaluated_positions(obj), expected(dq_skin, obj, arm)) <= REL_TOL
 
     # Cancelled: the modifier says so and Blender's deformation stays.
-    centers._memory.clear()
+    store.forget_memory()
     obj.vertex_groups[0].add([0], 0.25, "REPLACE")  # new weights, new centers
     slow_down(monkeypatch, centers, 0.1)  # slow enough to cancel mid-way
     bpy.context.view_layer.update()
     evaluated_positions(obj)
-    running = centers.running()
+    running = store.running()
     assert running, "a new computation started"
     with bpy.context.temp_override(object=obj):
         assert bpy.ops.object.dq_skin_cancel_centers() == {"FINISHED"}
@@ -207,10 +213,10 @@ def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancell
             break
         time.sleep(0.05)
     assert running[0].error == "cancelled"
-    centers._poll()
+    store.poll()
     bpy.context.view_layer.update()
     evaluated_positions(obj)
-    st = dq_skin.modifier.status_of(obj, mod)
+    st = dq_skin.SESSION.status_of(obj, mod)
     assert st.mode.value == "fallback" and "cancelled" in st.message
 
 
@@ -235,17 +241,18 @@ def test_files_from_before_the_method_get_it_on_load(dq_skin, tmp_path):
     item is added, and the modifiers keep their methods."""
     obj, arm, _ = rig_tube(bones=2)
     add_dq_skin(obj, "LINEAR")
-    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
+    mod = dq_skin.engine.context.dq_skin_modifiers(obj)[0]
     switch = mod.node_group.nodes["Method Items"]
     switch.enum_items.remove(switch.enum_items[-1])  # as 0.1 saved it
-    dq_skin.nodes.forget_socket_ids()
+    for tag in (dq_skin.blender.nodes.IDS_TAG, dq_skin.blender.nodes.MENU_TAG):
+        del mod.node_group[tag]  # nor did it store what later versions store on the group
     assert [i.name for i in switch.enum_items] == ["Linear", "Dual Quaternion", "Blend"]
     path, name = tmp_path / "old.blend", obj.name
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     obj = bpy.data.objects[name]
-    mod = dq_skin.modifier.dq_skin_modifiers(obj)[0]
-    assert [i.name for i in mod.node_group.nodes["Method Items"].enum_items] == list(dq_skin.nodes.METHODS)
-    assert dq_skin.nodes.get_method(mod) == "Linear"
-    assert dq_skin.nodes.put_method(mod, "Optimized Centers") is not False
-    assert dq_skin.nodes.get_method(mod) == "Optimized Centers"
+    mod = dq_skin.engine.context.dq_skin_modifiers(obj)[0]
+    assert [i.name for i in mod.node_group.nodes["Method Items"].enum_items] == list(dq_skin.blender.nodes.METHODS)
+    assert dq_skin.blender.nodes.get_method(mod) == "Linear"
+    assert dq_skin.blender.nodes.put_method(mod, "Optimized Centers") is not False
+    assert dq_skin.blender.nodes.get_method(mod) == "Optimized Centers"

@@ -151,6 +151,12 @@ CASES = {
 }
 
 
+def _reads(dq_skin):
+    """A fresh per-call pose cache over the session's reader."""
+    readers = dq_skin.SESSION.readers
+    return dq_skin.blender.pose.PoseReads(readers.pose, readers.pose_error)
+
+
 @pytest.fixture
 def memory_only(dq_skin, monkeypatch):
     """The Python path fails if it runs: whatever passes used the pose from memory."""
@@ -159,7 +165,7 @@ def memory_only(dq_skin, monkeypatch):
         raise AssertionError("the Python path ran: the pose should come from memory")
 
     for name in ("with_bbone_joints", "curved_bbone_mapping", "bone_lengths"):
-        monkeypatch.setattr(dq_skin.rig, name, refuse)
+        monkeypatch.setattr(dq_skin.blender.rig, name, refuse)
     return dq_skin
 
 
@@ -171,8 +177,9 @@ def python_only(dq_skin, monkeypatch):
         def read(self, armature):
             raise ValueError("armature: refused by the test")
 
-    monkeypatch.setattr(dq_skin.memory, "_pose", Refusing())
-    monkeypatch.setattr(dq_skin.memory, "_built", True)
+    readers = dq_skin.SESSION.readers
+    readers.pose  # built first, then its pose reader replaced
+    monkeypatch.setattr(readers, "_pose", Refusing())
     return dq_skin
 
 
@@ -180,7 +187,7 @@ def compare(dq_skin, obj, arm, method: str, frame: int = 3):
     reference = reference_copy(obj, method == "DUAL_QUATERNION")
     mod = add_dq_skin(obj, method)
     bpy.context.scene.frame_set(frame)
-    st = dq_skin.modifier.state_of(obj, mod)
+    st = dq_skin.SESSION.state_of(obj, mod)
     assert st.status.live, st.status.message
     ours, theirs = evaluated_positions(obj), evaluated_positions(reference)
     dev = relative_deviation(ours, theirs)
@@ -231,7 +238,7 @@ def test_segments_and_mapping_changed_by_script(memory_only, method):
             b.bbone_segments = segments
             b.bbone_mapping_mode = mapping
         bpy.context.scene.frame_set(frame)
-        assert memory_only.modifier.state_of(obj, mod).status.live
+        assert memory_only.SESSION.state_of(obj, mod).status.live
         dev = relative_deviation(evaluated_positions(obj), evaluated_positions(reference))
         assert dev <= REL_TOL, (segments, mapping, dev)
 
@@ -269,8 +276,9 @@ def test_the_reader_gives_what_the_python_api_gives(dq_skin):
     arm.data.bones["Bone3"].envelope_weight = 0.4
     bpy.context.scene.frame_set(4)
     arm_eval = arm.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    data = dq_skin.pose.read(arm_eval)
-    assert data is not None, dq_skin.pose.last_error
+    reads = _reads(dq_skin)
+    data = reads.read(arm_eval)
+    assert data is not None, reads.error
     pbs = list(arm_eval.pose.bones)
     deforming = [pb for pb in pbs if pb.bone.use_deform]
     assert data.names == [pb.name for pb in deforming]
@@ -281,8 +289,9 @@ def test_the_reader_gives_what_the_python_api_gives(dq_skin):
     np.testing.assert_array_equal(deform[:b], [_row_major(pb.matrix_channel) for pb in deforming])
     np.testing.assert_array_equal(rest[:b], [_row_major(pb.bone.matrix_local) for pb in deforming])
     np.testing.assert_array_equal(data.segments, [pb.bone.bbone_segments for pb in deforming])
-    binding = dq_skin.rig.bind(obj, arm_eval)
-    np.testing.assert_array_equal(data.envelopes, dq_skin.rig.envelopes(arm_eval, binding))
+    mesh = dq_skin.SESSION.meshes.get(obj, dq_skin.SESSION.readers.mesh)
+    binding = dq_skin.blender.rig.bind(mesh, arm_eval)
+    np.testing.assert_array_equal(data.envelopes, dq_skin.blender.rig.envelopes(arm_eval, binding))
     # The joints: Blender's cache against what its Python API gives for them.
     first = b
     for pb in deforming:
@@ -326,8 +335,9 @@ def test_the_reader_gives_what_the_python_api_gives(dq_skin):
 
 def test_the_reader_refuses_what_is_not_an_armature(dq_skin):
     obj, arm, _ = bbone_rig()
-    reader = dq_skin.memory.pose_reader()
-    assert reader is not None, dq_skin.memory.pose_error
+    readers = dq_skin.SESSION.readers
+    reader = readers.pose
+    assert reader is not None, readers.pose_error
     with pytest.raises(ValueError, match="armature must be an armature object"):
         reader.read(obj)
     with pytest.raises(TypeError, match="armature must be a bpy.types.Object"):
@@ -345,7 +355,7 @@ def test_binding_and_pose_signatures(dq_skin):
     dg = bpy.context.evaluated_depsgraph_get()
 
     def read():
-        return dq_skin.pose.read(arm.evaluated_get(bpy.context.evaluated_depsgraph_get()))
+        return _reads(dq_skin).read(arm.evaluated_get(bpy.context.evaluated_depsgraph_get()))
 
     bpy.context.scene.frame_set(1)
     base = read()
@@ -371,7 +381,7 @@ def test_many_segments_and_many_bones_per_frame_read_once(memory_only):
     the bones' rest data change."""
     obj, arm, _ = bbone_rig(segments=16, mapping="CURVED")
     mod, reference, _ = compare(memory_only, obj, arm, "DUAL_QUATERNION")
-    st = memory_only.modifier.state_of(obj, mod)
+    st = memory_only.SESSION.state_of(obj, mod)
     kept = st.binding.binding.effective[1]
     for frame in (4, 5, 6):
         arm.pose.bones["Bone2"].rotation_quaternion = Quaternion((0, 1, 0), 0.2 * frame)
@@ -389,7 +399,7 @@ def test_many_segments_and_many_bones_per_frame_read_once(memory_only):
 
 def test_a_frame_reads_each_armature_once(memory_only, monkeypatch):
     """Each character's feed driver reads the pose in Blender's evaluation (see `feed`), and the
-    frame handler then reads nothing (`modifier.fed_frame_stands`). Where the drivers did not
+    frame handler then reads nothing (`playback.fed_frame_stands`). Where the drivers did not
     skin (here: as if an operator were running), the handler's full evaluation needs the pose
     for the binding's signature and for the frame, and two characters on one rig need the same
     pose: one read per armature and frame (each read of a Rigify rig costs about 0.1-0.2 ms)."""
@@ -403,9 +413,10 @@ def test_a_frame_reads_each_armature_once(memory_only, monkeypatch):
         arm.pose.bones["Bone2"].rotation_quaternion = Quaternion((0, 1, 0), 0.2 * frame)
         arm.pose.bones["Bone2"].keyframe_insert("rotation_quaternion", frame=frame)
     bpy.context.scene.frame_set(2)
-    reader = memory_only.memory.pose_reader()
+    session = memory_only.SESSION
+    reader = session.readers.pose
     reads = []
-    fed = [memory_only.feed.fed(memory_only.modifier.state_of(o, m).output.result) is not None for o, m in zip((obj, other), mods)]
+    fed = [session.route.feeds.fed(session.state_of(o, m).output.result) is not None for o, m in zip((obj, other), mods)]
     assert all(fed)
 
     class Counting:
@@ -414,15 +425,15 @@ def test_a_frame_reads_each_armature_once(memory_only, monkeypatch):
             reads.append(("driver" if in_driver else "handler", armature.name))
             return reader.read(armature)
 
-    monkeypatch.setattr(memory_only.memory, "_pose", Counting())
+    monkeypatch.setattr(session.readers, "_pose", Counting())
     for frame in (3, 4, 5):
         reads.clear()
         bpy.context.scene.frame_set(frame)
         assert sorted(reads) == [("driver", arm.name)] * 2, reads
         for o, mod in zip((obj, other), mods):
-            assert memory_only.modifier.state_of(o, mod).status.live
+            assert memory_only.SESSION.state_of(o, mod).status.live
             assert relative_deviation(evaluated_positions(o), evaluated_positions(reference)) <= REL_TOL
-    monkeypatch.setattr(memory_only.feed, "_operator_running", lambda: True)
+    monkeypatch.setattr(session.route.feeds, "_busy", lambda: True)
     for frame in (2, 4):
         reads.clear()
         bpy.context.scene.frame_set(frame)
@@ -447,7 +458,7 @@ def test_a_generated_rigify_character_matches_the_armature_modifier(memory_only)
     for frame in (1, 12, 20, 33):
         bpy.context.scene.frame_set(frame)
         for obj, mod, reference in pairs:
-            assert memory_only.modifier.state_of(obj, mod).status.live
+            assert memory_only.SESSION.state_of(obj, mod).status.live
             theirs = evaluated_positions(reference)
             dev = relative_deviation(evaluated_positions(obj), theirs)
             assert dev <= REL_TOL, (obj.name, frame, dev)

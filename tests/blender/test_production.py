@@ -117,8 +117,8 @@ def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method, ri
         bpy.context.scene.collection.objects.link(o)
         o.parent = a
         mod = dq_skin_mods(o)[0]
-        dq_skin.nodes.put(mod, "Armature", a)
-        o.modifiers[dq_skin.nodes.get_companion(mod)["name"]].object = a
+        dq_skin.blender.nodes.put(mod, "Armature", a)
+        o.modifiers[dq_skin.blender.nodes.get_companion(mod)["name"]].object = a
         assert o.data is obj.data
         pairs.append((o, twin(o)))
     check_frames(pairs)
@@ -416,7 +416,7 @@ def test_two_dq_skins_equal_two_armature_modifiers(dq_skin, method):
     tw = twin(obj)
     check_frames([(obj, tw)])
     assert status(dq_skin, obj, first).live and status(dq_skin, obj, second).live
-    assert status(dq_skin, obj, second).source == "chain"
+    assert status(dq_skin, obj, second).source.value == "chain"
 
 
 def test_removing_one_of_two_restores_only_its_own_armature_modifier(dq_skin):
@@ -613,7 +613,7 @@ def test_driven_corrective_shape_keys(dq_skin, method):
     fc.driver.expression = "1 - var"
     add_dq_skin(obj, method)
     check_frames([(obj, twin(obj))])
-    assert status(dq_skin, obj).source == "mesh"
+    assert status(dq_skin, obj).source.value == "mesh"
 
 
 def render_image(path: Path, frame: int, hide) -> np.ndarray:
@@ -701,7 +701,7 @@ def test_panel_status_says_what_is_wrong_and_where(dq_skin):
     tw.modifiers.remove(tw.modifiers[sub_name])
     bpy.context.scene.frame_set(6)
     bpy.context.scene.frame_set(7)
-    assert status(dq_skin, obj, mod).live and status(dq_skin, obj, mod).source == "capture"
+    assert status(dq_skin, obj, mod).live and status(dq_skin, obj, mod).source.value == "capture"
     assert_same(obj, tw)
 
 
@@ -717,7 +717,7 @@ def test_two_scenes_renames_nla_and_method_changes(dq_skin):
     obj.name, mod.name, arm.name = "Renamed", "Skin It", "Skeleton"
     check_frames([(obj, tw)], frames=(9, 4))
     # Method change.
-    dq_skin.nodes.put_method(mod, "Dual Quaternion")
+    dq_skin.blender.nodes.put_method(mod, "Dual Quaternion")
     tw.modifiers["Armature"].use_deform_preserve_volume = True
     check_frames([(obj, tw)], frames=(10, 12))
     # NLA: the action in a strip, played from the NLA.
@@ -809,10 +809,10 @@ def test_weights_read_from_memory_equal_the_python_api(dq_skin, assets, asset):
     """The vertex-group reader (Blender's memory, through its SDNA) gives exactly what
     `MeshVertex.groups` gives, in stored order."""
     obj, _ = import_character(assets / asset)
-    meshdata = dq_skin.meshdata
-    assert meshdata.reader() is not None, dq_skin.memory.mesh_error
-    fast = meshdata.read_groups(obj.data)
-    slow = meshdata._read_groups_slowly(obj.data)
+    readers = dq_skin.SESSION.readers
+    assert readers.mesh is not None, readers.mesh_error
+    fast = dq_skin.blender.meshdata.read_groups(obj.data, readers.mesh)
+    slow = dq_skin.blender.meshdata.read_groups(obj.data, None)
     assert fast is not None and slow is not None
     np.testing.assert_array_equal(fast.offsets, slow.offsets)
     np.testing.assert_array_equal(fast.groups, slow.groups)
@@ -855,7 +855,7 @@ def test_add_to_all_selected_objects_at_once(dq_skin, monkeypatch):
     plain = tube("Plain", 4, 6, 1.0, 0.2)  # no Armature modifier: skipped, said so
     select_only(objs[0], *objs[1:], plain)
     scans = []
-    scan = dq_skin.consumers.SCAN
+    scan = dq_skin.SESSION.scan
     build = scan.build
 
     def counted(version):

@@ -68,6 +68,6 @@ def test_ten_thousand_frames_with_reloads(dq_skin, tmp_path):
         scene.frame_set(frame)
         worst = max(worst, deviation(evaluated_positions(obj), evaluated_positions(reference)))
     assert len(our_results()) == 1 and not orphans()
-    assert len(dq_skin.registry.REGISTRY.records) == 1
+    assert len(dq_skin.SESSION.tracker.records) == 1
     assert worst <= REL_TOL, f"{worst:.3e} of the diagonal from the Armature modifier after the soak"
     print(f"\nsoak: {FRAMES} frames, resident growth {growth / 2**20:.2f} MB, deviation {worst:.2e}")

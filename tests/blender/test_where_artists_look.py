@@ -81,7 +81,7 @@ def test_the_ab_switch_shows_exactly_blenders_deformation_and_back(dq_skin, meth
     obj, arm, _ = animated_tube()
     mod = add_dq_skin(obj, method)
     if method == "BLEND":
-        dq_skin.nodes.put(mod, "Blend Factor", 0.5)
+        dq_skin.blender.nodes.put(mod, "Blend Factor", 0.5)
     reference = twin(obj, share_mesh=False)  # Blender's Armature modifier with DQ Skin's settings
     bpy.context.scene.frame_set(12)
     ours = evaluated_positions(obj)
@@ -107,7 +107,7 @@ def test_the_ab_switch_shows_exactly_blenders_deformation_and_back(dq_skin, meth
 def test_painting_the_blend_creates_selects_and_enters_weight_paint(dq_skin):
     obj, arm, _ = animated_tube()
     mod = add_dq_skin(obj, "BLEND")
-    dq_skin.nodes.put(mod, "Blend Factor", 0.3)
+    dq_skin.blender.nodes.put(mod, "Blend Factor", 0.3)
     bpy.context.scene.frame_set(9)
     before = evaluated_positions(obj)
     bpy.context.view_layer.objects.active = obj
@@ -116,10 +116,10 @@ def test_painting_the_blend_creates_selects_and_enters_weight_paint(dq_skin):
     try:
         assert obj.mode == "WEIGHT_PAINT"
         group = obj.vertex_groups.active
-        assert group.name == "DQ Skin Blend" and dq_skin.nodes.get_attribute(mod, "Blend Amount") == group.name
-        weights = dq_skin.meshdata.get(obj).group_weights(group.name)
+        assert group.name == "DQ Skin Blend" and dq_skin.blender.nodes.get_attribute(mod, "Blend Amount") == group.name
+        weights = dq_skin.SESSION.meshes.get(obj, dq_skin.SESSION.readers.mesh).group_weights(group.name)
         assert np.allclose(weights, 0.3)  # filled with the factor, which is now 1
-        assert dq_skin.nodes.get(mod, "Blend Factor") == 1.0
+        assert dq_skin.blender.nodes.get(mod, "Blend Factor") == 1.0
         assert any("vertex group 'DQ Skin Blend'" in line and "0.30 to 0.30" in line for line in draw_panel(dq_skin, obj))
     finally:
         bpy.ops.object.mode_set(mode="OBJECT")
@@ -148,7 +148,7 @@ def test_everything_an_artist_can_click_says_what_it_does(dq_skin):
         for prop in rna.properties if rna is not None else []:
             if prop.identifier not in ("rna_type",) and not prop.is_hidden and prop.identifier in getattr(cls, "__annotations__", {}):
                 assert len(prop.description) > 10, f"{cls.__name__}.{prop.identifier} has no description"
-    group = dq_skin.nodes.ensure_group()
+    group = dq_skin.blender.nodes.ensure_group()
     for item in group.interface.items_tree:
         if getattr(item, "item_type", "") == "SOCKET" and item.in_out == "INPUT" and item.name != "Geometry":
             assert len(item.description) > 15, f"the DQ Skin input {item.name!r} has no description"

@@ -162,8 +162,8 @@ def test_bad_pose_inputs_are_named():
     with pytest.raises(TypeError, match="PoseData"):
         dqskin.PoseData()
     with pytest.raises(TypeError, match="blend_file must be the bytes of a .blend file"):
-        dqskin._PoseMemory("file.blend")
+        dqskin.memory.PoseMemory("file.blend")
     with pytest.raises(ValueError, match="blend_file: not an uncompressed .blend file"):
-        dqskin._PoseMemory(b"\x1f\x8b" + b"\0" * 30)
+        dqskin.memory.PoseMemory(b"\x1f\x8b" + b"\0" * 30)
     with pytest.raises(ValueError, match="blend_file"):
-        dqskin._PoseMemory(b"BLENDER-v402" + b"\0" * 64)
+        dqskin.memory.PoseMemory(b"BLENDER-v402" + b"\0" * 64)

@@ -23,6 +23,7 @@ import os
 import re
 
 import dqskin
+import dqskin.memory
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, seed, settings
@@ -222,8 +223,8 @@ def catalogue():
             ["out"],
         ),
         "armature_spaces": (dqskin.armature_spaces, lambda: dict(object_world=DEF[0], armature_world=DEF[1]), []),
-        "_MeshMemory": (dqskin._MeshMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
-        "_PoseMemory": (dqskin._PoseMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
+        "memory.MeshMemory": (dqskin.memory.MeshMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
+        "memory.PoseMemory": (dqskin.memory.PoseMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
     }
     return c
 
@@ -432,7 +433,7 @@ def test_every_argument_refuses_each_kind_of_bad_value_naming_it(name, replaced)
 def test_every_public_function_survives_any_argument(name):
     fn, valid, outs = CATALOGUE[name]
     params = list(valid())
-    if name not in ("_MeshMemory", "_PoseMemory"):  # their valid input is a .blend written by Blender (tested there)
+    if name not in ("memory.MeshMemory", "memory.PoseMemory"):  # their valid input is a .blend written by Blender (tested there)
         fn(**valid())
 
     @seed(SEED + sum(map(ord, name)))

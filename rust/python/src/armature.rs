@@ -1,4 +1,4 @@
-//! Armature poses from Blender's memory (`_PoseMemory`, `PoseData`) and the per-frame
+//! Armature poses from Blender's memory (`dqskin.memory.PoseMemory`, `PoseData`) and the per-frame
 //! influences that use them (`Influences.effective`).
 
 use dqskin_blend::{read_pose, PoseLayout};
@@ -22,7 +22,7 @@ use crate::skinning::{matrices, skin_error, space, PyInfluences};
 ///
 /// Built from the bytes of any uncompressed ``.blend`` file that this Blender wrote (its SDNA
 /// describes the structs in memory). Internal to the DQ Skin extension.
-#[pyclass(name = "_PoseMemory", module = "dqskin", frozen)]
+#[pyclass(name = "PoseMemory", module = "dqskin.memory", frozen)]
 pub struct PyPoseMemory(PoseLayout);
 
 #[pymethods]
@@ -73,7 +73,7 @@ impl PyPoseMemory {
 }
 
 /// One frame of an armature's pose as the Armature modifier deforms with it (from
-/// ``_PoseMemory.read``). Its *bones* are the deforming pose bones in ``pose.bones`` order;
+/// ``dqskin.memory.PoseMemory.read``). Its *bones* are the deforming pose bones in ``pose.bones`` order;
 /// the *expanded* bone list adds each B-Bone's ``segments + 1`` joints after them, in bone order.
 #[pyclass(name = "PoseData", module = "dqskin", frozen)]
 pub struct PyPoseData(pub ArmaturePose);
@@ -211,7 +211,9 @@ pub fn effective(groups: &Influences, a: EffectiveArgs<'_, '_>) -> PyResult<PyIn
     if let Some(pose) = a.pose.filter(|p| !p.is_none()) {
         let pose = pose.cast::<PyPoseData>().map_err(|_| {
             let ty = pose.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-            PyTypeError::new_err(format!("pose must be a dqskin.PoseData (from _PoseMemory.read), got {ty}"))
+            PyTypeError::new_err(format!(
+                "pose must be a dqskin.PoseData (from dqskin.memory.PoseMemory.read), got {ty}"
+            ))
         })?;
         let arrays_too = [
             ("envelopes", a.envelopes),

@@ -20,7 +20,7 @@ use crate::skinning::{skin_error, PyInfluences};
 /// Built from the bytes of any uncompressed ``.blend`` file that this Blender wrote (e.g.
 /// ``bpy.data.libraries.write(path, set())``): its SDNA describes the structs in memory.
 /// Internal to the DQ Skin extension: a wrong pointer crashes the process.
-#[pyclass(name = "_MeshMemory", module = "dqskin", frozen)]
+#[pyclass(name = "MeshMemory", module = "dqskin.memory", frozen)]
 pub struct PyMeshMemory(MeshLayout);
 
 #[pymethods]
@@ -96,7 +96,7 @@ fn groups_arg<'py>(
 }
 
 /// Influences from vertex groups as Blender's Armature modifier maps them: ``offsets``,
-/// ``groups`` (``uint32``) and ``weights`` (``float32``) in CSR form (``_MeshMemory``), and
+/// ``groups`` (``uint32``) and ``weights`` (``float32``) in CSR form (``dqskin.memory.MeshMemory``), and
 /// ``group_to_bone``: for each vertex group index, the bone index or -1.
 #[pyfunction]
 fn influences_from_deform_groups(

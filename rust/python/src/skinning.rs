@@ -78,7 +78,7 @@ impl PyInfluences {
     /// (with ``use_envelopes``). The result's bone indices run over the expanded bone list: the
     /// ``B`` bones, then for each B-Bone in order its ``segments + 1`` joints.
     ///
-    /// - ``pose``: a :class:`PoseData` of the same ``B`` bones (``_PoseMemory.read``): the
+    /// - ``pose``: a :class:`PoseData` of the same ``B`` bones (``dqskin.memory.PoseMemory.read``): the
     ///   envelopes, B-Bones and their mappings (Straight or Curved, as Blender's) from it.
     /// - Or arrays: ``envelopes`` ``(B, 11)`` float32, one row per bone in Blender's pose-bone
     ///   order: head xyz, tail xyz (``Bone.head_local``, ``tail_local``), head radius, tail

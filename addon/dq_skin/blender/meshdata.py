@@ -1,0 +1,216 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""What DQ Skin reads from a mesh datablock, read once and kept until the mesh changes.
+
+Per mesh (shared by every object using it, e.g. a crowd of linked duplicates): the vertex
+positions, the vertex-group weights in stored order, the element counts, and the shape keys'
+coordinates. Weights are read straight from Blender's memory through `dqskin.memory.MeshMemory`
+(see `memory`), which takes milliseconds where `MeshVertex.groups` takes about a second per
+250,000 vertices; if that reader cannot be built, the slow path is used and the panel says
+nothing is wrong.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import dqskin
+
+
+@dataclass
+class Groups:
+    """Vertex-group weights in CSR form, in stored order (`dqskin.influences_from_deform_groups`)."""
+
+    offsets: np.ndarray
+    groups: np.ndarray
+    weights: np.ndarray
+
+    def weights_of(self, index: int) -> np.ndarray:
+        return dqskin.deform_group_weights(self.offsets, self.groups, self.weights, index)
+
+
+@dataclass
+class KeyData:
+    """A mesh's shape keys: their coordinates and how they mix (values come per frame)."""
+
+    relative: bool
+    reference: int
+    data: list  # (V, 3) float32 per key block, in block order
+    relative_to: list  # index of each block's relative key
+    vertex_groups: list  # vertex group name per block ("" for none)
+
+
+@dataclass
+class MeshData:
+    uid: int
+    version: int
+    counts: tuple  # vertices, edges, faces, corners
+    positions: np.ndarray  # (V, 3) float32
+    groups: Groups | None  # None: the mesh has no vertex-group data at all
+    group_names: tuple
+    keys: KeyData | None
+    _group_weights: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def vertex_count(self) -> int:
+        return self.counts[0]
+
+    def group_weights(self, name: str) -> np.ndarray | None:
+        """Per-vertex weights of a vertex group by name (None if there is no such group)."""
+        if name not in self._group_weights:
+            if name not in self.group_names:
+                self._group_weights[name] = None
+            elif self.groups is None:
+                self._group_weights[name] = np.zeros(self.vertex_count, np.float32)
+            else:
+                self._group_weights[name] = self.groups.weights_of(self.group_names.index(name))
+        return self._group_weights[name]
+
+
+def read_groups(mesh, reader) -> Groups | None:
+    """The mesh's vertex-group weights (None if it has no vertex-group data), from memory with
+    `reader` (`dqskin.memory.MeshMemory`, or None for the Python API)."""
+    if reader is not None and not mesh.is_editmode:
+        try:
+            got = reader.deform_verts(mesh)
+        except (ValueError, TypeError):
+            got = False
+        if got is not False:
+            return None if got is None else Groups(*got)
+    return _read_groups_slowly(mesh)
+
+
+def _read_groups_slowly(mesh) -> Groups | None:
+    # Without the memory reader an empty weight layer cannot be told from none; a mesh whose
+    # vertices are in no group counts as having none (only the mask group depends on it).
+    if not any(len(v.groups) for v in mesh.vertices):
+        return None
+    offsets = np.zeros(len(mesh.vertices) + 1, np.uint32)
+    groups: list[int] = []
+    weights: list[float] = []
+    for v in mesh.vertices:
+        for g in v.groups:
+            groups.append(g.group)
+            weights.append(g.weight)
+        offsets[v.index + 1] = len(groups)
+    return Groups(offsets, np.asarray(groups, np.uint32), np.asarray(weights, np.float32))
+
+
+def _positions(mesh) -> np.ndarray:
+    flat = np.empty(len(mesh.vertices) * 3, np.float32)
+    if len(flat):  # an empty mesh has no position attribute at all
+        mesh.attributes["position"].data.foreach_get("vector", flat)
+    return flat.reshape(-1, 3)
+
+
+def _keys(mesh) -> KeyData | None:
+    key = mesh.shape_keys
+    if key is None or not len(key.key_blocks):
+        return None
+    blocks = list(key.key_blocks)
+    data = []
+    for kb in blocks:
+        flat = np.empty(len(kb.data) * 3, np.float32)
+        points = getattr(kb, "points", None)  # the fast path (Blender 4.1+)
+        (points if points is not None else kb.data).foreach_get("co", flat)
+        data.append(flat.reshape(-1, 3))
+    index = {kb.name: i for i, kb in enumerate(blocks)}
+    reference = index.get(key.reference_key.name, 0) if key.reference_key is not None else 0
+    relative_to = [index.get(kb.relative_key.name, -1) if kb.relative_key is not None else -1 for kb in blocks]
+    return KeyData(key.use_relative, reference, data, relative_to, [kb.vertex_group for kb in blocks])
+
+
+def _read(mesh, uid: int, version: int, group_names: tuple, reader) -> MeshData:
+    counts = (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops))
+    return MeshData(
+        uid=uid,
+        version=version,
+        counts=counts,
+        positions=_positions(mesh),
+        groups=read_groups(mesh, reader),
+        group_names=group_names,
+        keys=_keys(mesh),
+    )
+
+
+def _same(a: MeshData, b: MeshData) -> bool:
+    if a.counts != b.counts or a.group_names != b.group_names or not np.array_equal(a.positions, b.positions):
+        return False
+    if (a.groups is None) != (b.groups is None):
+        return False
+    if a.groups is not None and not (
+        np.array_equal(a.groups.offsets, b.groups.offsets)
+        and np.array_equal(a.groups.groups, b.groups.groups)
+        and np.array_equal(a.groups.weights, b.groups.weights)
+    ):
+        return False
+    if (a.keys is None) != (b.keys is None):
+        return False
+    if a.keys is not None:
+        ka, kb = a.keys, b.keys
+        if (ka.relative, ka.reference, ka.relative_to, ka.vertex_groups) != (kb.relative, kb.reference, kb.relative_to, kb.vertex_groups):
+            return False
+        if len(ka.data) != len(kb.data) or not all(np.array_equal(x, y) for x, y in zip(ka.data, kb.data)):
+            return False
+    return True
+
+
+class MeshCache:
+    """What was read of each mesh (by its session uid), kept until Blender says it changed and
+    a comparison finds it did (owned by the session). `reader`: the vertex-group memory reader,
+    or None (`memory.Readers.mesh`)."""
+
+    def __init__(self):
+        self._cache: dict[int, MeshData] = {}
+        self._stale: set[int] = set()
+        self._revisions: dict[int, int] = {}  # mesh uid -> how many times Blender said it changed
+        self._version = 0
+
+    def forget(self) -> None:
+        self._cache.clear()
+        self._stale.clear()
+        self._revisions.clear()
+
+    def mark_stale(self, mesh_uid: int) -> None:
+        """Blender says the mesh may have changed: compare it on its next use."""
+        self._stale.add(mesh_uid)
+        self._revisions[mesh_uid] = self._revisions.get(mesh_uid, 0) + 1
+
+    def revision(self, mesh) -> int:
+        """Changes whenever Blender said the mesh changed, in anything (materials, UV maps,
+        colors, normals...), not only in what DQ Skin reads (`MeshData.version`)."""
+        return self._revisions.get(mesh.session_uid, 0)
+
+    def peek(self, obj) -> MeshData | None:
+        """The cached data of `obj`'s mesh if it is current (no read)."""
+        uid = obj.data.session_uid
+        return None if uid in self._stale else self._cache.get(uid)
+
+    def peek_any(self, obj) -> MeshData | None:
+        """The cached data of `obj`'s mesh, current or not (no read)."""
+        return self._cache.get(obj.data.session_uid)
+
+    def get(self, obj, reader, verify: bool = False) -> MeshData:
+        """The data of `obj`'s mesh, read if unknown, or re-read and compared with `verify`
+        (after Blender said the mesh may have changed); the version only changes when
+        something did."""
+        mesh = obj.data
+        uid = mesh.session_uid
+        old = self._cache.get(uid)
+        if uid in self._stale:
+            self._stale.discard(uid)
+            verify = True
+        # Vertex group names live on the mesh since Blender 3.0 but Python reaches them through
+        # any of its objects. Removing or renaming a group does not always reach the handlers
+        # as a change of the mesh: compared on every use (`keys()` reads them in C: 12 µs for
+        # Rigify's 160 groups, where reading each group's name took 34).
+        names = tuple(obj.vertex_groups.keys())
+        if old is not None and not verify and names == old.group_names:
+            return old
+        self._version += 1
+        new = _read(mesh, uid, self._version, names, reader)
+        if old is not None and _same(old, new):
+            return old
+        self._cache[uid] = new
+        return new

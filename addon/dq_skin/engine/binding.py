@@ -1,0 +1,104 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""What holds while the mesh, its weights, the armature's bones and the settings stay the same:
+the influences (the *binding*), the mask and blend weights, the Optimized Centers of Rotation,
+and the kernel's job built from them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import dqskin
+from ..blender import pose, rig
+from ..blender.meshdata import MeshData
+from ..model.keys import BindingKey
+from ..model.methods import Settings
+from ..model.state import ModifierState
+from . import centers
+from .context import Context, SkinError
+
+
+def binding(obj, arm, arm_eval, st: ModifierState, s: Settings, data: MeshData, ctx: Context) -> rig.Binding:
+    """The influences of this mesh on this armature, kept while what they depend on holds
+    (the armature's bones are compared on every full evaluation, whatever changed them: from
+    Blender's memory, see `pose.armature_signature`)."""
+    cache = st.binding
+    key = BindingKey(
+        data.uid,
+        data.version,
+        arm.session_uid,
+        pose.armature_signature(arm_eval, ctx.reads),
+        s.mask_group,
+        s.invert_mask,
+        s.blend_group,
+        s.use_vertex_groups,
+    )
+    if cache.binding is None or cache.key != key:
+        cache.clear()
+        bound = rig.bind(data, arm, s.mask_group, s.invert_mask, s.use_vertex_groups)
+        cache.binding = bound
+        cache.envelopes = rig.envelopes(arm, bound)
+        cache.blend = data.group_weights(s.blend_group) if s.blend_group else None
+        cache.segments = rig.bbone_segments(arm, bound)
+        cache.uses_envelopes = bool(cache.envelopes[:, 10].any())
+        cache.uses_bbones = bool(cache.segments.max(initial=0) > 1)
+        cache.key = key
+        st.output.invalidate()
+    st.needs_effective = s.use_envelopes or cache.uses_envelopes or cache.uses_bbones
+    if s.method == dqskin.Method.CENTERS_OF_ROTATION:
+        centers_of(obj, st, data, cache.binding, ctx)
+    return cache.binding
+
+
+def job(st: ModifierState, s: Settings, positions, influences, deform, rest, premat, postmat) -> dqskin.SkinJob:
+    """The `dqskin.SkinJob` of one modifier: its settings, kept data and output (checked here:
+    a bad input, a bone scaled to NaN say, is this modifier's error, shown on its panel)."""
+    method = s.method
+    try:
+        return dqskin.SkinJob(
+            positions,
+            influences,
+            np.ascontiguousarray(deform),
+            rest,
+            method=method,
+            premat=premat,
+            postmat=postmat,
+            mask=st.binding.binding.mask,
+            blend=st.binding.blend if method == dqskin.Method.BLEND else None,
+            blend_factor=s.blend_factor,
+            out=st.output.buffer,
+            centers=st.binding.centers if method == dqskin.Method.CENTERS_OF_ROTATION else None,
+        )
+    except (TypeError, ValueError) as e:
+        raise SkinError(str(e)) from None
+
+
+def centers_of(obj, st: ModifierState, data: MeshData, bound: rig.Binding, ctx: Context) -> None:
+    """Puts the Optimized Centers of Rotation for this binding in `st.binding.centers`: kept,
+    found in the cache, computed now (small meshes, command line, renders), or started in the
+    background (the SkinError that says so lets Blender's deformation stand in until they are
+    ready)."""
+    if st.needs_effective:
+        raise SkinError("Optimized Centers works with vertex groups only, not with envelopes or B-Bones: choose another method")
+    if st.binding.centers is not None:
+        return
+    store = ctx.session.centers
+    triangles = centers.triangles_of(obj.data)
+    key = centers.key_of(data.positions, triangles, bound.influences)
+    got = store.lookup(key, data.vertex_count)
+    if got is None:
+        running = store.job_of(key)
+        if running is not None and running.finished and running.error:
+            raise SkinError(f"Optimized Centers: {running.error} (change the method or any setting to try again)")
+        if data.vertex_count <= centers.INLINE_VERTICES or centers.in_background() or ctx.render:
+            label = f"Optimized Centers for {obj.name} ({data.vertex_count} vertices)" if centers.in_background() else ""
+            try:
+                got = store.compute(data.positions, triangles, bound.influences, key, label=label)
+            except centers.Cancelled:
+                raise SkinError("Optimized Centers: cancelled") from None
+        else:
+            running = store.start(data.positions, triangles, bound.influences, key, obj.name)
+            raise SkinError(
+                f"Optimized Centers: computing for {data.vertex_count} vertices ({running.fraction:.0%}); "
+                "Blender's deformation shows until they are ready"
+            )
+    st.binding.centers = got

@@ -1,0 +1,250 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Optimized Centers of Rotation for the modifier: the per-vertex centers (computed by the Rust
+core from the rest mesh, its triangles and the weights) are computed once and kept, keyed by a
+digest of exactly what they depend on:
+
+- in memory, for every modifier and object that shares them (duplicates share a mesh);
+- on disk, in the extension's user folder, so opening a file again does not recompute them
+  (nothing is written into the user's file or mesh).
+
+Small meshes are computed on the spot. Large ones, in an interactive session, in a background
+thread (the core releases the GIL) while the modifier says so and Blender's own deformation
+stands in; the panel shows the progress and can cancel. In background mode (command line,
+render farms) they are computed on the spot with a progress bar, stopping on Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+import bpy
+
+from .. import dqskin
+from ..progress import Progress
+
+SIGMA = 0.1  # the paper's default similarity width
+# Up to this many vertices the centers are computed on the spot, even in the viewport (well
+# under half a second on two cores).
+INLINE_VERTICES = 30_000
+MEMORY_ENTRIES = 16
+DISK_BYTES = 1 << 30  # the on-disk cache is trimmed to this, oldest first
+FORMAT = 1  # bump when the centers' definition changes: old files are then ignored
+
+
+class Cancelled(Exception):
+    """The user cancelled the computation."""
+
+
+@dataclass
+class Job:
+    """A computation running in a background thread."""
+
+    key: str
+    vertices: int
+    done: int = 0
+    total: int = 1
+    cancel: bool = False
+    error: str = ""
+    finished: bool = False
+    owners: set = field(default_factory=set)  # object names waiting for it (redrawn after)
+
+    @property
+    def fraction(self) -> float:
+        return self.done / max(self.total, 1)
+
+
+def in_background() -> bool:
+    """No interactive session (command line, render farm): compute on the spot."""
+    return bpy.app.background
+
+
+def triangles_of(mesh) -> np.ndarray:
+    """The mesh's triangles (Blender's own triangulation of its faces), `(T, 3)` uint32."""
+    mesh.calc_loop_triangles()
+    tris = np.empty(len(mesh.loop_triangles) * 3, np.uint32)
+    mesh.loop_triangles.foreach_get("vertices", tris)
+    return tris.reshape(-1, 3)
+
+
+def key_of(positions: np.ndarray, triangles: np.ndarray, influences, sigma: float = SIGMA) -> str:
+    """A digest of everything the centers depend on (rest positions, topology, weights, sigma)."""
+    h = hashlib.blake2b(digest_size=20)
+    h.update(f"dq_skin centers {FORMAT} {sigma!r} {len(positions)} {len(triangles)}".encode())
+    for a in (positions, triangles, influences.offsets, influences.bones, influences.weights):
+        h.update(np.ascontiguousarray(a).data)
+    return h.hexdigest()
+
+
+def _folder() -> Path | None:
+    try:
+        return Path(bpy.utils.extension_path_user(__package__.rpartition(".")[0], path="centers", create=True))
+    except (ValueError, OSError, AttributeError):
+        return None  # not installed as an extension (or no writable user folder): memory only
+
+
+def _trim(folder: Path) -> None:
+    files = sorted(folder.glob("*.npy"), key=lambda p: p.stat().st_mtime, reverse=True)
+    total = 0
+    for p in files:
+        total += p.stat().st_size
+        if total > DISK_BYTES:
+            p.unlink(missing_ok=True)
+
+
+class Centers:
+    """The centers computed in this session (an LRU in memory, backed by the user folder) and
+    the computations running in background threads (owned by the session). `interrupted()`:
+    whether Ctrl-C or SIGTERM stopped a batch command."""
+
+    def __init__(self, interrupted=lambda: False):
+        self._interrupted = interrupted
+        self._memory: OrderedDict[str, np.ndarray] = OrderedDict()
+        self._jobs: dict[str, Job] = {}
+        self._lock = threading.Lock()
+
+    def lookup(self, key: str, vertices: int) -> np.ndarray | None:
+        """The centers for `key` if they were computed before (in this session or an earlier one)."""
+        got = self._memory.get(key)
+        if got is not None:
+            self._memory.move_to_end(key)
+            return got
+        folder = _folder()
+        if folder is None:
+            return None
+        path = folder / f"{key}.npy"
+        try:
+            got = np.load(path, allow_pickle=False)
+        except (OSError, ValueError):
+            return None
+        if got.dtype != np.float32 or got.shape != (vertices, 3):
+            return None
+        os.utime(path)  # recently used: trimmed last
+        self._remember(key, got)
+        return got
+
+    def _remember(self, key: str, centers: np.ndarray) -> None:
+        centers.setflags(write=False)
+        self._memory[key] = centers
+        self._memory.move_to_end(key)
+        while len(self._memory) > MEMORY_ENTRIES:
+            self._memory.popitem(last=False)
+
+    def _store(self, key: str, centers: np.ndarray) -> None:
+        self._remember(key, centers)
+        folder = _folder()
+        if folder is None:
+            return
+        tmp = folder / f".{key}.{os.getpid()}.tmp.npy"
+        try:
+            np.save(tmp, centers, allow_pickle=False)
+            os.replace(tmp, folder / f"{key}.npy")
+            _trim(folder)
+        except OSError:
+            pass  # a cache: failing to keep it only costs a recomputation
+        finally:
+            if tmp.exists():
+                tmp.unlink()
+
+    def forget_memory(self) -> None:
+        """Drops the centers kept in memory (the user folder's stay)."""
+        self._memory.clear()
+
+    def compute(self, positions, triangles, influences, key: str, label: str = "", check=None, job: Job | None = None) -> np.ndarray:
+        """Computes (and keeps) the centers now. `check()` may raise to stop (Ctrl-C on the command
+        line); `job.cancel` stops a background computation."""
+        progress = Progress(None, 100, label) if label else None
+        last = [0]
+
+        def report(done: int, total: int) -> bool:
+            if job is not None:
+                job.done, job.total = done, total
+                if job.cancel:
+                    return False
+            if progress is not None:
+                step = int(100 * done / max(total, 1))
+                if step > last[0]:
+                    progress.set(step)
+                    last[0] = step
+            if check is not None:
+                check()
+            return not self._interrupted()  # Ctrl-C or SIGTERM in a batch command
+
+        try:
+            centers = dqskin.centers_of_rotation(positions, triangles, influences, sigma=SIGMA, progress=report)
+        except dqskin.Cancelled:
+            raise Cancelled() from None
+        finally:
+            if progress is not None:
+                progress.end()
+        centers = np.ascontiguousarray(centers, np.float32)
+        self._store(key, centers)
+        return centers
+
+    def start(self, positions, triangles, influences, key: str, owner: str) -> Job:
+        """The background computation of `key` (started if not running)."""
+        with self._lock:
+            job = self._jobs.get(key)
+            if job is not None and not job.finished:
+                job.owners.add(owner)
+                return job
+            job = self._jobs[key] = Job(key, len(positions), owners={owner})
+        positions, triangles = positions.copy(), triangles.copy()
+
+        def work():
+            try:
+                self.compute(positions, triangles, influences, key, job=job)
+            except Cancelled:
+                job.error = "cancelled"
+            except Exception as e:  # reported on the modifier
+                job.error = f"{type(e).__name__}: {e}"
+            job.finished = True
+
+        threading.Thread(target=work, name=f"dq_skin centers {key[:8]}", daemon=True).start()
+        bpy.app.timers.register(self.poll, first_interval=0.2)
+        return job
+
+    def running(self) -> list[Job]:
+        return [j for j in self._jobs.values() if not j.finished]
+
+    def jobs(self) -> list[Job]:
+        """Every computation started in this session, running or finished, oldest first."""
+        return list(self._jobs.values())
+
+    def job_of(self, key: str) -> Job | None:
+        return self._jobs.get(key)
+
+    def cancel(self, key: str) -> None:
+        job = self._jobs.get(key)
+        if job is not None:
+            job.cancel = True
+
+    def close(self) -> None:
+        """Stops every background computation (their threads end at their next progress call)."""
+        for job in self._jobs.values():
+            job.cancel = True
+        if bpy.app.timers.is_registered(self.poll):
+            bpy.app.timers.unregister(self.poll)
+
+    def poll(self):
+        """While computations run: redraw their progress; when one ends, re-evaluate its objects."""
+        running = False
+        for job in list(self._jobs.values()):
+            if job.finished and job.owners:
+                for name in job.owners:
+                    obj = bpy.data.objects.get(name)
+                    if obj is not None:
+                        obj.update_tag()  # evaluates again: now with the centers (or the error)
+                job.owners.clear()
+            running |= not job.finished
+        for window in getattr(bpy.context.window_manager, "windows", []):
+            for area in window.screen.areas:
+                if area.type in ("PROPERTIES", "VIEW_3D"):
+                    area.tag_redraw()
+        return 0.25 if running else None

@@ -1,0 +1,304 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Evaluating the DQ Skin modifiers of one object, in stack order: what reaches each (`inputs`),
+whether DQ Skin deforms (or Blender's own deformation does, for a reason: `decisions`), the
+binding and the kernel's job (`binding`), skinning, and publishing the result through the route
+(`routes`). This module is the only writer of results and of the panel's status.
+
+Where DQ Skin does not deform (switched off, handed over, an error), the node group passes the
+mesh through and the companion deforms it (see `companions`). Everything that does not change
+between frames is kept (see `model.state`); nothing is computed or written when nothing
+changed, which also keeps Blender's update loop from cycling.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .. import dqskin
+from ..blender import consumers, nodes, pose, rig, settings
+from ..model import decisions
+from ..model.keys import FrameKey, PoseKey, Source
+from ..model.methods import Settings
+from ..model.state import Mode, ModifierState
+from ..routes.base import Target
+from ..routes.result_route import MeshSource
+from . import binding, companions, inputs, playback
+from .context import Context, Plan, SkinError, dq_skin_modifiers, mod_key
+
+
+def evaluate_object(obj, ctx: Context, force: bool = False) -> bool:
+    """Evaluates every DQ Skin modifier of `obj`, in stack order. With `ctx.batch`, the skinning
+    of an object with one DQ Skin is queued there instead of run (see `run_batch`). Returns
+    whether a result was written or queued."""
+    obj_eval = obj.evaluated_get(ctx.depsgraph)
+    wrote = False
+    reaching: Source | None = None
+    previous: ModifierState | None = None
+    batchable = ctx.batch is not None and len(dq_skin_modifiers(obj)) == 1
+    for mod in obj.modifiers:
+        enabled = mod.show_render if ctx.render else mod.show_viewport
+        if not nodes.is_dq_skin(mod):
+            reaching = decisions.next_source(reaching, False, enabled, False)
+            continue
+        st = ctx.state(obj, mod)
+        if nodes.version_of(mod.node_group) != nodes.VERSION:
+            report(st, Mode.FALLBACK, "Made with an older DQ Skin: remove it and add it again")
+            reaching = decisions.next_source(reaching, True, enabled, False)
+            continue
+        wrote |= _evaluate(obj, obj_eval, mod, st, ctx, decisions.source_for(reaching), previous, force, batchable)
+        reaching = decisions.next_source(reaching, True, enabled, st.status.live)
+        previous = st
+    return wrote
+
+
+def report(st: ModifierState, mode: Mode, message: str = "") -> None:
+    st.status.mode, st.status.message = mode, message
+    st.output.invalidate()
+
+
+def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: Source, previous, force: bool, batchable: bool) -> bool:
+    start = time.perf_counter()
+    st.status.source = source
+    if obj.library is not None:
+        lib = obj.library.filepath or obj.library.name
+        report(st, Mode.LINKED, f"Linked from {lib}: Blender's Armature modifier deforms it (make a Library Override to use DQ Skin)")
+        return False
+    s = None
+    try:
+        if batchable and not force:
+            plan = playback.quick_plan(obj, mod, st, ctx)
+            if plan is None:
+                return False
+            if plan is not False:
+                ctx.batch.append(plan)
+                return True
+        s = st.settings.value if st.settings.value is not None and obj.session_uid in ctx.unchanged else settings.cached(mod, st.settings)
+        exporting = ctx.session.exports.active()
+        companions.follow_the_user(obj, mod, st, bool(exporting))
+        deforms, reason = _where_it_deforms(obj, mod, st, s, ctx, exporting)
+        if not (mod.show_render if ctx.render else mod.show_viewport):
+            where = "renders" if ctx.render else "the viewport"
+            message = f"Off in {where}: Blender's Armature modifier deforms the mesh there"
+            return _step_aside(ctx, obj, mod, st, s, deforms, Mode.OFF, message)
+        if reason:
+            return _step_aside(ctx, obj, mod, st, s, deforms, Mode.HANDED_OVER, reason + decisions.instead(s.method))
+        plan = _prepare(obj, obj_eval, mod, st, s, ctx, source, previous, force, deforms, start)
+        if plan is None:
+            if st.companion.deforms != deforms:  # e.g. only the render toggle changed
+                companions.settle(obj, mod, st, s, deforms, render=ctx.render)
+            return False
+        if batchable and not st.needs_effective:
+            ctx.batch.append(plan)
+            return True
+        error = dqskin.skin_many([plan.job])[0]
+        if error is not None:
+            raise SkinError(error)
+        finish(ctx.session, plan)
+        return True
+    except SkinError as e:
+        return fallback(ctx.session, obj, mod, st, s, str(e), ctx.render)
+    except Exception as e:  # never a traceback in the user's face; say what happened
+        return fallback(ctx.session, obj, mod, st, s, f"{type(e).__name__}: {e}", ctx.render)
+
+
+def _where_it_deforms(obj, mod, st: ModifierState, s: Settings, ctx: Context, exporting: str) -> tuple[tuple[bool, bool], str]:
+    """Where DQ Skin would deform ((viewport, render), as far as this evaluation can tell), and
+    why it hands over in this evaluation ("" if it does not)."""
+    scan = ctx.session.scan.ensure(ctx.structure)
+    arm = s.armature
+    in_edit = arm is not None and arm.type == "ARMATURE" and arm.mode == "EDIT"
+    simulation = consumers.simulation_reason(scan, obj, mod) if not exporting and not in_edit else ""
+    reasons = decisions.hand_over(exporting, in_edit, simulation, consumers.mode_reason(obj))
+    st.decided_structure = ctx.structure
+    return decisions.deforms_where(mod.show_viewport, mod.show_render, reasons), reasons.for_render(ctx.render)
+
+
+def _step_aside(ctx: Context, obj, mod, st: ModifierState, s, deforms, mode: Mode, message: str) -> bool:
+    """DQ Skin does not deform in this evaluation: the mesh passes through, the companion
+    deforms (where the user has not switched it off)."""
+    if obj.library is None:
+        ctx.session.route.pass_through(Target(obj, mod, st))
+        companions.settle(obj, mod, st, s, deforms, render=ctx.render)
+    report(st, mode, message)
+    if mode is Mode.OFF and not companions.companion_of(obj, mod, st):
+        st.status.message = "Off: no Armature modifier after it, the mesh is not deformed"
+    return False
+
+
+def fallback(session, obj, mod, st: ModifierState, s, message: str, render: bool = False) -> bool:
+    """DQ Skin cannot deform: the input passes through and the companion deforms as Blender
+    does; the panel shows why."""
+    try:
+        session.route.pass_through(Target(obj, mod, st))
+        if s is None:
+            try:
+                s = settings.read(mod)
+            except Exception:  # a damaged modifier: the companion as it is
+                s = None
+        companions.settle(obj, mod, st, s, (False, False), render=render)
+    except Exception as e:  # nothing of this may reach Blender's console
+        message += f" (and the companion could not be set up: {type(e).__name__}: {e})"
+    report(st, Mode.FALLBACK, message)
+    c = companions.companion_of(obj, mod, st) if obj.library is None else None
+    st.status.instead = (
+        f"Blender's Armature modifier '{c.name}' deforms the mesh instead"
+        if c is not None
+        else "No Armature modifier after it: the mesh is not deformed"
+    )
+    return False
+
+
+def _prepare(obj, obj_eval, mod, st: ModifierState, s: Settings, ctx: Context, source, previous, force, deforms, start) -> Plan | None:
+    """Everything before the kernel: checks, what reaches the modifier, influences, this frame's
+    matrices; None when the result is already this."""
+    session = ctx.session
+    arm = s.armature
+    if arm is None:
+        raise SkinError("No armature object set")
+    if arm.type != "ARMATURE":
+        raise SkinError(f"'{arm.name}' is not an armature")
+    if obj.mode == "EDIT" or obj.data.is_editmode:
+        raise SkinError("The mesh is in Edit Mode")
+    data = session.meshes.get(obj, session.readers.mesh)
+    if data.vertex_count == 0:
+        raise SkinError("The mesh has no vertices")
+    arm_eval = arm.evaluated_get(ctx.depsgraph)
+    if arm_eval.pose is None:
+        raise SkinError(f"The armature '{arm.name}' has no pose")
+
+    # What reaches the modifier.
+    if source is Source.MESH:
+        try:
+            positions, input_key = inputs.mesh_input(obj, obj_eval, st, data, ctx.depsgraph)
+        except inputs.CaptureNeeded:
+            source = st.status.source = Source.CAPTURE
+    if source is Source.CAPTURE:
+        positions, input_key = inputs.captured_input(obj, obj_eval, mod, st, data)
+    elif source is Source.CHAIN:
+        positions, input_key = inputs.chain_input(previous, data.vertex_count)
+    if source is not Source.CAPTURE and st.capture_on is not False:
+        inputs.set_capture(mod, False)
+        st.capture_on = False
+
+    bound = binding.binding(obj, arm, arm_eval, st, s, data, ctx)
+    if len(positions) != bound.vertex_count:
+        raise SkinError(
+            f"An earlier modifier changed the vertex count ({bound.vertex_count} → {len(positions)}); "
+            "put DQ Skin before modifiers that add or remove vertices"
+        )
+    if st.needs_effective:
+        bones = pose.frame(arm_eval, bound, st.binding.segments, ctx.reads)  # with every B-Bone's joints
+        pose_key = bones.key
+    else:
+        deform = pose_matrices(ctx, arm, arm_eval, bound)
+        pose_key = PoseKey(matrices=deform.tobytes())
+    out = st.output
+    if out.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
+        out.spaces = rig.spaces(obj_eval, arm_eval)
+    premat, postmat = out.spaces
+    by_index = bool(consumers.index_readers(session.scan.ensure(ctx.structure), obj))
+    kind = decisions.result_kind(source, by_index)
+    result = session.route.prepare(Target(obj, mod, st))
+    key = FrameKey(s.key(), input_key, pose_key, premat.tobytes(), result.session_uid, (data.version, session.meshes.revision(obj.data)))
+    if decisions.already_written(key, out.written, st.status.live, session.route.mode_of(result), kind, force):
+        return None
+    if out.buffer is None or len(out.buffer) != bound.vertex_count:
+        out.buffer = np.empty((bound.vertex_count, 3), np.float32)
+    influences, rest = bound.influences, bound.rest
+    if st.needs_effective:
+        # Envelopes and B-Bone segments depend on where the vertices are: this frame's
+        # influences, over the bones followed by the B-Bones' segment joints.
+        cache = st.binding
+        influences = pose.influences(
+            bones, bound, arm_eval, positions, input_key, premat, s.use_vertex_groups, s.use_envelopes, cache.envelopes, cache.segments
+        )
+        deform, rest = bones.deform, bones.rest
+    out.job = binding.job(st, s, positions, influences, deform, rest, premat, postmat)
+    return Plan(obj, mod, st, s, result, kind, key, out.job, deforms, start, render=ctx.render, data=data)
+
+
+def pose_matrices(ctx: Context, arm, arm_eval, bound: rig.Binding) -> np.ndarray:
+    """This evaluation's channel matrices of the bound bones (each armature read once per call)."""
+    deform = ctx.poses.get(arm.session_uid)
+    if deform is None:
+        deform = ctx.poses[arm.session_uid] = rig.pose_matrices(arm_eval)
+    if len(bound.bone_indices) != len(deform):
+        deform = deform[bound.bone_indices]
+    return deform
+
+
+def finish(session, plan: Plan) -> None:
+    """Publishes the result, then switches the companion off where DQ Skin deforms (in this
+    order, so that no evaluation sees both or neither)."""
+    obj, mod, st, kind = plan.obj, plan.mod, plan.st, plan.kind
+    out = st.output
+    out.generation += 1
+    target = Target(obj, mod, st)
+    route = session.route
+    if plan.quick:
+        route.write(target, out.buffer, kind)
+        out.written = plan.key
+        st.status.seconds = time.perf_counter() - plan.start
+        return
+    data = plan.data
+    source = MeshSource(obj.data, data.version, session.meshes.revision(obj.data), data.counts)
+    out.result = plan.result
+    route.write(target, out.buffer, kind, source)
+    out.written = plan.key
+    bones = len(plan.s.armature.data.bones)
+    faster = decisions.feeds_faster(data.vertex_count, bones)
+    route.feed(
+        target,
+        decisions.feedable(
+            kind, st.needs_effective, st.status.source, data.keys is not None, plan.render, plan.key.pose.from_memory, faster
+        ),
+    )
+    companions.settle(obj, mod, st, plan.s, plan.deforms, render=plan.render)
+    bound = st.binding.binding
+    status = st.status
+    status.mode, status.message = Mode.LIVE, ""
+    status.notes = tuple(consumers.notes(obj, mod))
+    status.method = plan.s.method.label
+    status.bones = len(bound.bone_names)
+    status.influences = len(bound.influences)
+    status.seconds = time.perf_counter() - plan.start
+
+
+def run_batch(session, plans: list) -> None:
+    """Skins every queued plan in one call (in parallel across objects) and publishes the results."""
+    if not plans:
+        return
+    errors = dqskin.skin_many([p.job for p in plans])  # jobs were checked when built (`binding.job`)
+    for plan, error in zip(plans, errors):
+        try:
+            if error is not None:
+                raise SkinError(error)
+            finish(session, plan)
+        except Exception as e:
+            message = str(e) if isinstance(e, SkinError) else f"{type(e).__name__}: {e}"
+            # Steady playback plans carry no modifier (an object with one DQ Skin).
+            mod = plan.mod or next(iter(dq_skin_modifiers(plan.obj)), None)
+            if mod is not None:
+                fallback(session, plan.obj, mod, plan.st, plan.s, message, plan.render)
+
+
+def prepare_capture(session, obj) -> None:
+    """Switches the node group's capture on for the DQ Skin modifiers that other enabled
+    modifiers precede, as soon as the stack changes: Blender then stores what reaches them in
+    the same evaluation, and the next one skins it (capture found on only while skinning would
+    cost an evaluation more)."""
+    if obj.library is not None:
+        return
+    others = False
+    for mod in obj.modifiers:
+        if nodes.is_dq_skin(mod):
+            if others and nodes.version_of(mod.node_group) == nodes.VERSION:
+                st = session.states.get(mod_key(obj, mod))
+                if st.capture_on is not True:
+                    inputs.set_capture(mod, True)
+                    session.route.pass_through(Target(obj, mod, st))  # a replacing result would hide what the group stores
+                    st.capture_on = True
+        elif mod.show_viewport or mod.show_render:
+            others = True

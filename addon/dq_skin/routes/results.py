@@ -1,0 +1,150 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Result objects: where the add-on puts what a DQ Skin modifier outputs.
+
+One per object and modifier (two DQ Skins on one object, or a copy of a character, never share
+one), local to the current file even when the character is a library override, linked to no
+scene (the modifier's reference keeps it evaluated), and runtime data: Blender never writes a
+result, its mesh or anything of theirs to a file.
+
+Each result records its owner (the object's session uid and the modifier's persistent id): a
+copied object or modifier that still points at another modifier's result gets one of its own.
+"""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+
+import bpy
+
+from ..blender import compat
+from ..model.state import ResultMode
+
+TAG = "dq_skin_result"
+OWNER_OBJECT = "dq_skin_owner_object"
+OWNER_MODIFIER = "dq_skin_owner_modifier"
+
+
+def is_result(obj) -> bool:
+    try:
+        return obj is not None and obj.get(TAG) is not None
+    except ReferenceError:
+        return False
+
+
+def owned_by(result, obj, mod) -> bool:
+    """Whether `result` is a local result of `mod` on `obj` (this session)."""
+    return (
+        is_result(result)
+        and result.library is None
+        and result.get(OWNER_OBJECT) == str(obj.session_uid)
+        and result.get(OWNER_MODIFIER) == compat.modifier_uid(mod)
+    )
+
+
+def create(obj, mod):
+    """A new, empty result object for `mod` on `obj` (its transform says "pass through")."""
+    name = f".DQ Skin result {obj.name} {mod.name}"
+    mesh = _runtime(bpy.data.meshes.new(name))
+    result = _runtime(bpy.data.objects.new(name, mesh))
+    result[TAG] = 1
+    result[OWNER_OBJECT] = str(obj.session_uid)  # a string: uids exceed ID properties' int range
+    result[OWNER_MODIFIER] = compat.modifier_uid(mod)
+    return result
+
+
+def _runtime(datablock):
+    """Marks a data-block of ours as runtime data: Blender never writes it to a file."""
+    datablock.is_runtime_data = True
+    return datablock
+
+
+def remove(result) -> None:
+    """Deletes a result object and its mesh (its feed goes first, see `ResultRoute.release`)."""
+    if not is_result(result) or result.library is not None:
+        return
+    mesh = result.data
+    bpy.data.objects.remove(result)
+    if mesh is not None and mesh.users == 0:
+        bpy.data.meshes.remove(mesh)
+
+
+def unused() -> list:
+    """The results nothing uses any more (their modifier or object was deleted)."""
+    return [o for o in bpy.data.objects if is_result(o) and o.users == 0 and o.library is None]
+
+
+# What a result object's transform asks the node group to do (see `nodes`).
+_TRANSFORMS = MappingProxyType(
+    {
+        ResultMode.OFF: ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
+        ResultMode.REPLACE: ((1.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
+        ResultMode.POSITIONS: ((0.0, 0.0, 0.0), (2.0, 2.0, 2.0)),
+    }
+)
+SCALE_POSITIONS = 2.0
+
+
+def set_mode(result, mode: ResultMode) -> None:
+    """Tells the node group what to do with the result (writes only what changes)."""
+    if mode is ResultMode.PENDING:
+        if result.location.z != 1.0:
+            result.location.z = 1.0
+        return
+    loc, scale = _TRANSFORMS[mode]
+    if tuple(result.location) != loc:
+        result.location = loc
+    if tuple(result.scale) != scale:
+        result.scale = scale
+
+
+def mode_of(result) -> ResultMode:
+    if result is None:
+        return ResultMode.OFF
+    if result.location.z > 0:
+        return ResultMode.PENDING
+    if result.location.x > 0:
+        return ResultMode.REPLACE
+    if result.scale.x == SCALE_POSITIONS:
+        return ResultMode.POSITIONS
+    return ResultMode.OFF
+
+
+def copy_mesh(result, source_mesh) -> None:
+    """Makes the result's mesh a copy of `source_mesh` (attributes, groups, topology, shared with
+    it until written) without its shape keys: a copied shape-key data-block would be saved in
+    the user's file, pointing at a mesh that is not."""
+    old = result.data
+    mesh = _runtime(source_mesh.copy())
+    mesh.name = result.name
+    if mesh.shape_keys is not None:
+        bpy.data.batch_remove([mesh.shape_keys])
+    result.data = mesh
+    if old is not None and old.users == 0:
+        bpy.data.meshes.remove(old)
+
+
+def points_mesh(result, count: int) -> None:
+    """Makes the result's mesh `count` loose points (positions mode)."""
+    mesh = result.data
+    if len(mesh.vertices) == count and not len(mesh.polygons) and not len(mesh.edges):
+        return
+    old = mesh
+    mesh = _runtime(bpy.data.meshes.new(result.name))
+    mesh.vertices.add(count)
+    result.data = mesh
+    if old is not None and old.users == 0:
+        bpy.data.meshes.remove(old)
+
+
+def write_positions(result, positions) -> None:
+    """New positions. The attribute write alone leaves Blender's caches of the mesh (bounds,
+    normals, the BVH trees Shrinkwrap, Surface Deform and ray casts use) as they were; writing
+    one vertex through `MeshVertex.co` makes Blender tag the positions as changed, which
+    invalidates them and tells the dependency graph."""
+    mesh = result.data
+    mesh.attributes["position"].data.foreach_set("vector", positions.ravel())
+    if len(mesh.vertices):
+        v = mesh.vertices[0]
+        v.co = v.co
+    else:
+        mesh.update()

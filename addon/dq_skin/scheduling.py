@@ -30,7 +30,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from . import exports
-from .blender import nodes
+from .blender import node_group, nodes
 from .engine import saving
 from .session import SESSION
 
@@ -104,8 +104,8 @@ def on_depsgraph_update_post(scene, depsgraph):
 def _upgrade_node_groups() -> None:
     for group in bpy.data.node_groups:
         try:
-            if group.bl_idname == "GeometryNodeTree" and nodes.version_of(group) == nodes.VERSION:
-                nodes.upgrade(group)
+            if group.bl_idname == "GeometryNodeTree" and nodes.version_of(group) in nodes.UPGRADABLE:
+                node_group.upgrade(group)
         except (AttributeError, RuntimeError, TypeError) as e:  # never stop a file from loading
             print(f"DQ Skin: could not update node group {group.name!r}: {e}")
 
@@ -124,7 +124,7 @@ def on_undo(*_args):
 
 @persistent
 def on_save_pre(*_args):
-    _guarded(saving.deactivate_all, SESSION, True)
+    _guarded(saving.deactivate_all, SESSION)
 
 
 @persistent
@@ -170,5 +170,5 @@ def unregister():
             handlers.remove(fn)
     # Without the add-on, Blender's own deformation takes over (as in a saved file), and the
     # results are let go (never saved).
-    _guarded(saving.deactivate_all, SESSION, True)
+    _guarded(saving.deactivate_all, SESSION)
     SESSION.close()

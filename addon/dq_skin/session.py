@@ -6,7 +6,7 @@
 - `meshes`: what was read of each mesh (`blender.meshdata`);
 - `readers`: the readers of Blender's memory (`blender.memory`);
 - `scan`: what simulates on what (`blender.consumers`);
-- `route`: how positions reach Blender, with its feeds (`routes`);
+- `routes`: how positions reach Blender, with the feed (`routes`);
 - `centers`: the Optimized Centers computed and computing (`engine.centers`);
 - `exports`, `signals`, `errors`: exporters running, batch commands' signals, the last
   internal error (`model.runtime`).
@@ -23,11 +23,12 @@ from .blender.memory import Readers
 from .blender.meshdata import MeshCache
 from .engine.centers import Centers
 from .engine.context import mod_key
+from .engine.fed import skin_members
 from .engine.tracker import Tracker
 from .model.runtime import Errors, Exports, Signals
 from .model.state import States
 from .routes.feed import Feeds
-from .routes.result_route import ResultRoute
+from .routes.table import Routes
 
 
 class Session:
@@ -41,23 +42,28 @@ class Session:
         self.readers = Readers()
         self.scan = Scan()
         self.centers = Centers(interrupted=self.signals.requested)
-        self.route = ResultRoute(Feeds(busy=lambda: self.operator_running(), readers=self.readers))
-        self.tracker = Tracker(self)
         # Whether the main thread is inside a Python operator (set by the scheduling layer,
         # which reads the interpreter's stack; see `scheduling.inside_python_operator`).
         self.operator_running = lambda: False
+        self.routes = Routes(Feeds(busy=lambda: self.operator_running()))
+        self.routes.feeds.skin = skin_members(self)
+        self.tracker = Tracker(self)
 
     def reset(self) -> None:
-        """Forgets everything tied to the file's data-blocks."""
+        """Forgets everything tied to the file's data-blocks (the point-cache files go)."""
         self.tracker.reset()
+        for _key, st in self.states.items():
+            if st.output.pointcache is not None:
+                st.output.pointcache.close()
         self.states.clear()
-        self.route.feeds.prune()
+        self.routes.feeds.close()
         self.meshes.forget()
         self.scan.version = -1
 
     def close(self) -> None:
         """Releases what the session made, then forgets everything (the add-on is disabled)."""
-        self.route.feeds.close()
+        for _key, st in self.states.items():
+            self.routes.release_state(st)
         self.centers.close()
         self.reset()
 

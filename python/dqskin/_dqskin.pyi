@@ -254,6 +254,8 @@ class SkinJob:
     deform: F32Array
     premat: ArrayLike | None
     postmat: ArrayLike | None
+    out: F32Array
+    """Where the result is written: a writable, C-contiguous ``(V, 3)`` float32 array."""
     @property
     def method(self) -> Method: ...
     @property
@@ -268,8 +270,6 @@ class SkinJob:
     def blend_factor(self) -> float: ...
     @property
     def centers(self) -> F32Array | None: ...
-    @property
-    def out(self) -> F32Array: ...
 
 def skin_many(jobs: Sequence[SkinJob]) -> list[str | None]:
     """Runs the jobs at once, in parallel across meshes; returns None or the error message per

@@ -68,19 +68,20 @@ def empty_scene(dq_skin):
     yield
 
 
-def feed_every_size(dq_skin, monkeypatch) -> None:
-    """The feed takes meshes of every size on every rig (by default only where it is faster
-    than the frame handler, `decisions.feeds_faster`: Rigify-sized rigs), so that the small test
-    characters exercise it."""
-    monkeypatch.setattr(dq_skin.model.decisions, "FEED_VERTICES_PER_BONE", 1 << 40)
+def node_route_for_every_size(dq_skin, monkeypatch) -> None:
+    """Characters of every size take the result-object route where nothing needs a deform-only
+    modifier (by default only those above `decisions.CACHE_ROUTE_VERTICES` do), so that the small
+    test characters exercise it."""
+    monkeypatch.setattr(dq_skin.model.decisions, "CACHE_ROUTE_VERTICES", 0)
 
 
 @pytest.fixture(autouse=True)
-def _feed_for_fed_rigs(request, dq_skin, monkeypatch):
-    """Tests parametrized with `rig` "B-Bones fed" (`scenes.RIGS`) run with `feed_every_size`."""
+def _node_route_for_rigs(request, dq_skin, monkeypatch):
+    """Tests parametrized with `rig` "B-Bones, node route" (`scenes.RIGS`) run with
+    `node_route_for_every_size`."""
     callspec = getattr(request.node, "callspec", None)
-    if callspec is not None and callspec.params.get("rig") == "B-Bones fed":
-        feed_every_size(dq_skin, monkeypatch)
+    if callspec is not None and callspec.params.get("rig") == "B-Bones, node route":
+        node_route_for_every_size(dq_skin, monkeypatch)
     yield
 
 

@@ -104,7 +104,24 @@ def twin(obj, name: str | None = None, collection=None, share_mesh: bool = True)
         for k, v in settings.items():
             setattr(arm_mod, k, v)
         copy.modifiers.remove(copy.modifiers[dq_name])
+    drop_carriers(copy)
     return copy
+
+
+def is_carrier(mod) -> bool:
+    """A Mesh Cache modifier DQ Skin keeps before its modifier (its positions, see the add-on's
+    `routes.cache_route`): copies made here to hold Blender's own deformation drop it."""
+    return mod.type == "MESH_CACHE" and mod.filepath.replace("\\", "/").rpartition("/")[2].startswith("dqskin-")
+
+
+def stack(obj) -> list[str]:
+    """The types of `obj`'s modifiers as the artist arranged them (DQ Skin's carriers left out)."""
+    return [m.type for m in obj.modifiers if not is_carrier(m)]
+
+
+def drop_carriers(obj) -> None:
+    for m in [m for m in obj.modifiers if is_carrier(m)]:
+        obj.modifiers.remove(m)
 
 
 def plain_twin(obj, name: str | None = None):
@@ -224,15 +241,46 @@ def status(dq_skin, obj, mod=None):
     return dq_skin.SESSION.status_of(obj, mod or dq_skin_mods(obj)[0])
 
 
-def assert_fed(dq_skin, obj, fed: bool = True) -> None:
-    """Every DQ Skin of `obj` is (`fed`) or is not skinned by the feed, inside Blender's first
-    evaluation (B-Bone and envelope characters), after one frame change."""
-    bpy.context.scene.frame_set(bpy.context.scene.frame_current)
+def route_of(dq_skin, obj, mod=None) -> str:
+    """How the modifier's positions reach Blender: "cache" (a Mesh Cache carrier, fed inside
+    Blender's first evaluation), "node" (a result object, fed likewise), "result" (written after
+    the first evaluation) or "" (nothing published)."""
+    route = dq_skin.SESSION.state_of(obj, mod or dq_skin_mods(obj)[0]).output.route
+    return route.value if route is not None else ""
+
+
+def output_of(obj, mod):
+    """Where a modifier's positions go: the file its carrier reads, or the result object its
+    node group outputs (each modifier must have its own)."""
+    mods = list(obj.modifiers)
+    before = mods[: mods.index(mod)]
+    while before and before[-1].type == "SOFT_BODY":
+        before.pop()
+    if before and is_carrier(before[-1]):
+        return ("carrier", before[-1].filepath)
+    result = get_input(mod, "Result")
+    return ("result", result.session_uid if result is not None else None)
+
+
+def fed_runs(dq_skin, obj, mod=None) -> int:
+    """Frames the feed skinned this modifier inside Blender's evaluation."""
+    key = dq_skin.engine.context.mod_key(obj, mod or dq_skin_mods(obj)[0])
+    return dq_skin.SESSION.routes.feeds.runs(key)
+
+
+def assert_fed(dq_skin, obj, route: str | None = None) -> None:
+    """Every DQ Skin of `obj` is skinned inside Blender's first evaluation at a frame change
+    (on `route` if given: "cache" or "node")."""
+    scene = bpy.context.scene
+    scene.frame_set(scene.frame_current)
+    before = {m.name: fed_runs(dq_skin, obj, m) for m in dq_skin_mods(obj)}
+    scene.frame_set(scene.frame_current + 1)
+    scene.frame_set(scene.frame_current - 1)
     for mod in dq_skin_mods(obj):
-        result = dq_skin.SESSION.state_of(obj, mod).output.result
         st = status(dq_skin, obj, mod)
         assert st.live, f"{obj.name}: {st.message}"
-        assert (dq_skin.SESSION.route.feeds.fed(result) is not None) == fed, f"{obj.name}: {'not ' if fed else ''}fed"
+        assert route_of(dq_skin, obj, mod) in ((route,) if route else ("cache", "node")), f"{obj.name}: {route_of(dq_skin, obj, mod)!r}"
+        assert fed_runs(dq_skin, obj, mod) >= before[mod.name] + 1, f"{obj.name}: not skinned by the feed"
 
 
 class _Recorder:
@@ -287,6 +335,7 @@ def reference_copy(obj, preserve_volume: bool):
     for m in list(copy.modifiers):
         if m.type == "NODES":
             copy.modifiers.remove(m)
+    drop_carriers(copy)
     arm_mod = next(m for m in copy.modifiers if m.type == "ARMATURE")
     for name in ("use_vertex_groups", "use_bone_envelopes", "vertex_group", "invert_vertex_group"):
         if name in original:

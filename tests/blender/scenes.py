@@ -106,20 +106,20 @@ def rig_tube(rings=24, segments=16, length=4.0, radius=0.4, bones=2, rig="vertex
     return mesh_obj, arm, mod
 
 
-# The ways DQ Skin evaluates a rig: vertex groups only (skinned by the frame handler, a crowd in
-# one batched call); B-Bones on a small rig (the frame handler too: the feed is not worth it
-# there, `modifier.feeds_faster`); and B-Bones fed (skinned by the feed inside Blender's first
-# evaluation, as Rigify characters are; conftest lets the feed take these small test meshes).
-# Tests of what artists do run on all three.
-RIGS = ["vertex groups", "B-Bones", "B-Bones fed"]
+# The rigs and routes DQ Skin is tested on: vertex groups only and B-Bones (skinned by the feed
+# inside Blender's first evaluation, into a Mesh Cache carrier: the route of characters up to
+# `decisions.CACHE_ROUTE_VERTICES`), and B-Bones on the result-object route (that of larger
+# meshes; conftest makes these small test meshes take it). Tests of what artists do run on all
+# three.
+RIGS = ["vertex groups", "B-Bones", "B-Bones, node route"]
 
 
 def make_rig(arm, rig: str, segments: int = 4) -> None:
-    """For "B-Bones" and "B-Bones fed": every deforming bone a B-Bone with `segments` segments,
+    """For "B-Bones" and "B-Bones, node route": every deforming bone a B-Bone with `segments` segments,
     eased and with a slightly curved rest shape (as Rigify's deforming bones are)."""
     if rig == "vertex groups":
         return
-    assert rig in ("B-Bones", "B-Bones fed"), rig
+    assert rig in ("B-Bones", "B-Bones, node route"), rig
     for b in arm.data.bones:
         if b.use_deform:
             b.bbone_segments = segments

@@ -1,10 +1,10 @@
-"""Characters with B-Bones or envelopes are skinned inside Blender's first evaluation (`feed`):
-the frame handler then writes nothing and Blender does not evaluate the scene a second time.
-Checked here: that it happens (the handler's writes and the driver's runs are counted), that
-every frame still equals the Armature modifier's on its own object, including frames where
-more than the pose changed (the handler's full evaluation must catch what the driver cannot
-know), renders of another frame than the viewport's, save and reload, removal, and a deleted
-cache file.
+"""Every character is skinned inside Blender's first evaluation (the feed, `routes.feed`), on
+both routes (a Mesh Cache carrier on the character; a result object): the frame handler then
+publishes nothing and Blender does not evaluate the scene a second time. Checked here: that it
+happens (the handler's publishing and the driver's runs are counted), that every frame still
+equals the Armature modifier's on its own object, including frames where more than the pose
+changed (the handler's full evaluation must catch what the driver cannot know), renders of
+another frame than the viewport's, save and reload, removal, and a deleted cache file.
 
 Bar: max vertex distance ≤ 1e-5 × the mesh's bounding-box diagonal (`dqtest.REL_TOL`).
 """
@@ -14,17 +14,36 @@ from __future__ import annotations
 import os
 
 import pytest
-from conftest import feed_every_size
-from dqtest import add_dq_skin, animate, assert_same, dq_skin_mods, get_input, reference_copy, select_only, status
+from conftest import node_route_for_every_size
+from dqtest import (
+    add_dq_skin,
+    animate,
+    assert_same,
+    deviation,
+    dq_skin_mods,
+    evaluated_positions,
+    fed_runs,
+    is_carrier,
+    reference_copy,
+    route_of,
+    select_only,
+    status,
+)
 from test_pose_memory import bbone_rig
 from test_render import SAME_IMAGE, changed, render_frame, setup_scene
 
 import bpy
 
+ROUTES = ["cache", "node"]
 
-@pytest.fixture(autouse=True)
-def _feed_these_small_characters(dq_skin, monkeypatch):
-    feed_every_size(dq_skin, monkeypatch)
+
+@pytest.fixture(params=ROUTES)
+def route(request, dq_skin, monkeypatch) -> str:
+    """The route the characters of a test take (the small test characters take the Mesh Cache
+    carrier unless told otherwise)."""
+    if request.param == "node":
+        node_route_for_every_size(dq_skin, monkeypatch)
+    return request.param
 
 
 def fed_character(dq_skin, method: str):
@@ -39,40 +58,63 @@ def fed_character(dq_skin, method: str):
     return obj, arm, reference
 
 
-def result_of(dq_skin, obj):
-    mod = dq_skin_mods(obj)[0]
-    return dq_skin.SESSION.state_of(obj, mod).output.result
-
-
-class Writes:
-    """Counts what DQ Skin's handlers write into results."""
+class Publishes:
+    """Counts what DQ Skin's handlers publish outside Blender's evaluation."""
 
     def __init__(self, dq_skin, monkeypatch):
         self.count = 0
-        original = dq_skin.routes.results.write_positions
+        routes = dq_skin.SESSION.routes
+        original = routes.publish
 
-        def counted(result, positions):
+        def counted(*args, **kwargs):
             self.count += 1
-            original(result, positions)
+            original(*args, **kwargs)
 
-        monkeypatch.setattr(dq_skin.routes.results, "write_positions", counted)
+        monkeypatch.setattr(routes, "publish", counted)
 
 
 @pytest.mark.parametrize("method", ["LINEAR", "DUAL_QUATERNION"])
-def test_b_bone_frames_are_skinned_in_the_first_evaluation(dq_skin, monkeypatch, method):
+def test_b_bone_frames_are_skinned_in_the_first_evaluation(dq_skin, monkeypatch, method, route):
     obj, arm, reference = fed_character(dq_skin, method)
-    result = result_of(dq_skin, obj)
-    assert dq_skin.SESSION.route.feeds.fed(result) is not None, status(dq_skin, obj).message
-    writes = Writes(dq_skin, monkeypatch)
-    runs = dq_skin.SESSION.route.feeds.runs(result)
+    assert route_of(dq_skin, obj) == route, status(dq_skin, obj).message
+    published = Publishes(dq_skin, monkeypatch)
+    runs = fed_runs(dq_skin, obj)
     for k, f in enumerate((5, 9, 14, 18), start=1):
         bpy.context.scene.frame_set(f)
         assert_same(obj, reference, f"frame {f}")
-        assert dq_skin.SESSION.route.feeds.runs(result) == runs + k, "the driver skins once per frame"
-    assert writes.count == 0, "the frame handler wrote a result the driver had made"
+        assert fed_runs(dq_skin, obj) == runs + k, "the driver skins once per frame"
+    assert published.count == 0, "the frame handler published a frame the driver had made"
 
 
-def test_what_the_pose_alone_does_not_say_is_caught(dq_skin):
+@pytest.mark.parametrize("method", ["LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS_OF_ROTATION"])
+def test_vertex_group_characters_are_fed_too(dq_skin, monkeypatch, method, route):
+    """Vertex groups alone, every method: fed, and equal to what DQ Skin computes outside the
+    evaluation (Linear and Dual Quaternion: to Blender's Armature modifier too)."""
+    from dqtest import animated_tube
+
+    obj, arm, _ = animated_tube()
+    reference = reference_copy(obj, method != "LINEAR")
+    add_dq_skin(obj, method)
+    bpy.context.scene.frame_set(3)
+    assert route_of(dq_skin, obj) == route
+    published = Publishes(dq_skin, monkeypatch)
+    runs = fed_runs(dq_skin, obj)
+    mod = dq_skin_mods(obj)[0]
+    for k, f in enumerate((5, 9, 14), start=1):
+        bpy.context.scene.frame_set(f)
+        assert fed_runs(dq_skin, obj) == runs + k
+        if method in ("LINEAR", "DUAL_QUATERNION"):
+            assert_same(obj, reference, f"frame {f}")
+        fed = evaluated_positions(obj)
+        # The full evaluation of the same frame (forced) publishes the same positions.
+        tracker = dq_skin.SESSION.tracker
+        tracker.evaluate(tracker.record_of(obj), bpy.context.evaluated_depsgraph_get(), force=True)
+        assert deviation(evaluated_positions(obj), fed) <= 1e-6, (f, method)
+        assert dq_skin.SESSION.status_of(obj, mod).live
+    assert published.count == 3  # (the forced ones)
+
+
+def test_what_the_pose_alone_does_not_say_is_caught(dq_skin, route):
     """The driver only knows the pose: a changed method, a moved object, an edited bone and a
     changed setting, each made by a script right before the frame change, must still show."""
     obj, arm, reference = fed_character(dq_skin, "LINEAR")
@@ -102,12 +144,12 @@ def test_what_the_pose_alone_does_not_say_is_caught(dq_skin):
     assert_same(obj, reference, "with envelopes on")
     scene.frame_set(17)
     assert_same(obj, reference, "the next frame")
-    assert dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)) is not None
+    assert route_of(dq_skin, obj) == route
 
 
-def test_what_the_object_alone_says_is_caught(dq_skin):
+def test_what_the_object_alone_says_is_caught(dq_skin, route):
     """The frame handler takes the driver's frame without the full evaluation when the driver
-    skinned it (`modifier.fed_frame_stands`): each edit of the object a script makes right
+    skinned it (`playback.fed_frame_stands`): each edit of the object a script makes right
     before a frame change (weights, a renamed group, a modifier before DQ Skin, the companion
     switched on, DQ Skin switched off in the viewport) must still show."""
     obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
@@ -125,7 +167,7 @@ def test_what_the_object_alone_says_is_caught(dq_skin):
         o.vertex_groups["Renamed"].name = "Bone1"
     scene.frame_set(9)
     assert_same(obj, reference, "after it was named back")
-    assert dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)) is not None
+    assert route_of(dq_skin, obj) == route
     for o in (obj, reference):
         d = o.modifiers.new("Displace", "DISPLACE")
         d.strength = 0.2
@@ -158,7 +200,7 @@ def test_what_the_object_alone_says_is_caught(dq_skin):
     assert_same(obj, reference, "with DQ Skin off in the viewport")
 
 
-def test_an_edit_without_a_frame_change_shows(dq_skin):
+def test_an_edit_without_a_frame_change_shows(dq_skin, route):
     """Posing in the interface: a bone rotated, then the view layer updated."""
     obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
     arm.pose.bones["Bone2"].rotation_quaternion = (0.8, 0.2, 0.5, 0.1)
@@ -166,11 +208,11 @@ def test_an_edit_without_a_frame_change_shows(dq_skin):
     assert_same(obj, reference, "after posing")
 
 
-def test_a_render_of_another_frame_shows_that_frame(dq_skin, tmp_path):
+def test_a_render_of_another_frame_shows_that_frame(dq_skin, tmp_path, route):
     obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
     scene = setup_scene()
     scene.camera.location = (0.0, -9.0, 2.0)
-    assert dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)) is not None
+    assert route_of(dq_skin, obj) == route
 
     def show(which):
         obj.hide_render = which is not obj
@@ -185,51 +227,40 @@ def test_a_render_of_another_frame_shows_that_frame(dq_skin, tmp_path):
     assert changed(ours, theirs) < SAME_IMAGE, changed(ours, theirs)
 
 
-def test_files_hold_nothing_of_it_and_removing_dq_skin_removes_it(dq_skin, tmp_path):
+def test_files_hold_nothing_of_it_and_removing_dq_skin_removes_it(dq_skin, tmp_path, route):
     obj, arm, reference = fed_character(dq_skin, "LINEAR")
-    path = dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)).path
-    assert os.path.exists(path)
     blend = tmp_path / "fed.blend"
     names = obj.name, reference.name
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert any(is_carrier(m) for m in obj.modifiers) == (route == "cache"), "the carrier is back after the save"
+    assert_same(obj, reference, "right after the save")
     bpy.ops.wm.open_mainfile(filepath=str(blend))
-    assert not [
-        o.name for o in bpy.data.objects if any(m.type == "MESH_CACHE" for m in o.modifiers) and not dq_skin.routes.results.is_result(o)
-    ]
+    assert not [o.name for o in bpy.data.objects if any(is_carrier(m) for m in o.modifiers)], "a carrier was saved"
+    assert not [o.name for o in bpy.data.objects if o.animation_data and o.animation_data.drivers], "a driver was saved"
     obj, reference = (bpy.data.objects[n] for n in names)
     for f in (4, 7, 11):
         bpy.context.scene.frame_set(f)
         assert_same(obj, reference, f"reopened, frame {f}")
-    result = result_of(dq_skin, obj)
-    feed = dq_skin.SESSION.route.feeds.fed(result)
-    assert feed is not None
-    path = feed.path
+    assert route_of(dq_skin, obj) == route
+    st = dq_skin.SESSION.state_of(obj, dq_skin_mods(obj)[0])
+    path = st.output.pointcache.path if route == "cache" else None
     select_only(obj)
     bpy.context.view_layer.objects.active = obj
     with bpy.context.temp_override(object=obj, active_object=obj):
         assert bpy.ops.object.dq_skin_remove() == {"FINISHED"}
-    assert not os.path.exists(path), "the cache file outlived its modifier"
-    assert not dq_skin_mods(obj)
+    assert path is None or not os.path.exists(path), "the cache file outlived its modifier"
+    assert not dq_skin_mods(obj) and not any(is_carrier(m) for m in obj.modifiers)
+    assert obj.animation_data is None or not obj.animation_data.drivers
     bpy.context.scene.frame_set(13)
     assert_same(obj, reference, "after DQ Skin was removed")
 
 
 def test_a_deleted_cache_file_is_made_again(dq_skin):
     obj, arm, reference = fed_character(dq_skin, "LINEAR")
-    feed = dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj))
-    os.unlink(feed.path)
+    st = dq_skin.SESSION.state_of(obj, dq_skin_mods(obj)[0])
+    path = st.output.pointcache.path
+    os.unlink(path)
     for f in (6, 10):
         bpy.context.scene.frame_set(f)
         assert_same(obj, reference, f"frame {f} after the file was deleted")
-    assert os.path.exists(feed.path)
-
-
-def test_vertex_group_characters_are_not_fed(dq_skin):
-    """Vertex groups alone keep the handler's batched path (one kernel call for a crowd)."""
-    from dqtest import animated_tube
-
-    obj, arm, _ = animated_tube()
-    add_dq_skin(obj, "LINEAR")
-    bpy.context.scene.frame_set(3)
-    assert dq_skin.SESSION.route.feeds.fed(result_of(dq_skin, obj)) is None
-    assert get_input(dq_skin_mods(obj)[0], "Result") is not None
+    assert os.path.exists(path)

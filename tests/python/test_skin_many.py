@@ -89,6 +89,10 @@ def test_the_per_frame_inputs_can_be_replaced_on_a_kept_job():
         ("deform", np.full((2, 4, 4), np.nan, F), ValueError, ["deform", "NaN"]),
         ("premat", np.zeros((3, 3), F), ValueError, ["premat", "(4, 4)"]),
         ("postmat", "eye", TypeError, ["postmat"]),
+        ("out", np.zeros((7, 3), F), ValueError, ["out", "(10, 3)"]),
+        ("out", np.zeros((10, 3)), TypeError, ["out", "float32"]),
+        ("out", np.zeros((10, 3), F)[::-1], ValueError, ["out", "contiguous"]),
+        ("out", None, TypeError, ["out"]),
     ],
 )
 def test_a_refused_replacement_names_the_argument_and_leaves_the_job(attribute, value, error, words):
@@ -107,9 +111,31 @@ def test_only_the_per_frame_inputs_are_settable():
     rng = np.random.default_rng(3)
     p, inf, d, r = mesh(rng, 10, 2)
     job = dqskin.SkinJob(p, inf, d, r)
-    for name in ("influences", "rest", "method", "mask", "blend", "blend_factor", "centers", "out"):
+    for name in ("influences", "rest", "method", "mask", "blend", "blend_factor", "centers"):
         with pytest.raises(AttributeError):
             setattr(job, name, getattr(job, name))
+
+
+def test_out_can_be_replaced_by_a_view_of_other_memory():
+    """A job writes into whatever `out` names when it runs: a view of memory it does not own
+    (the extension points it at Blender's own position array), then its own array again."""
+    rng = np.random.default_rng(4)
+    p, inf, d, r = mesh(rng, 50, 3)
+    job = dqskin.SkinJob(p, inf, d, r, method="linear")
+    own = job.out
+    backing = np.zeros(50 * 3 + 8, F)
+    view = backing[4:-4].reshape(50, 3)  # C-contiguous, inside a larger allocation
+    job.out = view
+    assert dqskin.skin_many([job]) == [None]
+    np.testing.assert_array_equal(view, dqskin.skin(p, inf, d, r, method="linear"))
+    assert not backing[:4].any() and not backing[-4:].any()
+    assert not own.any()
+    job.out = own
+    assert dqskin.skin_many([job]) == [None]
+    np.testing.assert_array_equal(own, view)
+    with pytest.raises(ValueError, match="out"):
+        job.out = p  # writing over an input is refused when it runs, or here
+        dqskin.skin_many([job])
 
 
 def test_a_failing_job_reports_its_error_and_leaves_its_out_alone():

@@ -1,31 +1,20 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""What reads a DQ Skin object's deformed mesh in a way DQ Skin cannot serve, and why: the
-reasons DQ Skin hands an object over to Blender's own Armature modifier (its companion).
-
-DQ Skin writes its result after Blender's first evaluation of a frame (in `frame_change_post`),
-and Blender evaluates again what it changed. Everything that reads the mesh again in that second
-evaluation sees DQ Skin's result: later modifiers, Shrinkwrap, Surface Deform, Data Transfer and
-Geometry Nodes of other objects, hair curves on the surface, constraints, exporters that read
-the evaluated mesh, ray casts, snapping, renders and bakes. What steps and caches in the first
-evaluation does not read it again, and what maps edits through the deformation (crazyspace)
-only maps through deform-only modifiers, which a Geometry Nodes modifier is not:
+"""What reads a DQ Skin object's deformed mesh in a way only a deform-only modifier serves:
+the simulations on or around it and the modes whose brushes map through the deformation
+(`decisions.route_for` then takes the Mesh Cache carrier), and what finds its vertices by index.
 
 - simulations that use the mesh (Cloth, Soft Body, Collision, Dynamic Paint, particles, Fluid,
   force fields shaped by the surface, deforming rigid bodies), on this object or on another
-  object that reads this one's geometry;
-- brushes and edit mode on the object (Edit Mode, Sculpt, Weight, Vertex and Texture Paint,
-  Particle Edit), which map strokes through the deformation;
-- exporters that skin from the Armature modifier (FBX, glTF with Apply Modifiers; see
-  `exports`).
-
-For those DQ Skin hands over: the node group passes the mesh through and the companion deforms
-it exactly as DQ Skin would for Linear and Dual Quaternion (for Blend and Optimized Centers with
-Preserve Volume, and the panel says so). `reasons` gives the reason for each kind of evaluation.
+  object that reads this one's geometry: they step in Blender's first evaluation, where the
+  carrier has DQ Skin's positions, and Soft Body simulates only what deform-only modifiers
+  before it make;
+- brushes and Edit Mode on the object (Edit Mode, Sculpt, Weight, Vertex and Texture Paint,
+  Particle Edit), which map strokes through deform-only modifiers (crazyspace);
+- vertex parents and hair curves on the surface, which find the object's vertices by index.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from types import MappingProxyType
 
 import bpy
@@ -53,17 +42,6 @@ MODES = MappingProxyType(
         "PARTICLE_EDIT": "Particle Edit",
     }
 )
-
-
-@dataclass(frozen=True)
-class Reasons:
-    """Why DQ Skin hands over, per kind of evaluation ("" where it deforms)."""
-
-    viewport: str = ""
-    render: str = ""
-
-    def for_render(self, render: bool) -> str:
-        return self.render if render else self.viewport
 
 
 def _simulates(tree, known: dict) -> bool:
@@ -187,12 +165,25 @@ def index_readers(scan: Scan, obj) -> list[str]:
     return scan.by_index.get(obj.session_uid, [])
 
 
+def soft_body_before(obj, mod) -> bool:
+    """Whether a Soft Body comes right before DQ Skin (where Blender puts one added to an object
+    whose stack has modifiers that are not deform-only): it simulates what deform-only
+    modifiers before it make, so DQ Skin's positions must come from one."""
+    mods = list(obj.modifiers)
+    at = mods.index(mod)
+    while at > 0 and mods[at - 1].type in ("SOFT_BODY", "MESH_CACHE"):
+        at -= 1
+        if mods[at].type == "SOFT_BODY" and (mods[at].show_viewport or mods[at].show_render):
+            return True
+    return False
+
+
 def _own_simulation(obj, mod) -> str:
     """A simulation in the object's own stack after DQ Skin, or one the object takes part in."""
-    mods = obj.modifiers
-    for later in list(mods)[mods.find(mod.name) + 1 :]:
-        label = simulation_label(later)
-        if label and (later.show_viewport or later.show_render):
+    mods = list(obj.modifiers)
+    for other in mods[mods.index(mod) + 1 :]:
+        label = simulation_label(other)
+        if label and (other.show_viewport or other.show_render):
             return label
     rb = obj.rigid_body
     if rb is not None and (rb.use_deform or rb.collision_shape in ("MESH", "CONVEX_HULL")):
@@ -213,30 +204,6 @@ def simulation_reason(scan: Scan, obj, mod) -> str:
     return ""
 
 
-def notes(obj, mod) -> list[str]:
-    """What the panel points out about the stack while DQ Skin deforms."""
-    out = []
-    mods = obj.modifiers
-    for earlier in list(mods)[: mods.find(mod.name)]:
-        if earlier.type == "SOFT_BODY" and (earlier.show_viewport or earlier.show_render):
-            out.append(
-                f"'{earlier.name}' simulates the undeformed mesh before DQ Skin (Blender keeps Soft Body "
-                "before modifiers that are not deform-only); for a soft body on the skinned mesh, bake DQ "
-                "Skin to a cache: the cache comes first and the Soft Body follows it"
-            )
-    return out
-
-
 def mode_reason(obj) -> str:
     label = MODES.get(obj.mode)
-    return f"{label}: brushes and edits map through Blender's deformation" if label else ""
-
-
-def reasons(scan: Scan, obj, mod, armature, exporting: str) -> Reasons:
-    """Why DQ Skin hands `obj` over, in the viewport and in renders."""
-    common = exporting
-    if not common and armature is not None and armature.type == "ARMATURE" and armature.mode == "EDIT":
-        common = "The armature is in Edit Mode: Blender shows the rest pose"
-    if not common:
-        common = simulation_reason(scan, obj, mod)
-    return Reasons(viewport=common or mode_reason(obj), render=common)
+    return f"{label}: brushes and edits map through Blender's deformation (the same)" if label else ""

@@ -12,7 +12,7 @@ from ..blender.meshdata import MeshData
 from ..blender.pose import PoseReads
 from ..model.keys import FrameKey, ModKey
 from ..model.methods import Settings
-from ..model.state import ModifierState, ResultMode
+from ..model.state import ModifierState, ResultMode, RouteKind
 
 
 class SkinError(Exception):
@@ -58,16 +58,15 @@ class Context:
 class Plan:
     """One skinning to run: the kernel's job and where its result goes."""
 
-    obj: object
-    mod: object
-    st: ModifierState
+    target: object  # routes.base.Target
     s: Settings
-    result: object
-    kind: ResultMode
+    kind: ResultMode  # what a result route's node group outputs
+    route: RouteKind
     key: FrameKey
     job: object  # dqskin.SkinJob
     deforms: tuple  # (viewport, render): where DQ Skin deforms (the companion is off there)
     start: float = field(default_factory=time.perf_counter)
-    quick: bool = False  # steady playback: only the positions change
     render: bool = False  # a render's evaluation (only the render side of the companion changes)
-    data: MeshData | None = None  # the mesh's data as the full path read it (every full-path plan has it)
+    data: MeshData | None = None  # the mesh's data as the full path read it
+    previous: ModifierState | None = None  # the DQ Skin before it, whose output reaches it (a chain)
+    scene: object = None  # the scene whose feed it joins

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Evaluating the DQ Skin modifiers of one object, in stack order: what reaches each (`inputs`),
 whether DQ Skin deforms (or Blender's own deformation does, for a reason: `decisions`), the
-binding and the kernel's job (`binding`), skinning, and publishing the result through the route
+binding and the kernel's job (`binding`), skinning, and publishing the result through a route
 (`routes`). This module is the only writer of results and of the panel's status.
 
 Where DQ Skin does not deform (switched off, handed over, an error), the node group passes the
@@ -21,10 +21,12 @@ from ..blender import consumers, nodes, pose, rig, settings
 from ..model import decisions
 from ..model.keys import FrameKey, PoseKey, Source
 from ..model.methods import Settings
-from ..model.state import Mode, ModifierState
+from ..model.state import Mode, ModifierState, RouteKind
+from ..routes import pointcache
 from ..routes.base import Target
+from ..routes.feed import Member
 from ..routes.result_route import MeshSource
-from . import binding, companions, inputs, playback
+from . import binding, companions, inputs
 from .context import Context, Plan, SkinError, dq_skin_modifiers, mod_key
 
 
@@ -40,7 +42,8 @@ def evaluate_object(obj, ctx: Context, force: bool = False) -> bool:
     for mod in obj.modifiers:
         enabled = mod.show_render if ctx.render else mod.show_viewport
         if not nodes.is_dq_skin(mod):
-            reaching = decisions.next_source(reaching, False, enabled, False)
+            if not _ours(obj, mod):
+                reaching = decisions.next_source(reaching, False, enabled, False)
             continue
         st = ctx.state(obj, mod)
         if nodes.version_of(mod.node_group) != nodes.VERSION:
@@ -51,6 +54,18 @@ def evaluate_object(obj, ctx: Context, force: bool = False) -> bool:
         reaching = decisions.next_source(reaching, True, enabled, st.status.live)
         previous = st
     return wrote
+
+
+def _ours(obj, mod) -> bool:
+    """Whether `mod` carries DQ Skin's positions (a carrier, or a Soft Body right before a DQ Skin,
+    which simulates them), not something reaching DQ Skin."""
+    if mod.type == "MESH_CACHE":
+        return pointcache.is_ours(mod.filepath)
+    if mod.type != "SOFT_BODY":
+        return False
+    mods = list(obj.modifiers)
+    following = next((m for m in mods[mods.index(mod) + 1 :] if m.type != "SOFT_BODY"), None)
+    return following is not None and nodes.is_dq_skin(following)
 
 
 def report(st: ModifierState, mode: Mode, message: str = "") -> None:
@@ -66,25 +81,22 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: Sourc
         report(st, Mode.LINKED, f"Linked from {lib}: Blender's Armature modifier deforms it (make a Library Override to use DQ Skin)")
         return False
     s = None
+    target = Target(obj, mod, st, mod_key(obj, mod))
     try:
-        if batchable and not force:
-            plan = playback.quick_plan(obj, mod, st, ctx)
-            if plan is None:
-                return False
-            if plan is not False:
-                ctx.batch.append(plan)
-                return True
         s = st.settings.value if st.settings.value is not None and obj.session_uid in ctx.unchanged else settings.cached(mod, st.settings)
         exporting = ctx.session.exports.active()
         companions.follow_the_user(obj, mod, st, bool(exporting))
-        deforms, reason = _where_it_deforms(obj, mod, st, s, ctx, exporting)
+        deforms, reason = _where_it_deforms(obj, mod, s, ctx, exporting)
+        st.decided_structure = ctx.structure
         if not (mod.show_render if ctx.render else mod.show_viewport):
             where = "renders" if ctx.render else "the viewport"
             message = f"Off in {where}: Blender's Armature modifier deforms the mesh there"
-            return _step_aside(ctx, obj, mod, st, s, deforms, Mode.OFF, message)
+            return _step_aside(ctx, target, s, deforms, Mode.OFF, message)
         if reason:
-            return _step_aside(ctx, obj, mod, st, s, deforms, Mode.HANDED_OVER, reason + decisions.instead(s.method))
-        plan = _prepare(obj, obj_eval, mod, st, s, ctx, source, previous, force, deforms, start)
+            return _step_aside(ctx, target, s, deforms, Mode.HANDED_OVER, reason)
+        if obj.mode == "EDIT" or obj.data.is_editmode:
+            return _in_edit_mode(ctx, target, s, deforms)
+        plan = _prepare(obj, obj_eval, target, s, ctx, source, previous, force, deforms, start)
         if plan is None:
             if st.companion.deforms != deforms:  # e.g. only the render toggle changed
                 companions.settle(obj, mod, st, s, deforms, render=ctx.render)
@@ -103,23 +115,41 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: Sourc
         return fallback(ctx.session, obj, mod, st, s, f"{type(e).__name__}: {e}", ctx.render)
 
 
-def _where_it_deforms(obj, mod, st: ModifierState, s: Settings, ctx: Context, exporting: str) -> tuple[tuple[bool, bool], str]:
+def _where_it_deforms(obj, mod, s: Settings, ctx: Context, exporting: str) -> tuple[tuple[bool, bool], str]:
     """Where DQ Skin would deform ((viewport, render), as far as this evaluation can tell), and
     why it hands over in this evaluation ("" if it does not)."""
-    scan = ctx.session.scan.ensure(ctx.structure)
     arm = s.armature
     in_edit = arm is not None and arm.type == "ARMATURE" and arm.mode == "EDIT"
-    simulation = consumers.simulation_reason(scan, obj, mod) if not exporting and not in_edit else ""
-    reasons = decisions.hand_over(exporting, in_edit, simulation, consumers.mode_reason(obj))
-    st.decided_structure = ctx.structure
+    blender_method = s.blender_method
+    simulation = consumers.simulation_reason(ctx.session.scan.ensure(ctx.structure), obj, mod) if blender_method else ""
+    mode = consumers.mode_reason(obj) if blender_method else ""
+    reasons = decisions.hand_over(exporting, in_edit, simulation, mode, blender_method)
     return decisions.deforms_where(mod.show_viewport, mod.show_render, reasons), reasons.for_render(ctx.render)
 
 
-def _step_aside(ctx: Context, obj, mod, st: ModifierState, s, deforms, mode: Mode, message: str) -> bool:
+def _in_edit_mode(ctx: Context, target: Target, s: Settings, deforms) -> bool:
+    """The mesh is in Edit Mode with one of DQ Skin's own methods: what Object Mode showed last
+    stays, through the deform-only carrier (as a baked cache would show it; edits show when
+    leaving Edit Mode)."""
+    st = target.st
+    out = st.output
+    if not st.status.live or out.buffer is None or len(out.buffer) != len(target.obj.data.vertices):
+        raise SkinError("The mesh is in Edit Mode (DQ Skin deforms it again in Object Mode)")
+    if out.route is not RouteKind.CACHE:
+        ctx.session.routes.publish(
+            target, RouteKind.CACHE, out.buffer, out.kind, None, deforms, _member(target, s, RouteKind.CACHE, None), _scene(target.obj, ctx)
+        )
+        out.written = None  # computed again in Object Mode
+    st.status.notes = ("Edit Mode: the pose of Object Mode shows; edits take effect in Object Mode",)
+    return False
+
+
+def _step_aside(ctx: Context, target: Target, s, deforms, mode: Mode, message: str) -> bool:
     """DQ Skin does not deform in this evaluation: the mesh passes through, the companion
     deforms (where the user has not switched it off)."""
+    obj, mod, st = target.obj, target.mod, target.st
     if obj.library is None:
-        ctx.session.route.pass_through(Target(obj, mod, st))
+        ctx.session.routes.pass_through(target)
         companions.settle(obj, mod, st, s, deforms, render=ctx.render)
     report(st, mode, message)
     if mode is Mode.OFF and not companions.companion_of(obj, mod, st):
@@ -131,7 +161,7 @@ def fallback(session, obj, mod, st: ModifierState, s, message: str, render: bool
     """DQ Skin cannot deform: the input passes through and the companion deforms as Blender
     does; the panel shows why."""
     try:
-        session.route.pass_through(Target(obj, mod, st))
+        session.routes.pass_through(Target(obj, mod, st, mod_key(obj, mod)))
         if s is None:
             try:
                 s = settings.read(mod)
@@ -150,17 +180,15 @@ def fallback(session, obj, mod, st: ModifierState, s, message: str, render: bool
     return False
 
 
-def _prepare(obj, obj_eval, mod, st: ModifierState, s: Settings, ctx: Context, source, previous, force, deforms, start) -> Plan | None:
+def _prepare(obj, obj_eval, target: Target, s: Settings, ctx: Context, source, previous, force, deforms, start) -> Plan | None:
     """Everything before the kernel: checks, what reaches the modifier, influences, this frame's
-    matrices; None when the result is already this."""
-    session = ctx.session
+    matrices, the route; None when what Blender shows already is this."""
+    session, mod, st = ctx.session, target.mod, target.st
     arm = s.armature
     if arm is None:
         raise SkinError("No armature object set")
     if arm.type != "ARMATURE":
         raise SkinError(f"'{arm.name}' is not an armature")
-    if obj.mode == "EDIT" or obj.data.is_editmode:
-        raise SkinError("The mesh is in Edit Mode")
     data = session.meshes.get(obj, session.readers.mesh)
     if data.vertex_count == 0:
         raise SkinError("The mesh has no vertices")
@@ -198,11 +226,22 @@ def _prepare(obj, obj_eval, mod, st: ModifierState, s: Settings, ctx: Context, s
     if out.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
         out.spaces = rig.spaces(obj_eval, arm_eval)
     premat, postmat = out.spaces
-    by_index = bool(consumers.index_readers(session.scan.ensure(ctx.structure), obj))
+    scan = session.scan.ensure(ctx.structure)
+    by_index = bool(consumers.index_readers(scan, obj))
     kind = decisions.result_kind(source, by_index)
-    result = session.route.prepare(Target(obj, mod, st))
-    key = FrameKey(s.key(), input_key, pose_key, premat.tobytes(), result.session_uid, (data.version, session.meshes.revision(obj.data)))
-    if decisions.already_written(key, out.written, st.status.live, session.route.mode_of(result), kind, force):
+    deform_only = decisions.needs_deform_only(
+        consumers.mode_reason(obj), consumers.simulation_reason(scan, obj, mod), by_index or consumers.soft_body_before(obj, mod)
+    )
+    route = decisions.route_for(source, deform_only, data.vertex_count)
+    if route is RouteKind.CACHE:
+        # (The carrier reads positions alone: what else of the mesh changed does not matter, and
+        # Blender says the mesh changed whenever the carrier is told to read its file again.)
+        result_uid, revision = 0, 0
+    else:
+        result_uid, revision = session.routes.result.prepare(target).session_uid, session.meshes.revision(obj.data)
+    key = FrameKey(s.key(), input_key, pose_key, premat.tobytes(), result_uid, (data.version, revision))
+    shown, wanted = (out.route, out.kind), decisions.shown_as(route, kind)
+    if decisions.already_written(key, out.written, st.status.live, shown, wanted, force):
         return None
     if out.buffer is None or len(out.buffer) != bound.vertex_count:
         out.buffer = np.empty((bound.vertex_count, 3), np.float32)
@@ -216,7 +255,9 @@ def _prepare(obj, obj_eval, mod, st: ModifierState, s: Settings, ctx: Context, s
         )
         deform, rest = bones.deform, bones.rest
     out.job = binding.job(st, s, positions, influences, deform, rest, premat, postmat)
-    return Plan(obj, mod, st, s, result, kind, key, out.job, deforms, start, render=ctx.render, data=data)
+    return Plan(
+        target, s, kind, route, key, out.job, deforms, start, render=ctx.render, data=data, previous=previous, scene=_scene(obj, ctx)
+    )
 
 
 def pose_matrices(ctx: Context, arm, arm_eval, bound: rig.Binding) -> np.ndarray:
@@ -229,37 +270,45 @@ def pose_matrices(ctx: Context, arm, arm_eval, bound: rig.Binding) -> np.ndarray
     return deform
 
 
+def _scene(obj, ctx: Context):
+    """The scene whose feed a character joins: its first (a character in two scenes is fed by
+    the first's batch in both)."""
+    scenes = obj.users_scene
+    return scenes[0] if scenes else ctx.depsgraph.scene
+
+
+def _member(target: Target, s: Settings, route: RouteKind, previous) -> Member:
+    bound = target.st.binding.binding
+    obj = target.obj
+    return Member(
+        target.key,
+        target,
+        route,
+        s.armature,
+        tuple(bound.bone_names),
+        obj.data.shape_keys,
+        list(obj.modifiers).index(target.mod),
+        previous,
+    )
+
+
 def finish(session, plan: Plan) -> None:
     """Publishes the result, then switches the companion off where DQ Skin deforms (in this
     order, so that no evaluation sees both or neither)."""
-    obj, mod, st, kind = plan.obj, plan.mod, plan.st, plan.kind
+    target, st = plan.target, plan.target.st
+    obj, mod = target.obj, target.mod
     out = st.output
     out.generation += 1
-    target = Target(obj, mod, st)
-    route = session.route
-    if plan.quick:
-        route.write(target, out.buffer, kind)
-        out.written = plan.key
-        st.status.seconds = time.perf_counter() - plan.start
-        return
     data = plan.data
     source = MeshSource(obj.data, data.version, session.meshes.revision(obj.data), data.counts)
-    out.result = plan.result
-    route.write(target, out.buffer, kind, source)
+    member = None if plan.route is RouteKind.RESULT else _member(target, plan.s, plan.route, plan.previous)
+    session.routes.publish(target, plan.route, out.buffer, plan.kind, source, plan.deforms, member, plan.scene)
     out.written = plan.key
-    bones = len(plan.s.armature.data.bones)
-    faster = decisions.feeds_faster(data.vertex_count, bones)
-    route.feed(
-        target,
-        decisions.feedable(
-            kind, st.needs_effective, st.status.source, data.keys is not None, plan.render, plan.key.pose.from_memory, faster
-        ),
-    )
     companions.settle(obj, mod, st, plan.s, plan.deforms, render=plan.render)
     bound = st.binding.binding
     status = st.status
     status.mode, status.message = Mode.LIVE, ""
-    status.notes = tuple(consumers.notes(obj, mod))
+    status.notes = ()
     status.method = plan.s.method.label
     status.bones = len(bound.bone_names)
     status.influences = len(bound.influences)
@@ -278,10 +327,8 @@ def run_batch(session, plans: list) -> None:
             finish(session, plan)
         except Exception as e:
             message = str(e) if isinstance(e, SkinError) else f"{type(e).__name__}: {e}"
-            # Steady playback plans carry no modifier (an object with one DQ Skin).
-            mod = plan.mod or next(iter(dq_skin_modifiers(plan.obj)), None)
-            if mod is not None:
-                fallback(session, plan.obj, mod, plan.st, plan.s, message, plan.render)
+            t = plan.target
+            fallback(session, t.obj, t.mod, t.st, plan.s, message, plan.render)
 
 
 def prepare_capture(session, obj) -> None:
@@ -295,10 +342,11 @@ def prepare_capture(session, obj) -> None:
     for mod in obj.modifiers:
         if nodes.is_dq_skin(mod):
             if others and nodes.version_of(mod.node_group) == nodes.VERSION:
-                st = session.states.get(mod_key(obj, mod))
+                key = mod_key(obj, mod)
+                st = session.states.get(key)
                 if st.capture_on is not True:
                     inputs.set_capture(mod, True)
-                    session.route.pass_through(Target(obj, mod, st))  # a replacing result would hide what the group stores
+                    session.routes.pass_through(Target(obj, mod, st, key))  # a replacing result would hide what the group stores
                     st.capture_on = True
-        elif mod.show_viewport or mod.show_render:
+        elif (mod.show_viewport or mod.show_render) and not _ours(obj, mod):
             others = True

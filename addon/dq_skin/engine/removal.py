@@ -7,10 +7,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
-from ..blender import companion, compat, nodes
+from ..blender import companion, compat, node_group, nodes
 from ..model.keys import ModKey
+from ..model.state import RouteKind
+from ..routes import cache_route
+from ..routes.base import Target
 from . import inputs
 
 
@@ -42,12 +43,27 @@ def forget_modifier(session, obj, uid: str, info: ModInfo, applied: bool) -> Non
             companion.restore(c, info.companion.get("original", {}))
     if not applied and info.companion.get("parent_type") and obj.parent is not None:
         obj.parent_type = info.companion["parent_type"]
-    attr = obj.data.attributes.get(info.capture)
-    if attr is not None:
-        obj.data.attributes.remove(attr)
+    for name in (info.capture, node_group.OUTPUT_MARK):
+        attr = obj.data.attributes.get(name)
+        if attr is not None:
+            obj.data.attributes.remove(attr)
+    if applied and st is not None and st.output.route is RouteKind.CACHE:
+        _keep_carried(obj, st)
     if st is not None:
-        session.route.release_result(st.output.result)
-    session.route.remove_unused()
+        session.routes.release(Target(obj, None, st, ModKey(obj.session_uid, uid)))
+    cache_route.remove_orphans(obj)
+    session.routes.remove_unused()
+
+
+def _keep_carried(obj, st) -> None:
+    """Applying a DQ Skin whose positions a carrier held (its node group passes the mesh through,
+    so Blender's Apply changed nothing): the mesh takes the positions the carrier showed."""
+    out = st.output.buffer
+    mesh = obj.data
+    if out is None or len(out) != len(mesh.vertices) or mesh.shape_keys is not None:
+        return
+    mesh.attributes["position"].data.foreach_set("vector", out.ravel())
+    mesh.update()
 
 
 def was_applied(session, obj, info: ModInfo, st) -> bool:
@@ -59,12 +75,6 @@ def was_applied(session, obj, info: ModInfo, st) -> bool:
                 return True
         except (AttributeError, ReferenceError):
             pass
-    if st is None or st.output.buffer is None or len(st.output.buffer) != len(obj.data.vertices) or not st.status.live:
-        return False
-    # The mesh now holds what the modifier output (and that differs from what reached it).
-    current = np.empty(len(obj.data.vertices) * 3, np.float32)
-    obj.data.attributes["position"].data.foreach_get("vector", current)
-    current = current.reshape(-1, 3)
-    data = session.meshes.peek_any(obj)
-    moved = data is None or not np.array_equal(data.positions, st.output.buffer)
-    return moved and np.allclose(current, st.output.buffer, atol=1e-6, rtol=0)
+    # Where DQ Skin deforms its output is marked (`node_group.OUTPUT_MARK`): a mesh it was
+    # applied to has the mark, a removal leaves none.
+    return node_group.OUTPUT_MARK in obj.data.attributes

@@ -7,12 +7,13 @@ deformation."""
 from __future__ import annotations
 
 from ..blender import companion, settings
+from ..routes.base import Target
 from . import companions
 from .context import mod_key
 
 
-def deactivate(session, obj, mod, detach: bool) -> None:
-    """The state files are saved in (detached from its result with `detach`)."""
+def deactivate(session, obj, mod) -> None:
+    """The state files are saved in."""
     if obj.library is not None:
         return
     try:
@@ -25,36 +26,29 @@ def deactivate(session, obj, mod, detach: bool) -> None:
             companion.configure(c, mod, s, (mod.show_viewport, mod.show_render))
         else:
             companion.configure_without_settings(c, mod)
-    st = session.states.find(mod_key(obj, mod))
-    session.route.pass_through_modifier(mod)
-    if detach:
-        session.route.detach(mod)
-    if st is not None:
-        st.output.invalidate()
+    key = mod_key(obj, mod)
+    st = session.states.get(key)
+    session.routes.detach(Target(obj, mod, st, key))
 
 
 def reactivate(session, obj, mod) -> None:
-    """After a save: back to how it was before `deactivate` (the next evaluation writes again)."""
-    st = session.states.find(mod_key(obj, mod))
+    """After a save: back to how it was before `deactivate` (the next frame evaluates fully)."""
+    key = mod_key(obj, mod)
+    st = session.states.find(key)
     if st is None or obj.library is not None:
         return
-    if st.output.result is not None:
-        try:
-            session.route.attach(mod, st.output.result)
-        except ReferenceError:
-            st.output.result = None
+    session.routes.attach(Target(obj, mod, st, key), st.companion.deforms or (mod.show_viewport, mod.show_render))
     c = companions.companion_of(obj, mod, st)
     known = st.companion
     if c is not None and known.shown is not None and st.settings.value is not None:
         companion.configure(c, mod, st.settings.value, known.shown)
-    st.output.invalidate()
 
 
-def deactivate_all(session, detach: bool) -> None:
+def deactivate_all(session) -> None:
     """Puts every DQ Skin in the state files are saved in."""
     session.tracker.ensure()
     for obj, mod in session.tracker.local_modifiers():
-        deactivate(session, obj, mod, detach)
+        deactivate(session, obj, mod)
 
 
 def reactivate_all(session) -> None:

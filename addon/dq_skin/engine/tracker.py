@@ -21,9 +21,8 @@ from dataclasses import dataclass, field
 import bpy
 
 from ..blender import compat, nodes
-from ..model import decisions
 from ..model.keys import ModKey
-from ..model.state import Mode, ResultMode
+from ..routes import cache_route
 from . import pipeline, playback, removal
 from .context import Context, dq_skin_modifiers
 from .removal import ModInfo
@@ -34,9 +33,8 @@ class Record:
     obj: object
     mods: dict[str, ModInfo] = field(default_factory=dict)  # modifier uid -> info
     watched: set = field(default_factory=set)
-    steady: object = None  # the ModifierState of its one DQ Skin while playback needs only the pose
-    volatile: bool = False  # evaluated by Blender before the frame handler (see `frame_pre`)
-    pending: bool = False  # evaluate fully at the next frame (its result was let go)
+    pending: bool = False  # evaluate fully at the next frame
+    bones_changed: bool = False  # its armature's data was updated: the bones' binding is compared
     modifier_count: int = 0
 
 
@@ -81,7 +79,7 @@ class Tracker:
         for obj in bpy.data.objects:
             if obj.type == "MESH" and any(nodes.is_dq_skin(m) for m in obj.modifiers):
                 self.add(obj)
-        self.session.route.remove_unused()
+        self.session.routes.remove_unused()
 
     def ensure(self) -> None:
         if not self.built:
@@ -121,7 +119,6 @@ class Tracker:
                     if arm.data is not None:
                         watched.add(arm.data.session_uid)
         rec.mods = mods
-        rec.steady = None
         rec.watched = watched
         rec.modifier_count = len(obj.modifiers)
         for uid in watched:
@@ -151,7 +148,7 @@ class Tracker:
 
     def prune(self) -> None:
         """Forgets deleted objects (and their results)."""
-        route = self.session.route
+        routes = self.session.routes
         for key, rec in list(self.records.items()):
             try:
                 alive = rec.obj.session_uid == key and rec.obj.name is not None
@@ -162,24 +159,20 @@ class Tracker:
                 for uid in rec.watched:
                     self.watch.get(uid, set()).discard(key)
                 for st in self.session.states.drop_object(key):
-                    route.release_result(st.output.result)
+                    routes.release_state(st)
                 self.structure += 1
-        route.remove_unused()
+        routes.feeds.prune()
+        routes.remove_unused()
 
     def _armature_changed(self, arm_data_uid: int) -> None:
-        """Bones may have changed (deform flags, segments, rest pose): every object bound to
-        them takes the full path, which compares the bones, at its next evaluation (forced, so
-        that no steady-playback shortcut skips it). Objects whose every modifier reads its
-        bones from memory (envelopes, B-Bones) take the full path anyway, and its keys hold the
-        bones and the pose: they are not forced, since Rigify's armature data is updated on
-        every frame and a forced evaluation would write again what a feed made."""
+        """Bones may have changed (deform flags, segments, rest pose): every object bound to them
+        compares its bones' binding at its next evaluation (a fed frame too: Rigify's armature
+        data is updated on every frame, and a forced full evaluation would publish again what
+        the feed made)."""
         for obj_uid in self.watch.get(arm_data_uid, ()):
             rec = self.records.get(obj_uid)
             if rec is not None:
-                rec.steady = None
-                states = [self.session.states.find(ModKey(obj_uid, m)) for m in rec.mods]
-                if not states or not all(st is not None and st.needs_effective for st in states):
-                    rec.pending = True
+                rec.bones_changed = True
 
     def _other_object_changed(self, obj) -> None:
         """Another object's geometry was updated: if its modifiers or constraints changed, what
@@ -202,11 +195,6 @@ class Tracker:
             self.prune()
             return
         pipeline.evaluate_object(obj, ctx or self.context(depsgraph), force)
-        rec.steady = None
-        if len(rec.mods) == 1:
-            st = self.session.states.find(ModKey(obj.session_uid, next(iter(rec.mods))))
-            if st is not None and decisions.steady_candidate(1, st.status.mode is Mode.LIVE, st.status.source, st.needs_effective):
-                rec.steady = st
 
     def evaluate_all(self, depsgraph, force: bool = True) -> None:
         """Every DQ Skin object of `depsgraph` (exports starting or ending, a save)."""
@@ -215,6 +203,7 @@ class Tracker:
         for rec in list(self.records.values()):
             if _in(rec.obj, depsgraph):
                 self.evaluate(rec, depsgraph, force, ctx)
+        self.session.routes.feeds.commit()
 
     def updates(self, depsgraph, in_operator: bool) -> bool:
         """After an interactive change: re-evaluate only what it concerns (once the scene
@@ -242,6 +231,7 @@ class Tracker:
                     dirty.add(uid)
                 elif update.is_updated_geometry:
                     self._other_object_changed(orig)
+                    cache_route.remove_orphans(orig)
                 if uid in self.watch:
                     dirty |= self.watch[uid]
             elif isinstance(orig, (bpy.types.Collection, bpy.types.Scene)):
@@ -270,6 +260,7 @@ class Tracker:
             rec = self.records.get(uid)
             if rec is not None and _in(rec.obj, depsgraph):
                 self.evaluate(rec, depsgraph, ctx=ctx)
+        self.session.routes.feeds.commit()
         return False
 
     def settle(self, depsgraph) -> None:
@@ -282,31 +273,11 @@ class Tracker:
             rec = self.records.get(uid)
             if rec is not None and _in(rec.obj, depsgraph):
                 self.evaluate(rec, depsgraph, ctx=ctx)
+        self.session.routes.feeds.commit()
 
     def frame_pre(self) -> None:
-        """Before a frame change: objects Blender will evaluate anyway before the frame handler
-        (their shape keys, transforms or earlier modifiers are animated) output nothing in that
-        evaluation, so that the modifiers after DQ Skin run once per frame, not twice."""
-        route = self.session.route
-        route.feeds.new_frame()
-        for rec in self.records.values():
-            if not rec.volatile:
-                continue
-            for _uid, st in self.session.states.of_object(rec.obj.session_uid):
-                # (A modifier reading what reaches it needs that evaluated in the first pass; a
-                # fed result is this frame's there, see `feed`.)
-                if (
-                    st.status.mode is Mode.LIVE
-                    and st.output.result is not None
-                    and st.output.kind is ResultMode.REPLACE
-                    and not st.capture_on
-                    and route.feeds.fed(st.output.result) is None
-                ):
-                    try:
-                        route.pend(st.output.result)
-                        rec.pending = True
-                    except ReferenceError:
-                        pass
+        """Before a frame change: the feed counts it (whether it skinned in this one)."""
+        self.session.routes.feeds.new_frame()
 
     def frame(self, depsgraph) -> None:
         """After a frame change: every DQ Skin object of this depsgraph."""
@@ -333,6 +304,7 @@ class Tracker:
                         moved.add(uid)
                     elif update.is_updated_geometry and uid not in self.watch:
                         self._other_object_changed(orig)  # (not the armatures, posed every frame)
+                        cache_route.remove_orphans(orig)
                 elif len(orig.modifiers) != rec.modifier_count:
                     self.refresh(rec)
                     moved.add(uid)
@@ -355,21 +327,13 @@ class Tracker:
         for uid, rec in list(self.records.items()):
             if uid not in self.records or not _in(rec.obj, depsgraph):
                 continue
-            if uid in updated and not rec.pending:
-                rec.volatile = True
             forced, rec.pending = rec.pending, False
-            path = decisions.frame_path(rec.steady is not None, forced, uid in ctx.unchanged)
-            if path is decisions.FramePath.STEADY:
-                plan = playback.quick_plan(rec.obj, None, rec.steady, ctx)
-                if plan is None:
-                    continue
-                if plan is not False:
-                    ctx.batch.append(plan)
-                    continue
-            if path is not decisions.FramePath.FULL and playback.fed_frame_stands(rec.obj, ctx):
+            bones, rec.bones_changed = rec.bones_changed, False
+            if not forced and playback.fed_frame_stands(rec.obj, ctx, bones):
                 continue  # the feed made this frame inside Blender's evaluation
             self.evaluate(rec, depsgraph, forced, ctx)
         pipeline.run_batch(self.session, ctx.batch)
+        self.session.routes.feeds.commit()
 
     def local_modifiers(self):
         """Every current DQ Skin modifier of the local objects tracked, with its object."""

@@ -6,18 +6,17 @@ does with a result, and whether a result is fed inside Blender's first evaluatio
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 
 from .keys import FrameKey, Source
 from .methods import BLENDER_METHODS
-from .state import ResultMode
+from .state import ResultMode, RouteKind
 
-# The feed (inside Blender's first evaluation) saves Blender's second evaluation, whose cost
-# grows with the scene's graph, and costs more per vertex than the frame handler's route (its
-# Mesh Cache reads a file a vertex at a time): a mesh is fed up to this many vertices per pose
-# bone of its armature (docs/performance.md has the figures).
-FEED_VERTICES_PER_BONE = 50
+# Up to this many vertices a character's positions go through a Mesh Cache carrier (deform-only,
+# whose reader costs Blender about 20 ns a vertex); larger ones through a result object (a copy of
+# the positions, about 2 ns a vertex), except where something needs deform-only modifiers
+# (docs/performance.md has the figures).
+CACHE_ROUTE_VERTICES = 20_000
 
 
 # -- what reaches a modifier ---------------------------------------------------------------------
@@ -46,9 +45,39 @@ def result_kind(source: Source, read_by_index: bool) -> ResultMode:
     return ResultMode.POSITIONS if source is Source.CAPTURE or read_by_index else ResultMode.REPLACE
 
 
-def already_written(key: FrameKey, written: FrameKey | None, live: bool, shown: ResultMode, kind: ResultMode, force: bool) -> bool:
-    """Whether the result already is what `key` describes (nothing to compute or write)."""
-    return not force and key == written and live and shown is kind
+def already_written(key: FrameKey, written: FrameKey | None, live: bool, shown: tuple, wanted: tuple, force: bool) -> bool:
+    """Whether what Blender shows already is what `key` describes, the way it is wanted (route
+    and result mode): nothing to compute or write."""
+    return not force and key == written and live and shown == wanted
+
+
+# -- which route ---------------------------------------------------------------------------------
+
+
+def needs_deform_only(mode: str, simulation: str, by_index_or_soft_body: bool) -> bool:
+    """Whether Blender needs DQ Skin's positions from a deform-only modifier: brushes and Edit
+    Mode map through deform-only modifiers only (`mode`: the object's mode's reason, "" in
+    Object Mode), simulations on or around the object (`simulation`: the reason, or ""), what
+    finds the object's vertices by their index, and a Soft Body right before DQ Skin (it
+    simulates only what deform-only modifiers before it make)."""
+    return bool(mode or simulation or by_index_or_soft_body)
+
+
+def route_for(source: Source, deform_only: bool, vertices: int) -> RouteKind:
+    """How a modifier's positions reach Blender: what reaches it from other modifiers is only
+    known after Blender's first evaluation (RESULT: written after it, a second one follows);
+    otherwise inside the first evaluation, through a deform-only Mesh Cache carrier where that
+    is needed or cheaper (CACHE), else through a result object (NODE)."""
+    if source is Source.CAPTURE:
+        return RouteKind.RESULT
+    if deform_only or vertices <= CACHE_ROUTE_VERTICES:
+        return RouteKind.CACHE
+    return RouteKind.NODE
+
+
+def shown_as(route: RouteKind, kind: ResultMode) -> tuple:
+    """The (route, node group mode) a published result is shown with."""
+    return (route, ResultMode.CARRIED if route is RouteKind.CACHE else kind)
 
 
 # -- where DQ Skin deforms, and why not ----------------------------------------------------------
@@ -65,17 +94,22 @@ class Reasons:
         return self.render if render else self.viewport
 
 
-def hand_over(exporting: str, armature_in_edit_mode: bool, simulation: str, mode: str) -> Reasons:
-    """Why DQ Skin hands its object over to Blender's own deformation: an exporter that skins
-    from the Armature modifier is running, the armature is in Edit Mode (Blender shows the rest
-    pose), a simulation reads the deformed mesh (`simulation`: the reason, or ""), or, in the
-    viewport only, the object is in a mode whose brushes map through the deformation (`mode`:
-    the reason, or "")."""
-    common = exporting
-    if not common and armature_in_edit_mode:
-        common = "The armature is in Edit Mode: Blender shows the rest pose"
-    if not common:
-        common = simulation
+def hand_over(exporting: str, armature_in_edit_mode: bool, simulation: str, mode: str, blender_method: bool) -> Reasons:
+    """Why DQ Skin hands its object over to Blender's own deformation, where that is exactly DQ
+    Skin's: the armature is in Edit Mode (the rest pose shows, which every method leaves as it
+    is); and for Linear and Dual Quaternion, whatever Blender computes through its Armature
+    modifier's own data: an exporter that skins from it (`exporting`), a simulation on or around
+    the object (`simulation`, which would amplify the last float bits in which two exact
+    skinnings differ), and, in the viewport, brushes and Edit Mode (`mode`: they map through its
+    deform matrices exactly). Each is the reason, or "". DQ Skin's own methods are never handed
+    over for those: Blender has no such deformation, and a deform-only carrier serves them
+    (`route_for`)."""
+    if armature_in_edit_mode:
+        common = "The armature is in Edit Mode: the rest pose shows (the same for every method)"
+        return Reasons(viewport=common, render=common)
+    if not blender_method:
+        return Reasons()
+    common = exporting or simulation
     return Reasons(viewport=common or mode, render=common)
 
 
@@ -118,59 +152,3 @@ def switched_off_by_user(known_shown, known_deforms, now_shown: tuple[bool, bool
     if known_shown is None or known_deforms is None:
         return (False, False)
     return tuple(now_shown[i] and not known_shown[i] and known_deforms[i] and dq_shown[i] for i in range(2))
-
-
-# -- frames --------------------------------------------------------------------------------------
-
-
-class FramePath(enum.Enum):
-    STEADY = "steady"  # only the pose changed: the last job with this frame's bones
-    FED = "fed"  # the feed may have skinned it inside Blender's evaluation: check it stands
-    FULL = "full"  # everything is read, compared and computed again as needed
-
-
-def frame_path(steady: bool, forced: bool, unchanged: bool) -> FramePath:
-    """How an object is evaluated at a frame change: `steady`, its one DQ Skin deforms the mesh's
-    own coordinates with bones from vertex groups; `forced`, something it depends on changed in
-    a way only the full path sees (bones edited, its result let go); `unchanged`, Blender did
-    not update the object itself in this evaluation."""
-    if forced:
-        return FramePath.FULL
-    if steady and unchanged:
-        return FramePath.STEADY
-    return FramePath.FED
-
-
-def steady_candidate(modifier_count: int, live: bool, source: Source | None, needs_effective: bool) -> bool:
-    """Whether an object's playback can take the steady path: one DQ Skin, live, on the mesh's own
-    coordinates, with bones from vertex groups (envelopes and B-Bones read the pose from memory)."""
-    return modifier_count == 1 and live and source is Source.MESH and not needs_effective
-
-
-def feeds_faster(vertices: int, bones: int) -> bool:
-    """Whether the feed is expected to beat the frame handler's route for a mesh of `vertices` on
-    an armature of `bones` (see FEED_VERTICES_PER_BONE)."""
-    return vertices <= FEED_VERTICES_PER_BONE * bones
-
-
-def feedable(
-    kind: ResultMode,
-    needs_effective: bool,
-    source: Source | None,
-    has_shape_keys: bool,
-    render: bool,
-    pose_from_memory: bool,
-    faster: bool,
-) -> bool:
-    """Whether a result can be skinned inside Blender's first evaluation: a whole-mesh result of
-    the mesh itself (no shape keys), its frames' bones read from memory (envelopes, B-Bones), in
-    the viewport, and worth it (`faster`, see `feeds_faster`)."""
-    return (
-        kind is ResultMode.REPLACE
-        and needs_effective
-        and source is Source.MESH
-        and not has_shape_keys
-        and not render
-        and pose_from_memory
-        and faster
-    )

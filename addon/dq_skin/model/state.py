@@ -36,12 +36,20 @@ class Mode(enum.Enum):
 
 
 class ResultMode(enum.Enum):
-    """What the node group does with a modifier's result object."""
+    """What the node group outputs (its hidden Mode input, see `blender.nodes`)."""
 
-    OFF = 0  # pass the mesh through (the companion deforms, or nothing does)
-    REPLACE = 1  # output the result, a full copy of the mesh with skinned positions
-    POSITIONS = 2  # set the incoming mesh's positions from the result's points
-    PENDING = 3  # output nothing: the frame handler is about to write this frame
+    OFF = 0  # pass the mesh through (the companion deforms, or nothing does), with a warning
+    REPLACE = 1  # the result object, a full copy of the mesh with skinned positions
+    POSITIONS = 2  # the incoming mesh with the positions of the result's points
+    CARRIED = 3  # pass the mesh through: a Mesh Cache carrier before DQ Skin holds its positions
+
+
+class RouteKind(enum.Enum):
+    """How a modifier's positions reach Blender (see `routes`)."""
+
+    RESULT = "result"  # a result object written after Blender's first evaluation (a second one follows)
+    NODE = "node"  # a result object fed inside the first evaluation
+    CACHE = "cache"  # a Mesh Cache carrier on the character, fed inside the first evaluation (deform-only)
 
 
 @dataclass
@@ -83,7 +91,8 @@ class BindingCache:
 @dataclass
 class Output:
     result: object = None  # the result object written last
-    kind: ResultMode = ResultMode.OFF  # what the node group does with the result
+    kind: ResultMode = ResultMode.OFF  # what the node group outputs
+    route: RouteKind | None = None  # how the positions reach Blender (None: nothing published)
     buffer: np.ndarray | None = field(default=None, repr=False)  # what the kernel writes
     mixed: np.ndarray | None = field(default=None, repr=False)  # the shape keys mixed
     mixed_key: tuple = ()
@@ -93,6 +102,7 @@ class Output:
     copied_revision: int = -1  # and its revision (see `meshdata.revision`)
     generation: int = 0  # counts the outputs (a following DQ Skin's input key)
     spaces: tuple | None = field(default=None, repr=False)  # (premat, postmat) last computed
+    pointcache: object = None  # the file a Mesh Cache carrier reads (`routes.pointcache.PointCache`)
 
     def invalidate(self) -> None:
         """The next evaluation computes and writes again."""
@@ -152,6 +162,9 @@ class States:
     def drop_object(self, obj_uid: int) -> list[ModifierState]:
         gone = [k for k in self._by_key if k.object_uid == obj_uid]
         return [self._by_key.pop(k) for k in gone]
+
+    def items(self) -> list[tuple[ModKey, ModifierState]]:
+        return list(self._by_key.items())
 
     def clear(self) -> None:
         self._by_key.clear()

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..blender import companion, compat, nodes, settings
+from ..blender import companion, compat, node_group, nodes, settings
 from ..engine import removal
 from ..engine.context import dq_skin_modifiers
 from ..model.methods import BY_NAME, DESCRIPTIONS, METHODS
@@ -49,7 +49,7 @@ def add(obj, source, method: str = "AUTO", made: dict | None = None):
     and keeps `source` as its companion. `made`: what `dq_skin_add` made for it (an Armature
     modifier it created, a parent type it changed), undone when DQ Skin is removed. Returns the
     new modifier."""
-    group = nodes.ensure_group()
+    group = node_group.ensure_group()
     index = list(obj.modifiers).index(source)
     mod = obj.modifiers.new("DQ Skin", "NODES")
     mod.node_group = group

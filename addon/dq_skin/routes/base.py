@@ -19,16 +19,18 @@ from typing import Protocol
 
 import numpy as np
 
+from ..model.keys import ModKey
 from ..model.state import ModifierState, ResultMode
 
 
 @dataclass
 class Target:
-    """One DQ Skin modifier on one object, and its state."""
+    """One DQ Skin modifier on one object, its key and its state."""
 
     obj: object
     mod: object
     st: ModifierState
+    key: ModKey
 
 
 class Route(Protocol):

@@ -1,225 +1,246 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Skinning inside Blender's first evaluation, for results whose frames read the pose from
-Blender's memory (envelopes and B-Bones: a Rigify character).
+"""Skinning inside Blender's first evaluation: the feed.
 
-Elsewhere DQ Skin writes its result in the frame handler, and Blender evaluates the scene a
-second time to show it; in a scene with a production rig that second evaluation costs more
-than the Armature modifier's whole deformation (Blender walks the rig's whole graph again,
-whatever changed; see the README's figures). A *fed* result instead carries a Mesh Cache
-modifier reading a point-cache file the add-on owns, and a Python driver on that modifier's
-Factor whose variables name the bound bones, so that Blender runs it after every bone (and
-every B-Bone's segments) and before the result's geometry: it reads this frame's pose from
-memory, skins, and writes the file, all inside the evaluation that posed the bones. The frame
-handler then finds the result already this frame's and writes nothing.
+Each scene's fed DQ Skin modifiers (its *members*) form one *batch*: a runtime Empty (never
+saved, in no scene) whose custom property is driven by one Python driver. Its variables name
+every member's bound bones (each B-Bone's segments, and the bones with no bound descendant),
+its object's and armature's transforms and its shape keys, so Blender runs it after all of
+them; it skins every member of the batch in one call and writes each one's positions where its
+route's carrier reads them. Each carrier (a Mesh Cache on the character, or the deform-only
+modifier on a result object) has a driver Blender evaluates without Python that reads the
+batch's property, so it is evaluated after the batch: everything happens in the evaluation
+that posed the bones, and Blender never evaluates the scene a second time for it.
 
-The handler stays the authority: the driver only takes a frame where nothing but the pose
-changed since the last full evaluation (its key says so), and the handler's full evaluation
-compares everything as before; whatever the driver could not know (settings, the mesh, the
-spaces) it computes and writes again, to the file and the mesh, which then agree.
-
-The file always holds what the result shows: the handler writes it with the result's mesh,
-the driver alone only when it skinned (renders too: their graph runs the driver for their own
-frame). The result objects are runtime data (never saved), so the modifier, the driver and the
-file never reach a user's file. The file lives in memory-backed storage where there is one
-(`/dev/shm`), else in the temporary folder, and is made again if something deletes it.
+The frame handler stays the authority: the driver only skins a member whose last full
+evaluation still stands as far as the driver can tell (its pose, transforms and shape keys are
+read each time); the handler checks what it could not know and evaluates fully where anything
+else changed (`engine.playback.fed_frame_stands`).
 """
 
 from __future__ import annotations
 
-import os
-import struct
-import tempfile
 import threading
-from dataclasses import dataclass
-
-import numpy as np
+from dataclasses import dataclass, field
 
 import bpy
 
-from .. import dqskin
-from ..blender import pose
-from ..model.state import Mode, ResultMode
+from ..model.keys import ModKey
+from ..model.state import RouteKind
+from .base import Target
 
 FUNCTION = "dq_skin_feed"
-MODIFIER = "DQ Skin feed"
-_HEADER = b"POINTCACHE2\0"
+PROPERTY = "dq_skin_go"
+PATH = f'["{PROPERTY}"]'
 
 
 @dataclass
-class Feed:
-    result: object
-    st: object  # the ModifierState whose result this is
+class Member:
+    key: ModKey
+    target: Target
+    kind: RouteKind
     armature: object
-    names: tuple  # the bone names the driver's variables follow
-    path: str
-    file: object  # the open point-cache file
-    points: int  # the point count its header says
-    runs: int = 0  # frames the driver skinned (tests and the benchmark read it)
-    skinned: tuple = (0, 0)  # (frame change, depsgraph address) of the driver's last skinning
+    bones: tuple  # the bound bone names the batch's variables follow
+    shape_keys: object = None  # the mesh's Key, whose values come each frame
+    order: int = 0  # the modifier's index in its stack (a chain's earlier modifier first)
+    previous: object = None  # the ModifierState of the DQ Skin before it, whose output reaches it
+    ordered: bool = False  # the batch's variables cover it (until then the handler skins it)
+    skinned: tuple = (0, 0)  # (frame change, depsgraph address) of its last skinning here
+    runs: int = 0  # frames skinned here (tests and the benchmark read it)
 
 
-def _folder() -> str:
-    return "/dev/shm" if os.path.isdir("/dev/shm") and os.access("/dev/shm", os.W_OK) else tempfile.gettempdir()
+@dataclass
+class Batch:
+    uid: int
+    scene: int  # the scene's session uid
+    carrier: object  # the runtime Empty with the driven property
+    members: dict = field(default_factory=dict)  # ModKey -> Member
+    dirty: bool = True  # its variables must be built again (`Feeds.commit`)
+    runs: int = 0
 
 
 class Feeds:
-    """Every fed result of the session (owned by the session). `busy()`: whether the main
-    thread is inside a Python operator (a rig rebuild, say: Blender evaluates the scene after
-    each of its steps, and the handler skins once it is done); `readers`: the memory readers."""
+    """Every batch of the session (owned by the session). `skin(members, depsgraph)` skins
+    members inside an evaluation and returns those it skinned (the engine's fed frame);
+    `busy()` says whether the main thread is inside a Python operator (a rig rebuild, say:
+    Blender evaluates the scene after each of its steps, and the handler skins once it is done)."""
 
-    def __init__(self, busy, readers):
+    def __init__(self, busy):
         self._busy = busy
-        self._readers = readers
-        self._feeds: dict[int, Feed] = {}  # result session uid -> its feed
-        self._frame_change = 0  # counts frame changes (`new_frame`): whether the driver skinned in this one
-        # A render's graph may run a driver on its own thread while the viewport's runs one: one
-        # skins and writes at a time (the kernel releases the GIL).
+        self.skin = None  # set by the session: the engine's fed frame
+        self._batches: dict[int, Batch] = {}  # scene uid -> batch
+        self._of: dict[ModKey, Batch] = {}
+        self._frame_change = 0
+        self._next_uid = 1
+        # A render's graph may run its driver on its own thread while the viewport's runs one:
+        # one batch skins at a time (the kernel releases the GIL).
         self._lock = threading.Lock()
 
-    def fed(self, result) -> Feed | None:
-        try:
-            return self._feeds.get(result.session_uid) if result is not None else None
-        except ReferenceError:
-            return None
+    # -- membership ------------------------------------------------------------------------
+    def join(self, member: Member, scene) -> Batch:
+        """`member` is fed by `scene`'s batch (made if missing) from its next build on."""
+        batch = self._batches.get(scene.session_uid)
+        if batch is None or not _alive(batch.carrier):
+            batch = self._new_batch(scene)
+        old = self._of.get(member.key)
+        if old is not None and old is not batch:
+            self.leave(member.key)
+        known = batch.members.get(member.key)
+        if known is not None and (known.armature, known.bones, known.shape_keys) == (member.armature, member.bones, member.shape_keys):
+            known.target, known.kind, known.order, known.previous = member.target, member.kind, member.order, member.previous
+            return batch
+        batch.members[member.key] = member
+        batch.dirty = True
+        self._of[member.key] = batch
+        return batch
 
-    def ensure(self, result, st, armature, binding, positions: np.ndarray) -> None:
-        """Makes `result` fed for `st`'s binding on `armature` (built once, rebuilt when the
-        bound bones change), its file holding `positions`."""
-        feed = self.fed(result)
-        names = tuple(binding.bone_names)
-        if (
-            feed is not None
-            and feed.st is st
-            and feed.armature == armature
-            and feed.names == names
-            and result.modifiers.get(MODIFIER) is not None
-        ):
-            self.write(result, positions)
-            return
-        self.remove(result)
-        path = os.path.join(_folder(), f"dqskin-{os.getpid()}-{result.session_uid}.pc2")
-        file = open(path, "w+b", buffering=0)  # kept open; closed in `_close`
-        self._feeds[result.session_uid] = Feed(result, st, armature, names, path, file, -1)
-        self.write(result, positions)
-        m = result.modifiers.new(MODIFIER, "MESH_CACHE")
-        m.cache_format, m.filepath = "PC2", path
-        m.time_mode, m.play_mode, m.eval_frame = "FRAME", "CUSTOM", 0.0
-        m.deform_mode, m.interpolation = "OVERWRITE", "NONE"
-        driver = m.driver_add("factor").driver
+    def _new_batch(self, scene) -> Batch:
+        carrier = bpy.data.objects.new(f".DQ Skin feed {scene.name}", None)
+        carrier.is_runtime_data = True
+        # Drivers do not count as users: without one, Purge Unused would delete it under the
+        # carriers that read it.
+        carrier.use_fake_user = True
+        carrier[PROPERTY] = 1.0
+        uid = self._next_uid
+        self._next_uid += 1
+        batch = self._batches[scene.session_uid] = Batch(uid, scene.session_uid, carrier)
+        driver = carrier.driver_add(PATH).driver
         driver.type = "SCRIPTED"
-        order_after_bones(driver, armature, names)
         # Set last: Blender compiles the expression now, while the function is known to it (with
         # Auto Run Python Scripts off it refuses names it does not know at compile time).
         bpy.app.driver_namespace[FUNCTION] = self.run
-        driver.expression = f"{FUNCTION}({result.session_uid})"
+        driver.expression = f"{FUNCTION}({uid})"
+        return batch
 
-    def write(self, result, positions: np.ndarray) -> None:
-        """The file holds `positions` (called wherever the result's mesh is written, so that the
-        two always agree)."""
-        feed = self.fed(result)
-        if feed is None:
-            return
-        with self._lock:
-            _write(feed, positions)
+    def leave(self, key: ModKey) -> None:
+        batch = self._of.pop(key, None)
+        if batch is not None and batch.members.pop(key, None) is not None:
+            batch.dirty = True
 
-    def remove(self, result) -> None:
-        """`result` is no longer fed: its modifier (and driver) and file go."""
-        try:
-            uid = result.session_uid
-        except ReferenceError:
-            return
-        feed = self._feeds.pop(uid, None)
-        if feed is not None:
-            _close(feed)
-        m = result.modifiers.get(MODIFIER) if result.library is None else None
-        if m is not None:
-            result.modifiers.remove(m)
+    def member(self, key: ModKey) -> Member | None:
+        batch = self._of.get(key)
+        return batch.members.get(key) if batch is not None else None
+
+    def carrier_of(self, key: ModKey):
+        """The runtime object whose property a member's carrier driver reads."""
+        batch = self._of.get(key)
+        return batch.carrier if batch is not None else None
+
+    def commit(self) -> None:
+        """Builds the variables of every batch whose members changed (once per handler call, not
+        once per member: a crowd joins at once)."""
+        for scene_uid, batch in list(self._batches.items()):
+            if not batch.dirty:
+                continue
+            if not batch.members:
+                self._drop(scene_uid)
+                continue
+            if not _alive(batch.carrier):
+                continue
+            driver = batch.carrier.animation_data.drivers[0].driver
+            while driver.variables:
+                driver.variables.remove(driver.variables[0])
+            order_after_inputs(driver, batch.members.values())
+            for m in batch.members.values():
+                m.ordered = True
+            batch.dirty = False
+
+    def _drop(self, scene_uid: int) -> None:
+        batch = self._batches.pop(scene_uid)
+        if _alive(batch.carrier):
+            bpy.data.objects.remove(batch.carrier)
 
     def prune(self) -> None:
-        """Forgets the feeds whose result is gone (deleted, or replaced by an undo step)."""
-        for uid, feed in list(self._feeds.items()):
-            try:
-                alive = feed.result.session_uid == uid
-            except ReferenceError:
-                alive = False
-            if not alive:
-                _close(self._feeds.pop(uid))
+        """Forgets members whose object is gone and batches whose carrier is (an undo step
+        replaced the data-blocks)."""
+        for scene_uid, batch in list(self._batches.items()):
+            if not _alive(batch.carrier):
+                self._batches.pop(scene_uid)
+                for key in batch.members:
+                    self._of.pop(key, None)
+                continue
+            for key, m in list(batch.members.items()):
+                if not _alive(m.target.obj):
+                    self.leave(key)
 
     def close(self) -> None:
-        """No result is fed any more (the add-on is unregistered): modifiers and files go."""
-        for feed in list(self._feeds.values()):
-            try:
-                self.remove(feed.result)
-            except ReferenceError:
-                pass
-        for feed in self._feeds.values():
-            _close(feed)
-        self._feeds.clear()
-        # The function stays in the driver namespace (with no feed it does nothing): touching
-        # the namespace while Blender 4.2 exits crashes it (`addon/install.py` under bpy 4.2.23).
+        """Every batch goes (the add-on is disabled). The function stays in the driver namespace
+        (with no batch it does nothing): touching the namespace while Blender 4.2 exits crashes
+        it (`addon/install.py` under bpy 4.2.23)."""
+        for scene_uid in list(self._batches):
+            self._drop(scene_uid)
+        self._of.clear()
 
+    # -- frames ----------------------------------------------------------------------------
     def new_frame(self) -> None:
         """A frame change starts (`frame_change_pre`)."""
         self._frame_change += 1
 
-    def skinned_now(self, result, depsgraph) -> bool:
-        """Whether the driver skinned `result` in this frame change's evaluation of `depsgraph`
-        (the handler then checks what the driver could not know, see `pipeline.fed_frame_stands`)."""
-        feed = self.fed(result)
-        return feed is not None and feed.skinned == (self._frame_change, depsgraph.as_pointer())
+    def skinned_now(self, key: ModKey, depsgraph) -> bool:
+        """Whether the batch skinned this member in this frame change's evaluation of `depsgraph`."""
+        m = self.member(key)
+        return m is not None and m.skinned == (self._frame_change, depsgraph.as_pointer())
 
-    def runs(self, result) -> int:
-        feed = self.fed(result)
-        return feed.runs if feed is not None else 0
+    def runs(self, key: ModKey) -> int:
+        m = self.member(key)
+        return m.runs if m is not None else 0
 
     def run(self, uid: int) -> float:
-        """The driver: this frame's result, if only the pose changed since the last full
-        evaluation (in whichever graph runs it: the viewport's, a render's). Always 1 (the file
-        holds what the result shows); never raises (Blender would switch a failing Python
-        driver off)."""
+        """The driver: skins the batch's members in whichever graph runs it (the viewport's, a
+        render's). Always 1; never raises (Blender would switch a failing Python driver off)."""
         try:
             depsgraph = bpy.app.driver_namespace.get("depsgraph")
-            feed = self._feeds.get(uid)
-            if feed is not None and depsgraph is not None and not self._busy():
+            batch = next((b for b in self._batches.values() if b.uid == uid), None)
+            if batch is not None and depsgraph is not None and self.skin is not None and not self._busy():
                 with self._lock:
-                    self._skin(feed, depsgraph)
+                    members = [m for m in batch.members.values() if m.ordered]
+                    stamp = (self._frame_change, depsgraph.as_pointer())
+                    for m in self.skin(members, depsgraph):
+                        m.skinned = stamp
+                        m.runs += 1
+                    batch.runs += 1
         except Exception:  # the handler's full evaluation follows and reports what is wrong
             pass
         return 1.0
 
-    def _skin(self, feed: Feed, depsgraph) -> None:
-        st = feed.st
-        out = st.output
-        old = out.written
-        if (
-            st.status.mode is not Mode.LIVE
-            or out.kind is not ResultMode.REPLACE
-            or old is None
-            or out.job is None
-            or not st.needs_effective
-            or not old.pose.from_memory
-        ):
-            return
-        binding = st.binding.binding
-        if binding is None or binding.effective is None:
-            return
-        arm_eval = feed.armature.evaluated_get(depsgraph)
-        reads = pose.PoseReads(self._readers.pose, self._readers.pose_error)
-        data = reads.read(arm_eval)
-        if data is None or not pose.same_bones(data, binding):
-            return
-        key = pose.memory_key(data)
-        if key == old.pose or key.binding_signature != old.pose.binding_signature:
-            return  # the same frame, or other bones: the full evaluation decides
-        job = out.job
-        job.deform = data.deform
-        if dqskin.skin_many([job])[0] is not None:
-            return
-        _write(feed, out.buffer)
-        out.written = old.with_pose(key)
-        out.generation += 1
-        feed.runs += 1
-        feed.skinned = (self._frame_change, depsgraph.as_pointer())
+
+def _alive(datablock) -> bool:
+    try:
+        return datablock is not None and datablock.name is not None
+    except ReferenceError:
+        return False
+
+
+def order_after_inputs(driver, members) -> int:
+    """Variables that make Blender evaluate `driver` after every input of `members`: their
+    armatures' bound bones (`order_after_bones`), their objects' and armatures' transforms, and
+    their shape keys. Returns how many."""
+    bones: dict[int, tuple] = {}
+    moved, keys = {}, {}
+    for m in members:
+        arm = m.armature
+        have = bones.get(arm.session_uid, (arm, ()))[1]
+        bones[arm.session_uid] = (arm, tuple(dict.fromkeys(have + tuple(m.bones))))
+        moved.setdefault(m.target.obj.session_uid, m.target.obj)
+        moved.setdefault(arm.session_uid, arm)
+        if m.shape_keys is not None:
+            keys.setdefault(m.shape_keys.session_uid, m.shape_keys)
+    count = 0
+    for k, (arm, names) in enumerate(bones.values()):
+        count += order_after_bones(driver, arm, names, prefix=f"b{k}_")
+    for k, obj in enumerate(moved.values()):
+        v = driver.variables.new()
+        v.name, v.type = f"t{k}", "TRANSFORMS"
+        v.targets[0].id = obj
+        v.targets[0].transform_type, v.targets[0].transform_space = "LOC_X", "WORLD_SPACE"
+        count += 1
+    for k, key in enumerate(keys.values()):
+        v = driver.variables.new()
+        v.name, v.type = f"k{k}", "SINGLE_PROP"
+        v.targets[0].id_type = "KEY"
+        v.targets[0].id = key
+        v.targets[0].data_path = "key_blocks[0].value"
+        count += 1
+    return count
 
 
 def order_after_bones(driver, armature, names, prefix: str = "b") -> int:
@@ -255,25 +276,3 @@ def order_after_bones(driver, armature, names, prefix: str = "b") -> int:
 
 def _quoted(name: str) -> str:
     return '"' + name.replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-
-def _write(feed: Feed, positions: np.ndarray) -> None:
-    n = len(positions)
-    if not os.path.exists(feed.path):  # (a cleaner removed it: Mesh Cache reads by name)
-        feed.file.close()
-        feed.file, feed.points = open(feed.path, "w+b", buffering=0), -1
-    f = feed.file
-    f.seek(0)
-    f.write(_HEADER + struct.pack("<iiffi", 1, n, 0.0, 1.0, 1))
-    f.write(memoryview(np.ascontiguousarray(positions, np.float32)).cast("B"))
-    if n != feed.points:
-        f.truncate()
-        feed.points = n
-
-
-def _close(feed: Feed) -> None:
-    try:
-        feed.file.close()
-        os.unlink(feed.path)
-    except OSError:
-        pass

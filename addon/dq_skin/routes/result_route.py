@@ -1,18 +1,25 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The result route: each DQ Skin modifier's node group outputs a result object the add-on
-owns (`results`), written after Blender's first evaluation of a frame (in a handler), which
-Blender then evaluates again; for characters whose frames read the pose from memory, the result
-is also fed inside the first evaluation (`feed`)."""
+"""The result routes: each DQ Skin modifier's node group outputs a result object the add-on owns
+(`results`):
+
+- RESULT: the result is written after Blender's first evaluation of a frame (in a handler), and
+  Blender evaluates again what it changed (what reaches the modifier from other modifiers is
+  only known then);
+- NODE: the result is fed inside the first evaluation (`feed`): the feed writes the positions
+  straight into the result mesh Blender evaluates, whose carrier copies them (see `results`).
+"""
 
 from __future__ import annotations
+
+from types import MappingProxyType
 
 import numpy as np
 
 from ..blender import nodes
-from ..model.state import ResultMode
+from ..model.state import ResultMode, RouteKind
 from . import results
 from .base import Target
-from .feed import Feeds
+from .feed import PATH
 
 
 class MeshSource:
@@ -23,8 +30,25 @@ class MeshSource:
         self.mesh, self.version, self.revision, self.counts = mesh, version, revision, counts
 
 
+MODES = MappingProxyType(
+    {
+        ResultMode.OFF: nodes.MODE_PASS_WARN,
+        ResultMode.REPLACE: nodes.MODE_REPLACE,
+        ResultMode.POSITIONS: nodes.MODE_POSITIONS,
+        ResultMode.CARRIED: nodes.MODE_PASS,
+    }
+)
+
+
+def set_mode(mod, kind: ResultMode) -> None:
+    """What the node group outputs (written only when it changes)."""
+    value = MODES[kind]
+    if nodes.get(mod, "Mode") != value:
+        nodes.put(mod, "Mode", value)
+
+
 class ResultRoute:
-    def __init__(self, feeds: Feeds):
+    def __init__(self, feeds):
         self.feeds = feeds
 
     def prepare(self, target: Target):
@@ -46,10 +70,10 @@ class ResultRoute:
             nodes.put(mod, "Result", result)
         return result
 
-    def write(self, target: Target, positions: np.ndarray, kind: ResultMode, mesh: MeshSource | None = None) -> None:
-        """Publishes `positions` in the modifier's result: the whole mesh (`kind` REPLACE, from
-        `mesh`) or points (POSITIONS); None for `mesh` writes the positions alone (steady
-        playback: nothing else changed)."""
+    def write(self, target: Target, positions: np.ndarray, kind: ResultMode, mesh: MeshSource | None, fed: bool) -> None:
+        """Publishes `positions` outside Blender's evaluation: the whole mesh (`kind` REPLACE, from
+        `mesh`) or points (POSITIONS); without `mesh`, the positions alone (nothing else
+        changed). With `fed`, the result also carries what makes the feed's frames reach it."""
         out = target.st.output
         result = out.result
         if mesh is not None:
@@ -63,50 +87,36 @@ class ResultRoute:
             else:
                 results.points_mesh(result, len(positions))
                 out.copied_version = 0
+        if fed:
+            carrier = results.ensure_carrier(result)
+            _drive(result, carrier, self.feeds.carrier_of(target.key))
+        else:
+            results.remove_carrier(result)
         results.write_positions(result, positions)
-        self.feeds.write(result, positions)
-        if mesh is not None:
-            results.set_mode(result, kind)
-            out.kind = kind
+        set_mode(target.mod, kind)
+        out.kind = kind
+        out.route = RouteKind.NODE if fed else RouteKind.RESULT
 
-    def feed(self, target: Target, feedable: bool) -> None:
-        """Feeds the result inside Blender's first evaluation (or stops feeding it)."""
-        st = target.st
-        result = st.output.result
-        if feedable:
-            self.feeds.ensure(result, st, st.settings.value.armature, st.binding.binding, st.output.buffer)
-        elif self.feeds.fed(result) is not None:
-            self.feeds.remove(result)
+    def fed_out(self, target: Target, depsgraph) -> np.ndarray | None:
+        """Where the feed's kernel writes this frame: the result mesh `depsgraph` evaluates."""
+        result = target.st.output.result
+        view = results.evaluated_positions(result, depsgraph) if result is not None else None
+        return view if view is not None and len(view) == len(target.st.output.buffer) else None
 
     def pass_through(self, target: Target) -> None:
-        self.pass_through_modifier(target.mod)
-
-    @staticmethod
-    def pass_through_modifier(mod) -> None:
-        result = nodes.get(mod, "Result")
-        if results.is_result(result) and result.library is None:
-            results.set_mode(result, ResultMode.OFF)
-
-    def pend(self, result) -> None:
-        """The node group outputs nothing until the frame handler writes (see `tracker.frame_pre`)."""
-        results.set_mode(result, ResultMode.PENDING)
+        set_mode(target.mod, ResultMode.OFF)
 
     def release(self, target: Target) -> None:
         self.release_result(target.st.output.result)
+        target.st.output.result = None
 
     def release_result(self, result) -> None:
         if result is None:
             return
         try:
-            self.feeds.remove(result)
             results.remove(result)
         except ReferenceError:
             pass
-
-    def remove_unused(self) -> None:
-        """Deletes the results nothing uses any more (their modifier or object was deleted)."""
-        for r in results.unused():
-            self.release_result(r)
 
     @staticmethod
     def detach(mod) -> None:
@@ -116,8 +126,35 @@ class ResultRoute:
 
     @staticmethod
     def attach(mod, result) -> None:
-        nodes.put(mod, "Result", result)
+        try:
+            nodes.put(mod, "Result", result)
+        except ReferenceError:
+            pass
+
+    def remove_unused(self) -> None:
+        """Deletes the results nothing uses any more (their modifier or object was deleted)."""
+        for r in results.unused():
+            self.release_result(r)
 
     @staticmethod
-    def mode_of(result) -> ResultMode:
-        return results.mode_of(result)
+    def positions(target: Target, depsgraph) -> np.ndarray | None:
+        """What the result shows in `depsgraph`, copied."""
+        result = target.st.output.result
+        view = results.evaluated_positions(result, depsgraph) if result is not None else None
+        return None if view is None else view.copy()
+
+
+def _drive(result, carrier, feed) -> None:
+    """The carrier's angle driven by the feed's property (always 0: the driver orders it)."""
+    fc = result.animation_data.drivers.find(f'modifiers["{carrier.name}"].angle') if result.animation_data else None
+    if fc is None:
+        fc = carrier.driver_add("angle")
+        driver = fc.driver
+        driver.type = "SCRIPTED"
+        v = driver.variables.new()
+        v.name, v.type = "go", "SINGLE_PROP"
+        driver.expression = "0 * go"
+    v = fc.driver.variables[0]
+    if v.targets[0].id != feed:
+        v.targets[0].id = feed
+        v.targets[0].data_path = PATH

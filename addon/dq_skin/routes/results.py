@@ -6,18 +6,24 @@ one), local to the current file even when the character is a library override, l
 scene (the modifier's reference keeps it evaluated), and runtime data: Blender never writes a
 result, its mesh or anything of theirs to a file.
 
+A result fed inside Blender's evaluation carries a *carrier*: a deform-only modifier doing
+nothing (SimpleDeform bending by 0, its angle driven by the feed), which orders the result's
+evaluation after the feed and makes Blender copy the positions the feed wrote into its own
+(with fresh caches: bounds, normals).
+
 Each result records its owner (the object's session uid and the modifier's persistent id): a
 copied object or modifier that still points at another modifier's result gets one of its own.
 """
 
 from __future__ import annotations
 
-from types import MappingProxyType
+import ctypes
+
+import numpy as np
 
 import bpy
 
 from ..blender import compat
-from ..model.state import ResultMode
 
 TAG = "dq_skin_result"
 OWNER_OBJECT = "dq_skin_owner_object"
@@ -42,7 +48,7 @@ def owned_by(result, obj, mod) -> bool:
 
 
 def create(obj, mod):
-    """A new, empty result object for `mod` on `obj` (its transform says "pass through")."""
+    """A new, empty result object for `mod` on `obj`."""
     name = f".DQ Skin result {obj.name} {mod.name}"
     mesh = _runtime(bpy.data.meshes.new(name))
     result = _runtime(bpy.data.objects.new(name, mesh))
@@ -71,42 +77,6 @@ def remove(result) -> None:
 def unused() -> list:
     """The results nothing uses any more (their modifier or object was deleted)."""
     return [o for o in bpy.data.objects if is_result(o) and o.users == 0 and o.library is None]
-
-
-# What a result object's transform asks the node group to do (see `nodes`).
-_TRANSFORMS = MappingProxyType(
-    {
-        ResultMode.OFF: ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
-        ResultMode.REPLACE: ((1.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
-        ResultMode.POSITIONS: ((0.0, 0.0, 0.0), (2.0, 2.0, 2.0)),
-    }
-)
-SCALE_POSITIONS = 2.0
-
-
-def set_mode(result, mode: ResultMode) -> None:
-    """Tells the node group what to do with the result (writes only what changes)."""
-    if mode is ResultMode.PENDING:
-        if result.location.z != 1.0:
-            result.location.z = 1.0
-        return
-    loc, scale = _TRANSFORMS[mode]
-    if tuple(result.location) != loc:
-        result.location = loc
-    if tuple(result.scale) != scale:
-        result.scale = scale
-
-
-def mode_of(result) -> ResultMode:
-    if result is None:
-        return ResultMode.OFF
-    if result.location.z > 0:
-        return ResultMode.PENDING
-    if result.location.x > 0:
-        return ResultMode.REPLACE
-    if result.scale.x == SCALE_POSITIONS:
-        return ResultMode.POSITIONS
-    return ResultMode.OFF
 
 
 def copy_mesh(result, source_mesh) -> None:
@@ -148,3 +118,40 @@ def write_positions(result, positions) -> None:
         v.co = v.co
     else:
         mesh.update()
+
+
+CARRIER = "DQ Skin carrier"
+
+
+def ensure_carrier(result):
+    """The result's carrier modifier (made if missing); returns it."""
+    m = result.modifiers.get(CARRIER)
+    if m is None or m.type != "SIMPLE_DEFORM":
+        if m is not None:
+            result.modifiers.remove(m)
+        m = result.modifiers.new(CARRIER, "SIMPLE_DEFORM")
+        m.deform_method = "BEND"
+        m.angle = 0.0  # (Blender's bend returns at once below its tolerance: no vertex is touched)
+    return m
+
+
+def remove_carrier(result) -> None:
+    m = result.modifiers.get(CARRIER)
+    if m is not None:
+        result.driver_remove(f'modifiers["{CARRIER}"].angle')
+        result.modifiers.remove(m)
+
+
+def evaluated_positions(result, depsgraph) -> np.ndarray | None:
+    """The position array of `result`'s mesh as `depsgraph` evaluates it (its copy-on-evaluation
+    data, which the carrier copies from), as a writable `(V, 3)` float32 view of Blender's
+    memory; None if it has no vertices. Valid until Blender evaluates that mesh again: taken anew
+    every time it is written."""
+    mesh = result.data.evaluated_get(depsgraph)
+    n = len(mesh.vertices)
+    if not n:
+        return None
+    # (Writable access: Blender gives the evaluated mesh an array of its own first if it shared
+    # the original's.)
+    address = mesh.attributes["position"].data[0].as_pointer()
+    return np.ctypeslib.as_array((ctypes.c_float * (3 * n)).from_address(address)).reshape(n, 3)

@@ -272,8 +272,8 @@ fn skin<'py>(
 /// Built with the arguments of :func:`skin` and checked then, against the influences, with
 /// errors naming the argument; ``out`` is allocated when not given. The job keeps references to
 /// its arrays and reads them when it runs, so they may be filled in place between runs. The
-/// inputs that change every frame, ``positions``, ``deform``, ``premat`` and ``postmat``, can be
-/// replaced (``job.deform = ...``), checked the same way (a refused value leaves the job as it
+/// inputs that change every frame, ``positions``, ``deform``, ``premat`` and ``postmat``, and the
+/// ``out`` array, can be replaced (``job.deform = ...``), checked the same way (a refused value leaves the job as it
 /// was); everything is checked again when the job runs. Values the kernel checks (mask and blend
 /// amounts and ``blend_factor`` in ``[0, 1]``, premat/postmat affine, every bone matrix usable)
 /// make that job's entry of :func:`skin_many` an error message.
@@ -477,10 +477,22 @@ impl SkinJob {
         optional(self.centers.as_ref(), py)
     }
 
-    /// The ``(V, 3)`` float32 array the result is written to.
+    /// The ``(V, 3)`` float32 array the result is written to (settable: a writable,
+    /// C-contiguous array of the same shape, such as a view of memory the caller owns).
     #[getter]
     fn out(&self, py: Python<'_>) -> Py<PyAny> {
         self.out.clone_ref(py)
+    }
+
+    #[setter]
+    fn set_out(&mut self, py: Python<'_>, value: Bound<'_, PyAny>) -> PyResult<()> {
+        guard(|| {
+            let (v, _) = self.counts(py);
+            let checked = arrays::readwrite::<f32>(&value, "out", &[Some(v), Some(3)], &["V"]).map(drop);
+            sized_by_influences(&value, v, "vertices", checked)?;
+            self.out = value.unbind();
+            Ok(())
+        })
     }
 
     fn __repr__(&self, py: Python<'_>) -> String {

@@ -3,6 +3,7 @@ Blender binary here): Blender enables the installed extensions, then calls the f
 extension registered with `bpy.utils.register_cli_command` and exits with its return value.
 Usage: python as_blender_command.py ARGS..."""
 
+import os
 import sys
 
 import bpy  # noqa: F401  (first: it makes Blender's own modules importable)
@@ -17,4 +18,10 @@ cli = sys.modules[f"{EXTENSION}.cli.command"]
 session = sys.modules[EXTENSION].SESSION
 # Blender accepted the registration (register_cli_command raises otherwise) under this name.
 assert cli.COMMAND == "dq_skin" and len(session.commands) == 1, session.commands
-sys.exit(cli.execute(sys.argv[1:]))
+code = cli.execute(sys.argv[1:])
+# Blender's own exit frees the file's data while Python still runs; the bpy module frees it from
+# a C exit hook after Python has finalized, which on 4.2 crashes on any Python driver's compiled
+# expression (DQ Skin's feed has one): end as the launcher does, once everything is written.
+sys.stdout.flush()
+sys.stderr.flush()
+os._exit(code)

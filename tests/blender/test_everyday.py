@@ -28,6 +28,7 @@ from dqtest import (
     import_character,
     output_of,
     perturbed,
+    reference_copy,
     select_only,
     stack,
     status,
@@ -338,8 +339,9 @@ def test_removing_the_mask_group_gives_a_steady_result(dq_skin):
 def test_corrective_smooth_after_dq_skin(dq_skin, assets, method):
     """Corrective Smooth turns the last float bits of its input into far larger differences on
     this mesh (sliver triangles): a perturbation of 2e-7 of the diagonal, what two exact
-    skinnings differ by, moves its output by about 5e-5. DQ Skin's stack is measured against
-    the Armature stack and against that amplification of Blender's own."""
+    skinnings differ by, moves its output by about 5e-5. For Linear and Dual Quaternion DQ Skin
+    hands over to Blender's own deformation there: the stack matches the Armature stack to 1e-6
+    of the size (and without Corrective Smooth, DQ Skin deforms again, exact)."""
     body, arm_mod = import_character(assets / "CesiumMan.glb")
     body.modifiers.new("Corrective Smooth", "CORRECTIVE_SMOOTH")
     ref = body.copy()
@@ -356,10 +358,11 @@ def test_corrective_smooth_after_dq_skin(dq_skin, assets, method):
         ours.append(deviation(evaluated_positions(body), r))
         blenders.append(deviation(evaluated_positions(noisy), r))
     assert max(blenders) > REL_TOL  # the amplification is real
-    assert max(ours) <= 2 * max(blenders), (ours, blenders)
-    assert max(ours) <= 1e-4, ours
+    assert max(ours) <= 1e-6, ours
+    assert "Corrective Smooth" in status(dq_skin, body).message
     body.modifiers["Corrective Smooth"].show_viewport = ref.modifiers["Corrective Smooth"].show_viewport = False
     bpy.context.scene.frame_set(11)
+    assert status(dq_skin, body).live
     assert_same(body, ref)  # what reaches Corrective Smooth is exact
 
 
@@ -451,3 +454,56 @@ def test_rigify_regenerate_with_dq_skin_characters_skins_once_when_it_settles(dq
     bpy.context.scene.frame_set(9)
     assert 1 <= sum(skinned) <= 2
     check_frames(list(zip((body, second), refs)), frames=(9, 14, 20))
+
+
+# -- every setting acts ---------------------------------------------------------------------------
+
+
+def test_blend_amount_as_one_value_blends(dq_skin):
+    """Without a vertex group the Blend Amount is one value for every vertex, scaled by the
+    Blend Factor: amount 0.25 with factor 1 is factor 0.25 with amount 1, and neither is all Dual
+    Quaternion."""
+    obj, arm, _ = animated_tube()
+    mod = add_dq_skin(obj, "BLEND")
+    nodes = dq_skin.blender.nodes
+    shown = {}
+    for amount, factor in ((1.0, 1.0), (0.25, 1.0), (1.0, 0.25), (0.5, 0.5), (0.0, 1.0)):
+        nodes.put(mod, "Blend Amount", amount)
+        nodes.put(mod, "Blend Factor", factor)
+        bpy.context.view_layer.update()
+        bpy.context.scene.frame_set(9)
+        shown[(amount, factor)] = evaluated_positions(obj)
+        assert status(dq_skin, obj).live
+    assert deviation(shown[(0.25, 1.0)], shown[(1.0, 0.25)]) <= 1e-6
+    assert deviation(shown[(0.25, 1.0)], shown[(1.0, 1.0)]) > 1e-3, "the amount changed nothing"
+    assert deviation(shown[(0.5, 0.5)], shown[(0.25, 1.0)]) <= 1e-6
+    linear, dual = (reference_copy(obj, pv) for pv in (False, True))
+    assert deviation(shown[(0.0, 1.0)], evaluated_positions(linear)) <= REL_TOL
+    assert deviation(shown[(1.0, 1.0)], evaluated_positions(dual)) <= REL_TOL
+
+
+@pytest.mark.parametrize("invert", [False, True])
+@pytest.mark.parametrize("change", ["deleted", "renamed"])
+def test_the_mask_follows_blenders_rules(dq_skin, invert, change):
+    """A mask group deleted (from the Vertex Groups panel) or renamed: as with Blender's Armature
+    modifier, whose group name stays and finds no group: the mesh is deformed unmasked."""
+    obj, arm, arm_mod = animated_tube()
+    g = obj.vertex_groups.new(name="Mask")
+    g.add(list(range(0, len(obj.data.vertices), 2)), 0.3, "REPLACE")
+    arm_mod.vertex_group, arm_mod.invert_vertex_group = "Mask", invert
+    add_dq_skin(obj, "LINEAR")
+    ref = twin(obj, share_mesh=False)
+    bpy.context.scene.frame_set(9)
+    assert_same(obj, ref, "masked")
+    for o in (obj, ref):
+        if change == "renamed":
+            o.vertex_groups["Mask"].name = "Renamed"
+        else:
+            o.vertex_groups.active_index = o.vertex_groups["Mask"].index
+            with bpy.context.temp_override(object=o, active_object=o):
+                assert bpy.ops.object.vertex_group_remove() == {"FINISHED"}
+    bpy.context.view_layer.update()
+    for f in (10, 14):
+        bpy.context.scene.frame_set(f)
+        assert_same(obj, ref, f"after the mask group was {change}, frame {f}")
+    assert status(dq_skin, obj).live

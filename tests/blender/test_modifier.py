@@ -316,3 +316,27 @@ def test_missing_armature_is_reported_and_passes_the_mesh_through(dq_skin):
     bpy.context.scene.frame_set(5)
     assert dq_skin.SESSION.status_of(obj, mod).message == "No armature object set"
     np.testing.assert_allclose(evaluated_positions(obj), rig_positions(obj), atol=1e-6)
+
+
+def test_adding_dq_skin_twice_is_refused_with_a_reason(dq_skin):
+    """A mesh parented to its armature, with DQ Skin: adding DQ Skin again (the Add Modifier menu)
+    would deform it a second time. Refused, saying so; the stack and the result stay."""
+    obj, arm, arm_mod = rig_tube()
+    obj.parent = arm
+    add_dq_skin(obj, "DUAL_QUATERNION")
+    bpy.context.scene.frame_set(2)
+    before = [(m.name, m.type) for m in obj.modifiers]
+    shown = evaluated_positions(obj)
+    bpy.context.view_layer.objects.active = obj
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        with pytest.raises(RuntimeError, match="already has DQ Skin"):
+            bpy.ops.object.dq_skin_add()
+    assert [(m.name, m.type) for m in obj.modifiers] == before
+    bpy.context.view_layer.update()
+    assert deviation(evaluated_positions(obj), shown) == 0.0
+    # A second armature's modifier is a second DQ Skin's own (two armatures, two deformations).
+    second = obj.modifiers.new("Armature.001", "ARMATURE")
+    second.object = arm
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_add() == {"FINISHED"}
+    assert len([m for m in obj.modifiers if m.type == "NODES"]) == 2

@@ -6,10 +6,13 @@ the comparison shows what it is for: no candy wrapper, no bulge."""
 from __future__ import annotations
 
 import math
+import sys
 import time
+from pathlib import Path
 
+import numpy as np
 import pytest
-from dqtest import REL_TOL, add_dq_skin, deviation, evaluated_positions, import_character
+from dqtest import REL_TOL, add_dq_skin, animate, deviation, evaluated_positions, import_character, moved
 from scenes import rig_tube
 
 import bpy
@@ -256,3 +259,49 @@ def test_files_from_before_the_method_get_it_on_load(dq_skin, tmp_path):
     assert dq_skin.blender.nodes.get_method(mod) == "Linear"
     assert dq_skin.blender.nodes.put_method(mod, "Optimized Centers") is not False
     assert dq_skin.blender.nodes.get_method(mod) == "Optimized Centers"
+
+
+def _references():
+    """The float64 references of the module's tests (tests/python/centers_reference.py)."""
+    here = str(Path(__file__).resolve().parents[1] / "python")
+    if here not in sys.path:
+        sys.path.insert(0, here)
+    import centers_reference
+
+    return centers_reference
+
+
+@pytest.mark.parametrize("deformation", ["B-Bones", "envelopes", "B-Bones and envelopes"])
+def test_centers_on_b_bones_and_envelopes_equal_the_brute_force(dq_skin, deformation):
+    """With B-Bones and envelopes the centers come from the influences DQ Skin skins with (over
+    the bones and the B-Bones' segment joints): the precompute equals the paper's formula on
+    those influences, and each frame equals the float64 reference of the per-frame formula."""
+    from test_pose_memory import bbone_rig
+
+    ref = _references()
+    obj, arm, arm_mod = bbone_rig(segments=4 if "B-Bones" in deformation else 1)
+    animate(arm)
+    if "envelopes" in deformation:
+        arm_mod.use_bone_envelopes = True
+        for b in arm.data.bones:
+            b.envelope_distance, b.head_radius, b.tail_radius = 0.3, 0.5, 0.5
+        group = obj.vertex_groups[0]
+        group.remove(list(range(0, len(obj.data.vertices), 5)))  # some vertices by envelopes alone
+    mod = add_dq_skin(obj, "CENTERS_OF_ROTATION")
+    for frame in (1, 9, 14):
+        bpy.context.scene.frame_set(frame)
+        st = dq_skin.SESSION.state_of(obj, mod)
+        assert st.status.live, st.status.message
+        job = st.output.job
+        infl = job.influences
+        assert len(job.deform) > infl.bone_count - 1 and (infl.bone_count > len(arm.data.bones) or "B-Bones" not in deformation)
+        positions = dq_skin.blender.rig.mesh_positions(obj.data)
+        triangles = dq_skin.engine.centers.triangles_of(obj.data)
+        want, has = ref.brute_force_centers(positions, triangles, infl)
+        got = st.binding.centers
+        diag = ref.diagonal(positions)
+        assert has.any() and np.abs(got[has] - want[has]).max() <= 1e-5 * diag
+        np.testing.assert_array_equal(got[~has], positions[~has])
+        expected = ref.reference_skin(positions, got, infl, job.deform, job.rest, premat=job.premat, postmat=job.postmat)
+        assert deviation(evaluated_positions(obj), expected) <= 5e-5
+    assert moved(obj) > 0.1

@@ -194,6 +194,23 @@ def _own_simulation(obj, mod) -> str:
     return ""
 
 
+# Modifiers whose result magnifies the last float bits of their input many times (Corrective
+# Smooth's tangent frames on sliver triangles: 2e-7 of the size in, 5e-5 out).
+MAGNIFIERS = MappingProxyType({"CORRECTIVE_SMOOTH": "Corrective Smooth"})
+
+
+def magnifier_reason(obj, mod, render: bool) -> str:
+    """A modifier after DQ Skin, on in the viewport (or renders), that magnifies the last float
+    bits of what reaches it ("" if none): there only Blender's own deformation gives Blender's
+    own result."""
+    mods = list(obj.modifiers)
+    for later in mods[mods.index(mod) + 1 :]:
+        label = MAGNIFIERS.get(later.type)
+        if label and (later.show_render if render else later.show_viewport):
+            return f"{label} after it magnifies the last float bits of its input: Blender's Armature modifier deforms (the same deformation, bit for bit)"
+    return ""
+
+
 def simulation_reason(scan: Scan, obj, mod) -> str:
     label = _own_simulation(obj, mod)
     if label:

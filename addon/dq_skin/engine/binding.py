@@ -44,8 +44,8 @@ def binding(obj, arm, arm_eval, st: ModifierState, s: Settings, data: MeshData, 
         cache.key = key
         st.output.invalidate()
     st.needs_effective = s.use_envelopes or cache.uses_envelopes or cache.uses_bbones
-    if s.method == dqskin.Method.CENTERS_OF_ROTATION:
-        centers_of(obj, st, data, cache.binding, ctx)
+    if s.method == dqskin.Method.CENTERS_OF_ROTATION and not st.needs_effective:
+        centers_of(obj, st, data, cache.binding.influences, ctx)
     return cache.binding
 
 
@@ -53,6 +53,8 @@ def job(st: ModifierState, s: Settings, positions, influences, deform, rest, pre
     """The `dqskin.SkinJob` of one modifier: its settings, kept data and output (checked here:
     a bad input, a bone scaled to NaN say, is this modifier's error, shown on its panel)."""
     method = s.method
+    # The Blend Amount is a vertex group, or one value for every vertex (scaled by the factor).
+    factor = s.blend_factor if s.blend_group else s.blend_factor * s.blend_amount
     try:
         return dqskin.SkinJob(
             positions,
@@ -64,7 +66,7 @@ def job(st: ModifierState, s: Settings, positions, influences, deform, rest, pre
             postmat=postmat,
             mask=st.binding.binding.mask,
             blend=st.binding.blend if method == dqskin.Method.BLEND else None,
-            blend_factor=s.blend_factor,
+            blend_factor=factor,
             out=st.output.buffer,
             centers=st.binding.centers if method == dqskin.Method.CENTERS_OF_ROTATION else None,
         )
@@ -72,18 +74,18 @@ def job(st: ModifierState, s: Settings, positions, influences, deform, rest, pre
         raise SkinError(str(e)) from None
 
 
-def centers_of(obj, st: ModifierState, data: MeshData, bound: rig.Binding, ctx: Context) -> None:
-    """Puts the Optimized Centers of Rotation for this binding in `st.binding.centers`: kept,
-    found in the cache, computed now (small meshes, command line, renders), or started in the
-    background (the SkinError that says so lets Blender's deformation stand in until they are
-    ready)."""
-    if st.needs_effective:
-        raise SkinError("Optimized Centers works with vertex groups only, not with envelopes or B-Bones: choose another method")
-    if st.binding.centers is not None:
+def centers_of(obj, st: ModifierState, data: MeshData, influences, ctx: Context) -> None:
+    """Puts the Optimized Centers of Rotation for `influences` (the binding's; with envelopes or
+    B-Bones, the influences DQ Skin skins with, over the bones and the B-Bones' segment joints)
+    in `st.binding.centers`: kept, found in the cache, computed now (small meshes, command line,
+    renders), or started in the background (the SkinError that says so lets Blender's
+    deformation stand in until they are ready)."""
+    cache = st.binding
+    if cache.centers is not None and cache.centers_of is influences:
         return
     store = ctx.session.centers
     triangles = centers.triangles_of(obj.data)
-    key = centers.key_of(data.positions, triangles, bound.influences)
+    key = centers.key_of(data.positions, triangles, influences)
     got = store.lookup(key, data.vertex_count)
     if got is None:
         running = store.job_of(key)
@@ -92,13 +94,13 @@ def centers_of(obj, st: ModifierState, data: MeshData, bound: rig.Binding, ctx: 
         if data.vertex_count <= centers.INLINE_VERTICES or centers.in_background() or ctx.render:
             label = f"Optimized Centers for {obj.name} ({data.vertex_count} vertices)" if centers.in_background() else ""
             try:
-                got = store.compute(data.positions, triangles, bound.influences, key, label=label)
+                got = store.compute(data.positions, triangles, influences, key, label=label)
             except centers.Cancelled:
                 raise SkinError("Optimized Centers: cancelled") from None
         else:
-            running = store.start(data.positions, triangles, bound.influences, key, obj.name)
+            running = store.start(data.positions, triangles, influences, key, obj.name)
             raise SkinError(
                 f"Optimized Centers: computing for {data.vertex_count} vertices ({running.fraction:.0%}); "
                 "Blender's deformation shows until they are ready"
             )
-    st.binding.centers = got
+    cache.centers, cache.centers_of = got, influences

@@ -98,6 +98,8 @@ class FedFrame:
         if key == old:
             return None  # already this (what the carrier reads holds it)
         if influences is not job.influences:
+            if s.method == dqskin.Method.CENTERS_OF_ROTATION:
+                return None  # other influences need their own centers: the full evaluation computes them
             job = out.job = binding.job(st, s, positions, influences, deform, rest, premat, postmat)
         else:
             if job.positions is not positions:

@@ -123,7 +123,8 @@ def _where_it_deforms(obj, mod, s: Settings, ctx: Context, exporting: str) -> tu
     blender_method = s.blender_method
     simulation = consumers.simulation_reason(ctx.session.scan.ensure(ctx.structure), obj, mod) if blender_method else ""
     mode = consumers.mode_reason(obj) if blender_method else ""
-    reasons = decisions.hand_over(exporting, in_edit, simulation, mode, blender_method)
+    magnifier = (consumers.magnifier_reason(obj, mod, False), consumers.magnifier_reason(obj, mod, True)) if blender_method else ("", "")
+    reasons = decisions.hand_over(exporting, in_edit, simulation, mode, blender_method, magnifier)
     return decisions.deforms_where(mod.show_viewport, mod.show_render, reasons), reasons.for_render(ctx.render)
 
 
@@ -254,6 +255,8 @@ def _prepare(obj, obj_eval, target: Target, s: Settings, ctx: Context, source, p
             bones, bound, arm_eval, positions, input_key, premat, s.use_vertex_groups, s.use_envelopes, cache.envelopes, cache.segments
         )
         deform, rest = bones.deform, bones.rest
+        if s.method == dqskin.Method.CENTERS_OF_ROTATION:
+            binding.centers_of(obj, st, data, influences, ctx)
     out.job = binding.job(st, s, positions, influences, deform, rest, premat, postmat)
     return Plan(
         target, s, kind, route, key, out.job, deforms, start, render=ctx.render, data=data, previous=previous, scene=_scene(obj, ctx)

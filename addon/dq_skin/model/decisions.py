@@ -94,14 +94,16 @@ class Reasons:
         return self.render if render else self.viewport
 
 
-def hand_over(exporting: str, armature_in_edit_mode: bool, simulation: str, mode: str, blender_method: bool) -> Reasons:
+def hand_over(
+    exporting: str, armature_in_edit_mode: bool, simulation: str, mode: str, blender_method: bool, magnifier: tuple[str, str] = ("", "")
+) -> Reasons:
     """Why DQ Skin hands its object over to Blender's own deformation, where that is exactly DQ
     Skin's: the armature is in Edit Mode (the rest pose shows, which every method leaves as it
     is); and for Linear and Dual Quaternion, whatever Blender computes through its Armature
-    modifier's own data: an exporter that skins from it (`exporting`), a simulation on or around
-    the object (`simulation`, which would amplify the last float bits in which two exact
-    skinnings differ), and, in the viewport, brushes and Edit Mode (`mode`: they map through its
-    deform matrices exactly). Each is the reason, or "". DQ Skin's own methods are never handed
+    modifier's own data or bits: an exporter that skins from it (`exporting`), a simulation on or
+    around the object (`simulation`) or a modifier after it that magnifies the last float bits
+    in which two exact skinnings differ (`magnifier`: viewport, render), and, in the viewport,
+    brushes and Edit Mode (`mode`: they map through its deform matrices exactly). Each is the reason, or "". DQ Skin's own methods are never handed
     over for those: Blender has no such deformation, and a deform-only carrier serves them
     (`route_for`)."""
     if armature_in_edit_mode:
@@ -110,7 +112,7 @@ def hand_over(exporting: str, armature_in_edit_mode: bool, simulation: str, mode
     if not blender_method:
         return Reasons()
     common = exporting or simulation
-    return Reasons(viewport=common or mode, render=common)
+    return Reasons(viewport=common or mode or magnifier[0], render=common or magnifier[1])
 
 
 def deforms_where(show_viewport: bool, show_render: bool, reasons: Reasons) -> tuple[bool, bool]:

@@ -82,9 +82,10 @@ class BindingCache:
     uses_envelopes: bool = False
     uses_bbones: bool = False
     centers: np.ndarray | None = field(default=None, repr=False)  # Optimized Centers of this binding
+    centers_of: object = None  # the influences they were computed for (with B-Bones: this frame's)
 
     def clear(self) -> None:
-        self.key = self.binding = self.blend = self.envelopes = self.segments = self.centers = None
+        self.key = self.binding = self.blend = self.envelopes = self.segments = self.centers = self.centers_of = None
         self.uses_envelopes = self.uses_bbones = False
 
 

@@ -151,10 +151,17 @@ class OBJECT_OT_dq_skin_add(ActiveMeshOperator):
         """Adds DQ Skin to `obj`; returns what is wrong instead, if anything."""
         if obj.library is not None:
             return f"{obj.name} is linked from a library: make a Library Override first"
-        taken = {nodes.get_companion(m).get("name") for m in dq_skin_modifiers(obj)}
+        existing = dq_skin_modifiers(obj)
+        taken = {nodes.get_companion(m).get("name") for m in existing}
         armature_mods = [m for m in obj.modifiers if m.type == "ARMATURE" and m.name not in taken]
         made = None
         if not armature_mods:
+            if existing:
+                # Another one would deform the mesh a second time with the same armature.
+                return (
+                    f"{obj.name} already has DQ Skin ({', '.join(m.name for m in existing)}) for each of its Armature "
+                    "modifiers: change its settings instead, or add an Armature modifier for another armature first"
+                )
             if obj.parent is None or obj.parent.type != "ARMATURE":
                 return (
                     f"{obj.name} has no Armature modifier and is not parented to an armature: add an "

@@ -1,6 +1,7 @@
 """A character with a generated Rigify rig, as artists make one: Blender's bundled `rigify`
 add-on, the human metarig, a body mesh fitted to it, `pose.rigify_generate`, automatic weights
-and an animation that bends, twists and scales. Used by the tests and by `bench/blender_bench.py`.
+and an animation that bends, twists and scales (FK arms and left leg, an IK right leg, scaled
+tweak bones). Used by the tests and by `bench/blender_bench.py`.
 
 The body is a Skin modifier over the metarig's body bones (the face bones left out), applied and
 subdivided twice: one closed mesh of about 14,000 vertices. The generated rig has 160 deforming
@@ -38,9 +39,13 @@ MOTION = [
     ("shin_fk.L", (1, 0, 0), 1.3, None),
     ("thigh_fk.R", (0, 1, 0), 0.8, None),
     ("shin_fk.R", (1, 0, 0), 0.6, None),
+    ("forearm_tweak.L", (0, 1, 0), 0.3, (1.3, 1.0, 1.3)),  # a scaled tweak: the B-Bones' ends scale
+    ("shin_tweak.L", (1, 0, 0), 0.2, (0.8, 1.0, 0.8)),
 ]
-# The IK/FK switches of the four limbs, set to FK so that the FK controls above drive them.
-LIMBS = ("upper_arm_parent.L", "upper_arm_parent.R", "thigh_parent.L", "thigh_parent.R")
+# The IK/FK switches of the limbs (1: FK, 0: IK): the arms and the left leg follow the FK controls
+# above, the right leg its IK foot (moved by IK_FOOT at full amount).
+LIMBS = {"upper_arm_parent.L": 1.0, "upper_arm_parent.R": 1.0, "thigh_parent.L": 1.0, "thigh_parent.R": 0.0}
+IK_FOOT = ("foot_ik.R", (0.0, -0.25, 0.3))
 
 
 def _in_face(bone) -> bool:
@@ -105,10 +110,13 @@ def body_mesh(metarig):
 
 def animate(rig, frames=(1, 20, 40)) -> None:
     """Keys the controls of `MOTION` at `frames`: rest, full, then half way back."""
-    for name in LIMBS:
-        rig.pose.bones[name]["IK_FK"] = 1.0
+    for name, fk in LIMBS.items():
+        rig.pose.bones[name]["IK_FK"] = fk
     for k, frame in enumerate(frames):
         amount = (0.0, 1.0, 0.5)[k % 3]
+        foot, offset = IK_FOOT
+        rig.pose.bones[foot].location = tuple(amount * x for x in offset)
+        rig.pose.bones[foot].keyframe_insert("location", frame=frame)
         for name, axis, angle, scale in MOTION:
             pb = rig.pose.bones[name]
             pb.rotation_mode = "QUATERNION"

@@ -137,11 +137,22 @@ def _in_edit_mode(ctx: Context, target: Target, s: Settings, deforms) -> bool:
     if not st.status.live or out.buffer is None or len(out.buffer) != len(target.obj.data.vertices):
         raise SkinError("The mesh is in Edit Mode (DQ Skin deforms it again in Object Mode)")
     if out.route is not RouteKind.CACHE:
+        if out.route is RouteKind.NODE:
+            # The feed wrote the last frames into the result's evaluated mesh, not the buffer.
+            fed = ctx.session.routes.result.fed_out(target, ctx.depsgraph)
+            if fed is not None:
+                out.buffer[:] = fed
         ctx.session.routes.publish(
             target, RouteKind.CACHE, out.buffer, out.kind, None, deforms, _member(target, s, RouteKind.CACHE, None), _scene(target.obj, ctx)
         )
         out.written = None  # computed again in Object Mode
-    st.status.notes = ("Edit Mode: the pose of Object Mode shows; edits take effect in Object Mode",)
+    else:
+        ctx.session.routes.cache.show_like_modifier(target)
+    if target.mod.show_in_editmode:
+        note = "Edit Mode: the pose of Object Mode shows; edits take effect in Object Mode"
+    else:
+        note = "Edit Mode: the rest mesh shows (the modifier's Edit Mode display is off)"
+    st.status.notes = (note,)
     return False
 
 
@@ -283,12 +294,15 @@ def _scene(obj, ctx: Context):
 def _member(target: Target, s: Settings, route: RouteKind, previous) -> Member:
     bound = target.st.binding.binding
     obj = target.obj
+    names = tuple(bound.bone_names)
+    bones = s.armature.data.bones
     return Member(
         target.key,
         target,
         route,
         s.armature,
-        tuple(bound.bone_names),
+        names,
+        tuple(n for n in names if (b := bones.get(n)) is not None and b.bbone_segments > 1),
         obj.data.shape_keys,
         list(obj.modifiers).index(target.mod),
         previous,

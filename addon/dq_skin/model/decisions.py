@@ -103,14 +103,17 @@ def hand_over(
     modifier's own data or bits: an exporter that skins from it (`exporting`), a simulation on or
     around the object (`simulation`) or a modifier after it that magnifies the last float bits
     in which two exact skinnings differ (`magnifier`: viewport, render), and, in the viewport,
-    brushes and Edit Mode (`mode`: they map through its deform matrices exactly). Each is the reason, or "". DQ Skin's own methods are never handed
-    over for those: Blender has no such deformation, and a deform-only carrier serves them
+    brushes and Edit Mode (`mode`: they map through its deform matrices exactly). Each is the
+    reason, or "". An exporter that writes a skin hands over every method: the file carries the
+    rest mesh, the weights and the armature, which other programs skin with their own method
+    (the export says so, see `exports`). DQ Skin's own methods are never handed over for
+    anything else: Blender has no such deformation, and a deform-only carrier serves them
     (`route_for`)."""
     if armature_in_edit_mode:
         common = "The armature is in Edit Mode: the rest pose shows (the same for every method)"
         return Reasons(viewport=common, render=common)
     if not blender_method:
-        return Reasons()
+        return Reasons(viewport=exporting, render=exporting)
     common = exporting or simulation
     return Reasons(viewport=common or mode or magnifier[0], render=common or magnifier[1])
 

@@ -86,6 +86,8 @@ def add_cache_modifier(obj, mod, path, frame_start: int):
     cache.time_mode = "FRAME"
     cache.deform_mode = "OVERWRITE"
     cache.forward_axis, cache.up_axis = "POS_Y", "POS_Z"
+    # Shown in Edit Mode (and on the cage) where DQ Skin was: the baked character edits as the live one.
+    cache.show_in_editmode, cache.show_on_cage = mod.show_in_editmode, mod.show_on_cage
     first_simulation = next(iter(_simulations_before(obj, mod)), None)
     index = list(obj.modifiers).index(first_simulation if first_simulation else mod) + (0 if first_simulation else 1)
     with bpy.context.temp_override(object=obj, active_object=obj):

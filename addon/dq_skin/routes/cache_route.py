@@ -63,6 +63,12 @@ def _place(obj, mod, carrier) -> None:
         obj.modifiers.move(now, at if now > at else at - 1)
 
 
+def show_like(carrier, mod) -> None:
+    for attr in ("show_in_editmode", "show_on_cage"):
+        if getattr(carrier, attr) != getattr(mod, attr):
+            setattr(carrier, attr, getattr(mod, attr))
+
+
 def remove_orphans(obj) -> None:
     """Carriers no DQ Skin modifier follows any more (a copy's, whose DQ Skin was removed before
     the add-on saw it) go."""
@@ -101,10 +107,15 @@ class CacheRoute:
         _place(obj, mod, carrier)
         if carrier.filepath != path:
             carrier.filepath = path
-        for attr in ("show_in_editmode", "show_on_cage"):
-            if getattr(carrier, attr) != getattr(mod, attr):
-                setattr(carrier, attr, getattr(mod, attr))
+        show_like(carrier, mod)
         return carrier
+
+    def show_like_modifier(self, target: Target) -> None:
+        """The carrier shows in Edit Mode and on the cage where its DQ Skin modifier does (the
+        user may switch those while the carrier stays)."""
+        carrier = carrier_of(target.obj, target.mod)
+        if carrier is not None:
+            show_like(carrier, target.mod)
 
     def write(self, target: Target, positions: np.ndarray, deforms: tuple[bool, bool]) -> None:
         """Publishes `positions` outside Blender's evaluation: the file, the carrier on where DQ

@@ -40,6 +40,7 @@ class Member:
     kind: RouteKind
     armature: object
     bones: tuple  # the bound bone names the batch's variables follow
+    bbones: tuple = ()  # those that are B-Bones (their variables wait for the segments)
     shape_keys: object = None  # the mesh's Key, whose values come each frame
     order: int = 0  # the modifier's index in its stack (a chain's earlier modifier first)
     previous: object = None  # the ModifierState of the DQ Skin before it, whose output reaches it
@@ -85,7 +86,12 @@ class Feeds:
         if old is not None and old is not batch:
             self.leave(member.key)
         known = batch.members.get(member.key)
-        if known is not None and (known.armature, known.bones, known.shape_keys) == (member.armature, member.bones, member.shape_keys):
+        if known is not None and (known.armature, known.bones, known.bbones, known.shape_keys) == (
+            member.armature,
+            member.bones,
+            member.bbones,
+            member.shape_keys,
+        ):
             known.target, known.kind, known.order, known.previous = member.target, member.kind, member.order, member.previous
             return batch
         batch.members[member.key] = member

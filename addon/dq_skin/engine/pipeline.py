@@ -29,6 +29,8 @@ from ..routes.result_route import MeshSource
 from . import binding, companions, inputs
 from .context import Context, Plan, SkinError, dq_skin_modifiers, mod_key
 
+CENTERS_UPDATING = "Optimized Centers: updating for the new weights (the last centers show meanwhile)"
+
 
 def evaluate_object(obj, ctx: Context, force: bool = False) -> bool:
     """Evaluates every DQ Skin modifier of `obj`, in stack order. With `ctx.batch`, the skinning
@@ -325,7 +327,7 @@ def finish(session, plan: Plan) -> None:
     bound = st.binding.binding
     status = st.status
     status.mode, status.message = Mode.LIVE, ""
-    status.notes = ()
+    status.notes = (CENTERS_UPDATING,) if st.binding.centers_pending else ()
     status.method = plan.s.method.label
     status.bones = len(bound.bone_names)
     status.influences = len(bound.influences)

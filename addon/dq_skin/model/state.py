@@ -83,10 +83,12 @@ class BindingCache:
     uses_bbones: bool = False
     centers: np.ndarray | None = field(default=None, repr=False)  # Optimized Centers of this binding
     centers_of: object = None  # the influences they were computed for (with B-Bones: this frame's)
+    centers_pending: str = ""  # the key of the centers being updated (the last ones show meanwhile)
 
     def clear(self) -> None:
         self.key = self.binding = self.blend = self.envelopes = self.segments = self.centers = self.centers_of = None
         self.uses_envelopes = self.uses_bbones = False
+        self.centers_pending = ""
 
 
 @dataclass

@@ -413,7 +413,8 @@ def test_a_frame_reads_each_armature_once(memory_only, monkeypatch):
         arm.pose.bones["Bone2"].keyframe_insert("rotation_quaternion", frame=frame)
     bpy.context.scene.frame_set(2)
     session = memory_only.SESSION
-    reader = session.readers.pose
+    assert session.readers.pose is not None, session.readers.pose_error
+    reader = session.readers._pose  # the raw reader: the checked wrapper reads through `_pose`
     reads = []
     assert all(session.state_of(o, m).output.route is not None for o, m in zip((obj, other), mods))
 

@@ -239,6 +239,7 @@ def _prepare(obj, obj_eval, target: Target, s: Settings, ctx: Context, source, p
     out = st.output
     if out.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
         out.spaces = rig.spaces(obj_eval, arm_eval)
+        out.spaces_of = (obj_eval.matrix_world.copy(), arm_eval.matrix_world.copy())
     premat, postmat = out.spaces
     scan = session.scan.ensure(ctx.structure)
     by_index = bool(consumers.index_readers(scan, obj))

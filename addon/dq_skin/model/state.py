@@ -105,6 +105,7 @@ class Output:
     copied_revision: int = -1  # and its revision (see `meshdata.revision`)
     generation: int = 0  # counts the outputs (a following DQ Skin's input key)
     spaces: tuple | None = field(default=None, repr=False)  # (premat, postmat) last computed
+    spaces_of: tuple = field(default=(), repr=False)  # the (object, armature) world matrices they are of
     pointcache: object = None  # the file a Mesh Cache carrier reads (`routes.pointcache.PointCache`)
 
     def invalidate(self) -> None:

@@ -1,9 +1,10 @@
 """Stands in for the `blender` program where the docs' examples run it (there is no Blender binary
-here, only the `bpy` module): `blender [-b] [--online-mode] [--factory-startup] --command NAME
-ARGS...`. It starts as Blender does for a command, as far as the examples need: the user's
+here, only the `bpy` module): `blender [-b] [--online-mode] [--factory-startup] (--command NAME
+ARGS... | --python FILE)`. It starts as Blender does, as far as the examples need: the user's
 preferences and add-ons from BLENDER_USER_RESOURCES (unless --factory-startup), online access
-with --online-mode, then the command: Blender's own `extension` command, or one that an
-installed extension registered (`dq_skin`), called as Blender calls it, exiting with its code.
+with --online-mode, then the command (Blender's own `extension` command, or one that an
+installed extension registered, `dq_skin`, called as Blender calls it, exiting with its code) or
+the script (exiting with 1 if it raised, as `--python-exit-code 1` makes Blender do).
 
 Tests put a `blender` script that runs this file first on the PATH (see `docs_examples.py`).
 """
@@ -15,7 +16,7 @@ import bpy
 
 import addon_utils  # noqa: E402  (importable once bpy is)
 
-USAGE = "usage: blender [-b] [--online-mode] [--factory-startup] --command NAME [ARGS...]"
+USAGE = "usage: blender [-b] [--online-mode] [--factory-startup] (--command NAME [ARGS...] | --python FILE)"
 
 
 def command_function(name: str):
@@ -31,9 +32,24 @@ def command_function(name: str):
     return None
 
 
+def run_script(path: str) -> int:
+    """A script, as `blender -b --python FILE` runs it (with `bpy` already imported)."""
+    import runpy
+    import traceback
+
+    try:
+        runpy.run_path(path, run_name="__main__")
+    except SystemExit as e:
+        return e.code if isinstance(e.code, int) else 0 if e.code is None else 1
+    except Exception:
+        traceback.print_exc()
+        return 1
+    return 0
+
+
 def main(argv: list[str]) -> int:
     factory, online = False, False
-    while argv and argv[0] not in ("-c", "--command"):
+    while argv and argv[0] not in ("-c", "--command", "-P", "--python"):
         option = argv.pop(0)
         if option in ("-b", "--background"):
             continue
@@ -53,6 +69,8 @@ def main(argv: list[str]) -> int:
         addon_utils.reset_all()
     if online:
         bpy.context.preferences.system.use_online_access = True
+    if argv[0] in ("-P", "--python"):
+        return run_script(name)
     run = command_function(name)
     if run is None:
         print(f"Unrecognized command: {name!r} (is the extension that registers it installed and enabled?)", file=sys.stderr)

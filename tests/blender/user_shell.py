@@ -53,10 +53,11 @@ def site_packages(user: Path) -> Path:
 def environment(user: Path, bin_dir: Path | None) -> dict[str, str]:
     """The environment of a command: the user folder, its extensions' wheels first on the path (as
     conftest.py does for the tests' own user folder: no other `dqskin` may be imported), and the
-    shell's `blender` and `python` first on the PATH."""
+    shell's `blender`, `python` and this environment's programs first on the PATH."""
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(user), PYTHONPATH=str(site_packages(user)))
     if bin_dir is not None:
-        env["PATH"] = os.pathsep.join([str(bin_dir), env.get("PATH", "")])
+        # This virtual environment's programs too (`openjd`), as an activated one puts them.
+        env["PATH"] = os.pathsep.join([str(bin_dir), str(Path(sys.executable).parent), env.get("PATH", "")])
     return env
 
 

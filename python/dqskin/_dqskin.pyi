@@ -290,6 +290,7 @@ def centers_of_rotation(
     *,
     with_mask: Literal[False] = False,
     progress: Callable[[int, int], bool | None] | None = None,
+    previous: tuple[Influences, F32Array | tuple[F32Array, npt.NDArray[np.bool_]]] | None = None,
 ) -> F32Array: ...
 @overload
 def centers_of_rotation(
@@ -300,6 +301,7 @@ def centers_of_rotation(
     *,
     with_mask: Literal[True],
     progress: Callable[[int, int], bool | None] | None = None,
+    previous: tuple[Influences, F32Array | tuple[F32Array, npt.NDArray[np.bool_]]] | None = None,
 ) -> tuple[F32Array, npt.NDArray[np.bool_]]: ...
 @overload
 def centers_of_rotation(
@@ -310,11 +312,15 @@ def centers_of_rotation(
     *,
     with_mask: bool,
     progress: Callable[[int, int], bool | None] | None = None,
+    previous: tuple[Influences, F32Array | tuple[F32Array, npt.NDArray[np.bool_]]] | None = None,
 ) -> F32Array | tuple[F32Array, npt.NDArray[np.bool_]]:
     """Centers of rotation of a rest mesh (Le & Hodgins 2016), ``(V, 3)`` float32; a vertex
     without a center gets its own position (skinned exactly like LBS). With ``with_mask=True``
     also a ``(V,)`` bool array, True where the vertex has a center. ``progress(done, total)`` is
-    called about a hundred times; returning False raises :class:`Cancelled`."""
+    called about a hundred times; returning False raises :class:`Cancelled`. ``previous``:
+    ``(influences, centers)`` returned before for the same positions and triangles with other
+    weights: only what the weight change reaches is computed again (the same result, bit for
+    bit)."""
 
 class Cancelled(Exception):
     """A long computation stopped because its progress callback returned False."""

@@ -413,7 +413,8 @@ def test_a_frame_reads_each_armature_once(memory_only, monkeypatch):
         arm.pose.bones["Bone2"].keyframe_insert("rotation_quaternion", frame=frame)
     bpy.context.scene.frame_set(2)
     session = memory_only.SESSION
-    reader = session.readers.pose
+    assert session.readers.pose is not None, session.readers.pose_error
+    reader = session.readers._pose  # the raw reader: the checked wrapper reads through `_pose`
     reads = []
     assert all(session.state_of(o, m).output.route is not None for o, m in zip((obj, other), mods))
 
@@ -461,3 +462,43 @@ def test_a_generated_rigify_character_matches_the_armature_modifier(memory_only)
             dev = relative_deviation(evaluated_positions(obj), theirs)
             assert dev <= REL_TOL, (obj.name, frame, dev)
     assert np.abs(theirs - rest).max() > 0.05, "the animation moves the body"
+
+
+def test_the_readers_are_checked_against_blenders_data_on_their_first_read(dq_skin, monkeypatch):
+    """A reader's first read in a session is compared with what Blender's Python API gives; one
+    that disagrees (a Blender whose structs changed under it) is refused for the session with
+    the reason, and DQ Skin deforms through the Python paths, still equal to the Armature
+    modifier."""
+    check = dq_skin.blender.memory_check
+    obj, arm, _ = bbone_rig(segments=6)
+    other, other_arm, _ = bbone_rig(segments=3)
+    other_arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 0.7)
+    other.vertex_groups["Bone3"].add([0], 0.3, "REPLACE")  # another weight on a sampled vertex
+    bpy.context.scene.frame_set(4)
+    dg = bpy.context.evaluated_depsgraph_get()
+    reads = _reads(dq_skin)
+    data = reads.read(arm.evaluated_get(dg))
+    assert data is not None, reads.error
+    # What the check compares: the right armature agrees, another armature's pose does not.
+    assert check.pose_differs(data, arm.evaluated_get(dg)) == ""
+    assert check.pose_differs(data, other_arm.evaluated_get(dg)) != ""
+    mesh = dq_skin.SESSION.meshes.get(obj, None)
+    assert check.groups_differ(mesh.groups, obj.data) == ""
+    assert check.groups_differ(mesh.groups, other.data) != ""
+    # A session whose readers disagree: both refused on their first read, with the reason.
+    readers = dq_skin.SESSION.readers
+    monkeypatch.setattr(readers, "pose_checked", False)
+    monkeypatch.setattr(readers, "mesh_checked", False)
+    monkeypatch.setattr(check, "pose_differs", lambda *_: "the bones' pose matrices (made up by the test)")
+    monkeypatch.setattr(check, "groups_differ", lambda *_: "the weights of vertex 0 (made up by the test)")
+    monkeypatch.setattr(readers, "_pose", readers._pose)  # (put back after the test)
+    monkeypatch.setattr(readers, "_mesh", readers._mesh)
+    dq_skin.SESSION.meshes.forget()
+    ref = reference_copy(obj, True)
+    add_dq_skin(obj, "DUAL_QUATERNION")
+    bpy.context.scene.frame_set(6)
+    assert readers.pose is None and "disagrees with Blender's data" in readers.pose_error, readers.pose_error
+    assert readers.mesh is None and "disagrees with Blender's data" in readers.mesh_error, readers.mesh_error
+    st = dq_skin.SESSION.status_of(obj, [m for m in obj.modifiers if m.type == "NODES"][0])
+    assert st.live, st.message
+    assert relative_deviation(evaluated_positions(obj), evaluated_positions(ref)) <= REL_TOL

@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The readers of Blender's memory (`dqskin.memory.MeshMemory` for vertex-group weights,
 `dqskin.memory.PoseMemory` for armature poses), built once per session from the SDNA of a tiny .blend
-this Blender writes: the file describes the structs in memory whatever the version. If a reader
-cannot be built, its error says why and the callers take their slow, safe Python paths."""
+this Blender writes: the file describes the structs in memory whatever the version. Each reader's
+first read in the session is checked against Blender's own data (`memory_check`). If a reader
+cannot be built or its check fails, its error says why and the callers take their slow, safe
+Python paths."""
 
 from __future__ import annotations
 
@@ -12,6 +14,8 @@ import tempfile
 import bpy
 
 from .. import dqskin
+from . import memory_check
+from .meshdata import Groups
 
 
 class Readers:
@@ -23,6 +27,9 @@ class Readers:
         self._pose = None
         self.mesh_error = ""
         self.pose_error = ""
+        # Whether each reader's first read agreed with Blender's data (`memory_check`).
+        self.mesh_checked = False
+        self.pose_checked = False
 
     def _build(self) -> None:
         if self._built:
@@ -55,10 +62,58 @@ class Readers:
     def mesh(self):
         """The vertex-group reader for this Blender, or None (then `mesh_error` says why)."""
         self._build()
-        return self._mesh
+        return self._mesh if self._mesh is None else CheckedMesh(self)
 
     @property
     def pose(self):
         """The pose reader for this Blender, or None (then `pose_error` says why)."""
         self._build()
-        return self._pose
+        return self._pose if self._pose is None else CheckedPose(self)
+
+    def refuse(self, which: str, what: str) -> None:
+        """A reader that disagreed with Blender's data: gone for the session, with the reason."""
+        message = f"the memory reader disagrees with Blender's data ({what}): the Python path reads instead"
+        if which == "mesh":
+            self._mesh, self.mesh_error = None, message
+        else:
+            self._pose, self.pose_error = None, message
+
+
+class CheckedMesh:
+    """`MeshMemory` whose first read in the session is checked (`memory_check.groups_differ`)."""
+
+    def __init__(self, readers: Readers):
+        self.readers = readers
+
+    def deform_verts(self, mesh):
+        readers = self.readers
+        if readers._mesh is None:  # refused since this wrapper was handed out
+            return False  # the caller reads through the Python API
+        got = readers._mesh.deform_verts(mesh)
+        if not readers.mesh_checked:
+            what = memory_check.groups_differ(None if got is None else Groups(*got), mesh)
+            if what:
+                readers.refuse("mesh", what)
+                return False
+            readers.mesh_checked = True
+        return got
+
+
+class CheckedPose:
+    """`PoseMemory` whose first read in the session is checked (`memory_check.pose_differs`)."""
+
+    def __init__(self, readers: Readers):
+        self.readers = readers
+
+    def read(self, arm_eval):
+        readers = self.readers
+        if readers._pose is None:
+            raise ValueError(readers.pose_error)
+        data = readers._pose.read(arm_eval)
+        if not readers.pose_checked:
+            what = memory_check.pose_differs(data, arm_eval)
+            if what:
+                readers.refuse("pose", what)
+                raise ValueError(readers.pose_error)
+            readers.pose_checked = True
+        return data

@@ -163,8 +163,16 @@ def _build_outputs(group) -> None:
     links.new(live, mark.inputs["Geometry"])
     mark.inputs["Name"].default_value = OUTPUT_MARK
     mark.inputs["Value"].default_value = True
-    deforming = boolean(node, links, "OR", boolean(node, links, "OR", replace, positions), quiet)
+    deforming = boolean(node, links, "OR", replace, positions)
     out = geometry_switch(node, links, deforming, passed, mark.outputs["Geometry"])
+    # Carried (the positions came through a deform-only carrier before the modifier): the mesh
+    # marked and nothing else evaluated (switches are lazy; this is every frame's path on the
+    # Mesh Cache route, where each node evaluated costs every character every frame).
+    carried = node("GeometryNodeStoreNamedAttribute", data_type="BOOLEAN", domain="POINT")
+    links.new(g_in.outputs["Geometry"], carried.inputs["Geometry"])
+    carried.inputs["Name"].default_value = OUTPUT_MARK
+    carried.inputs["Value"].default_value = True
+    out = geometry_switch(node, links, quiet, out, carried.outputs["Geometry"])
     links.new(out, g_out.inputs["Geometry"])
     for i, n in enumerate(nodes):
         n.location = (180 * (i % 8), -200 * (i // 8))

@@ -31,8 +31,8 @@ from . import compat
 
 GROUP_NAME = "DQ Skin"
 GROUP_TAG = "dq_skin_version"
-VERSION = 3
-UPGRADABLE = (2, 3)  # group versions brought up to this one in place (`node_group.upgrade`)
+VERSION = 4
+UPGRADABLE = (2, 3, 4)  # group versions brought up to this one in place (`node_group.upgrade`)
 
 # The Mode input's values (see above).
 MODE_PASS_WARN = 0
@@ -184,12 +184,13 @@ RAW = ("Armature", "Method", "Blend Amount", "Blend Factor", "Use Vertex Groups"
 
 def raw_settings(mod) -> tuple:
     """The settings' stored values, cheap to read and compare (see `settings.cached`)."""
-    ids = socket_ids(mod.node_group)
     if compat.RNA_INPUTS:
+        ids = socket_ids(mod.node_group)
         inputs = mod.properties.inputs
         return tuple((s.value, s.type, getattr(s, "attribute_name", "")) for s in (getattr(inputs, ids[n]) for n in RAW))
-    get = mod.get
-    return tuple(get(ids[n]) for n in RAW) + tuple((get(ids[n] + "_use_attribute"), get(ids[n] + "_attribute_name")) for n in FIELDS)
+    # Every stored value at once (one call; the hidden inputs too, which change only when DQ
+    # Skin's route does): read on every frame of every character.
+    return tuple(mod.items())
 
 
 # -- reading and writing a modifier's settings ---------------------------------------------------

@@ -8,6 +8,9 @@ Commands:
   Skin result (added from its Armature modifier if missing) to a PC2 cache.
 - ``apply FILE --out FILE.blend``: replace every Armature modifier with DQ Skin and save.
 - ``merge OUT IN [IN ...]``: join PC2 chunks of consecutive frame ranges (farm bakes).
+- ``preflight FILE``: name every object that would render differently on a node without the
+  extension (one of DQ Skin's own methods, unbaked, or a bake that would not play there): exit
+  code 3 if any, 0 if none.
 - ``compare [FILE] [--frames A-B] [--out DIR]``: a comparison scene (the file's first rigged
   mesh, or built-in test rigs) with the Armature modifier (Linear, Preserve Volume) and DQ Skin
   (Linear, Dual Quaternion, Blend, Optimized Centers) side by side: ``report.json`` and
@@ -41,7 +44,7 @@ from ..model.methods import BY_NAME
 from ..ops import bake
 from ..progress import Progress
 from ..tools import compare
-from . import interrupts
+from . import interrupts, preflight
 from .interrupts import check, deferred
 
 LAUNCHER = "python -m dqskin.blender"
@@ -191,6 +194,11 @@ def cmd_merge(args) -> str:
     return f"merged {len(args.inputs)} caches into {args.out}: frames {header.start_frame:g}-{header.end_frame:g}"
 
 
+def cmd_preflight(args) -> str:
+    _load(args.file)
+    return preflight.run(args.file)
+
+
 def cmd_compare(args) -> str:
     if args.file:
         _load(args.file)
@@ -271,6 +279,9 @@ def parser(prog: str) -> argparse.ArgumentParser:
     m.add_argument("out")
     m.add_argument("inputs", nargs="+")
     m.set_defaults(run=cmd_merge)
+    f = sub.add_parser("preflight", help="name the objects that would render differently without the extension (exit code 3)")
+    f.add_argument("file")
+    f.set_defaults(run=cmd_preflight)
     c = sub.add_parser("compare", help="a comparison scene, its report and a render")
     c.add_argument("file", nargs="?", help="a rigged file (default: the built-in test rigs)")
     c.add_argument("--frames", **frames)
@@ -297,6 +308,9 @@ def main(argv: list[str], prog: str, launched: bool = False) -> int:
             raise Failure(f"--user-resources is for `{LAUNCHER}`; Blender has its user folder already")
         print(args.run(args))
         return 0
+    except preflight.Differs as e:
+        print(e)
+        return preflight.DIFFERS
     except interrupts.Interrupted as e:
         print(f"{prog} {args.command}: interrupted ({e}); nothing written", file=sys.stderr)
         return 128 + e.signum

@@ -78,29 +78,42 @@ def centers_of(obj, st: ModifierState, data: MeshData, influences, ctx: Context)
     """Puts the Optimized Centers of Rotation for `influences` (the binding's; with envelopes or
     B-Bones, the influences DQ Skin skins with, over the bones and the B-Bones' segment joints)
     in `st.binding.centers`: kept, found in the cache, computed now (small meshes, command line,
-    renders), or started in the background (the SkinError that says so lets Blender's
+    renders), updated from the centers of the same mesh with other weights (a brush stroke:
+    only what it reaches; in the background on large meshes, the last centers showing
+    meanwhile), or started in the background (the SkinError that says so lets Blender's
     deformation stand in until they are ready)."""
     cache = st.binding
-    if cache.centers is not None and cache.centers_of is influences:
+    if cache.centers is not None and cache.centers_of is influences and not cache.centers_pending:
         return
     store = ctx.session.centers
     triangles = centers.triangles_of(obj.data)
     key = centers.key_of(data.positions, triangles, influences)
     got = store.lookup(key, data.vertex_count)
-    if got is None:
-        running = store.job_of(key)
-        if running is not None and running.finished and running.error:
-            raise SkinError(f"Optimized Centers: {running.error} (change the method or any setting to try again)")
-        if data.vertex_count <= centers.INLINE_VERTICES or centers.in_background() or ctx.render:
-            label = f"Optimized Centers for {obj.name} ({data.vertex_count} vertices)" if centers.in_background() else ""
-            try:
-                got = store.compute(data.positions, triangles, influences, key, label=label)
-            except centers.Cancelled:
-                raise SkinError("Optimized Centers: cancelled") from None
-        else:
-            running = store.start(data.positions, triangles, influences, key, obj.name)
-            raise SkinError(
-                f"Optimized Centers: computing for {data.vertex_count} vertices ({running.fraction:.0%}); "
-                "Blender's deformation shows until they are ready"
-            )
-    cache.centers, cache.centers_of = got, influences
+    if got is not None:
+        if cache.centers_pending:
+            st.output.invalidate()  # the updated centers replace the last ones: skin again
+        cache.centers, cache.centers_of, cache.centers_pending = got, influences, ""
+        return
+    running = store.job_of(key)
+    if running is not None and running.finished and running.error:
+        raise SkinError(f"Optimized Centers: {running.error} (change the method or any setting to try again)")
+    geometry = centers.geometry_of(data.positions, triangles)
+    previous = store.latest(geometry)
+    spot = centers.in_background() or ctx.render
+    if data.vertex_count <= (centers.UPDATE_INLINE_VERTICES if previous else centers.INLINE_VERTICES) or spot:
+        label = f"Optimized Centers for {obj.name} ({data.vertex_count} vertices)" if centers.in_background() else ""
+        try:
+            got = store.compute(data.positions, triangles, influences, key, label=label, geometry=geometry, previous=previous)
+        except centers.Cancelled:
+            raise SkinError("Optimized Centers: cancelled") from None
+        cache.centers, cache.centers_of, cache.centers_pending = got, influences, ""
+        return
+    running = store.start(data.positions, triangles, influences, key, obj.name, geometry=geometry, previous=previous)
+    if previous is not None:
+        # The last centers of this mesh keep showing until the update is in.
+        cache.centers, cache.centers_of, cache.centers_pending = previous[1], influences, key
+        return
+    raise SkinError(
+        f"Optimized Centers: computing for {data.vertex_count} vertices ({running.fraction:.0%}); "
+        "Blender's deformation shows until they are ready"
+    )

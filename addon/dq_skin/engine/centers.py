@@ -11,6 +11,11 @@ Small meshes are computed on the spot. Large ones, in an interactive session, in
 thread (the core releases the GIL) while the modifier says so and Blender's own deformation
 stands in; the panel shows the progress and can cancel. In background mode (command line,
 render farms) they are computed on the spot with a progress bar, stopping on Ctrl-C.
+
+After a weight change (a brush stroke) on a mesh whose centers were computed before (the same
+rest positions and triangles, `latest`), only what the change reaches is computed again (the
+core's `previous`, the same result bit for bit): on the spot up to UPDATE_INLINE_VERTICES, else
+in the background while the last centers keep showing (the panel says they are updating).
 """
 
 from __future__ import annotations
@@ -33,8 +38,12 @@ SIGMA = 0.1  # the paper's default similarity width
 # Up to this many vertices the centers are computed on the spot, even in the viewport (well
 # under half a second on two cores).
 INLINE_VERTICES = 30_000
+# Up to this many vertices an update after a weight change is computed on the spot (a stroke
+# reaches a part of the mesh: see docs/performance.md).
+UPDATE_INLINE_VERTICES = 30_000
 MEMORY_ENTRIES = 16
 DISK_BYTES = 1 << 30  # the on-disk cache is trimmed to this, oldest first
+POLL_SECONDS = 0.05  # how soon finished centers show (a stroke's update takes a few tenths)
 FORMAT = 1  # bump when the centers' definition changes: old files are then ignored
 
 
@@ -82,6 +91,16 @@ def key_of(positions: np.ndarray, triangles: np.ndarray, influences, sigma: floa
     return h.hexdigest()
 
 
+def geometry_of(positions: np.ndarray, triangles: np.ndarray) -> str:
+    """A digest of the rest mesh the centers are computed on (positions and topology), whatever
+    the weights: centers of the same geometry can be updated after a weight change."""
+    h = hashlib.blake2b(digest_size=20)
+    h.update(f"dq_skin geometry {len(positions)} {len(triangles)}".encode())
+    for a in (positions, triangles):
+        h.update(np.ascontiguousarray(a).data)
+    return h.hexdigest()
+
+
 def _folder() -> Path | None:
     try:
         return Path(bpy.utils.extension_path_user(__package__.rpartition(".")[0], path="centers", create=True))
@@ -106,6 +125,8 @@ class Centers:
     def __init__(self, interrupted=lambda: False):
         self._interrupted = interrupted
         self._memory: OrderedDict[str, np.ndarray] = OrderedDict()
+        # Geometry digest -> (influences, centers) computed last for it (what an update starts from).
+        self._latest: OrderedDict[str, tuple] = OrderedDict()
         self._jobs: dict[str, Job] = {}
         self._lock = threading.Lock()
 
@@ -155,10 +176,35 @@ class Centers:
     def forget_memory(self) -> None:
         """Drops the centers kept in memory (the user folder's stay)."""
         self._memory.clear()
+        self._latest.clear()
 
-    def compute(self, positions, triangles, influences, key: str, label: str = "", check=None, job: Job | None = None) -> np.ndarray:
-        """Computes (and keeps) the centers now. `check()` may raise to stop (Ctrl-C on the command
-        line); `job.cancel` stops a background computation."""
+    def latest(self, geometry: str) -> tuple | None:
+        """`(influences, centers)` computed last for this geometry in this session, or None."""
+        return self._latest.get(geometry)
+
+    def remember_latest(self, geometry: str, influences, centers: np.ndarray) -> None:
+        with self._lock:
+            self._latest[geometry] = (influences, centers)
+            self._latest.move_to_end(geometry)
+            while len(self._latest) > MEMORY_ENTRIES:
+                self._latest.popitem(last=False)
+
+    def compute(
+        self,
+        positions,
+        triangles,
+        influences,
+        key: str,
+        label: str = "",
+        check=None,
+        job: Job | None = None,
+        geometry: str = "",
+        previous: tuple | None = None,
+    ) -> np.ndarray:
+        """Computes (and keeps) the centers now (`previous`: the `(influences, centers)` of the
+        same geometry, of which only what the weight change reaches is computed again).
+        `check()` may raise to stop (Ctrl-C on the command line); `job.cancel` stops a
+        background computation."""
         progress = Progress(None, 100, label) if label else None
         last = [0]
 
@@ -177,7 +223,7 @@ class Centers:
             return not self._interrupted()  # Ctrl-C or SIGTERM in a batch command
 
         try:
-            centers = dqskin.centers_of_rotation(positions, triangles, influences, sigma=SIGMA, progress=report)
+            centers = dqskin.centers_of_rotation(positions, triangles, influences, sigma=SIGMA, progress=report, previous=previous)
         except dqskin.Cancelled:
             raise Cancelled() from None
         finally:
@@ -185,9 +231,11 @@ class Centers:
                 progress.end()
         centers = np.ascontiguousarray(centers, np.float32)
         self._store(key, centers)
+        if geometry:
+            self.remember_latest(geometry, influences, centers)
         return centers
 
-    def start(self, positions, triangles, influences, key: str, owner: str) -> Job:
+    def start(self, positions, triangles, influences, key: str, owner: str, geometry: str = "", previous: tuple | None = None) -> Job:
         """The background computation of `key` (started if not running)."""
         with self._lock:
             job = self._jobs.get(key)
@@ -199,7 +247,7 @@ class Centers:
 
         def work():
             try:
-                self.compute(positions, triangles, influences, key, job=job)
+                self.compute(positions, triangles, influences, key, job=job, geometry=geometry, previous=previous)
             except Cancelled:
                 job.error = "cancelled"
             except Exception as e:  # reported on the modifier
@@ -207,7 +255,8 @@ class Centers:
             job.finished = True
 
         threading.Thread(target=work, name=f"dq_skin centers {key[:8]}", daemon=True).start()
-        bpy.app.timers.register(self.poll, first_interval=0.2)
+        if not bpy.app.timers.is_registered(self.poll):
+            bpy.app.timers.register(self.poll, first_interval=POLL_SECONDS)
         return job
 
     def running(self) -> list[Job]:
@@ -247,4 +296,4 @@ class Centers:
             for area in window.screen.areas:
                 if area.type in ("PROPERTIES", "VIEW_3D"):
                     area.tag_redraw()
-        return 0.25 if running else None
+        return POLL_SECONDS if running else None

@@ -76,7 +76,10 @@ class FedFrame:
         positions, input_key = self._positions(m, obj_eval, old, outputs)
         if positions is None:
             return None
-        premat, postmat = rig.spaces(obj_eval, arm_eval)
+        worlds = (obj_eval.matrix_world, arm_eval.matrix_world)
+        if out.spaces is None or out.spaces_of != worlds:
+            out.spaces, out.spaces_of = rig.spaces(obj_eval, arm_eval), tuple(w.copy() for w in worlds)
+        premat, postmat = out.spaces
         bound = st.binding.binding
         if bound is None:
             return None
@@ -94,7 +97,6 @@ class FedFrame:
             deform = self._pose_matrices(arm, arm_eval, bound)
             influences, rest, pose_key = bound.influences, bound.rest, PoseKey(matrices=deform.tobytes())
         key = FrameKey(old.settings, input_key, pose_key, premat.tobytes(), old.result, old.mesh_version)
-        out.spaces = (premat, postmat)  # (the full evaluation takes them while nothing moves)
         if key == old:
             return None  # already this (what the carrier reads holds it)
         if influences is not job.influences:

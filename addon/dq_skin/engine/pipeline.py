@@ -29,6 +29,8 @@ from ..routes.result_route import MeshSource
 from . import binding, companions, inputs
 from .context import Context, Plan, SkinError, dq_skin_modifiers, mod_key
 
+CENTERS_UPDATING = "Optimized Centers: updating for the new weights (the last centers show meanwhile)"
+
 
 def evaluate_object(obj, ctx: Context, force: bool = False) -> bool:
     """Evaluates every DQ Skin modifier of `obj`, in stack order. With `ctx.batch`, the skinning
@@ -237,6 +239,7 @@ def _prepare(obj, obj_eval, target: Target, s: Settings, ctx: Context, source, p
     out = st.output
     if out.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
         out.spaces = rig.spaces(obj_eval, arm_eval)
+        out.spaces_of = (obj_eval.matrix_world.copy(), arm_eval.matrix_world.copy())
     premat, postmat = out.spaces
     scan = session.scan.ensure(ctx.structure)
     by_index = bool(consumers.index_readers(scan, obj))
@@ -325,7 +328,7 @@ def finish(session, plan: Plan) -> None:
     bound = st.binding.binding
     status = st.status
     status.mode, status.message = Mode.LIVE, ""
-    status.notes = ()
+    status.notes = (CENTERS_UPDATING,) if st.binding.centers_pending else ()
     status.method = plan.s.method.label
     status.bones = len(bound.bone_names)
     status.influences = len(bound.influences)

@@ -27,11 +27,13 @@ def fed_frame_stands(obj, ctx: Context, bones_changed: bool = False) -> bool:
     feeds: Feeds = session.routes.feeds
     if session.exports.active():
         return False
+    states = []
     for mod in mods:
         key = mod_key(obj, mod)
         if not mod.show_viewport or not feeds.skinned_now(key, ctx.depsgraph):
             return False
         st = session.states.find(key)
+        states.append(st)
         s = settings.cached(mod, st.settings)
         try:
             arm = s.armature
@@ -42,12 +44,11 @@ def fed_frame_stands(obj, ctx: Context, bones_changed: bool = False) -> bool:
         except (ReferenceError, AttributeError):  # (the armature was deleted: the full path says so)
             return False
     data = session.meshes.get(obj, session.readers.mesh)  # (compares the vertex group names)
-    for mod in mods:
-        st = session.states.find(mod_key(obj, mod))
+    for mod, st in zip(mods, states):
         written = st.output.written
         if written is None or data.version != written.mesh_version[0]:
             return False
         if written.result and session.meshes.revision(obj.data) != written.mesh_version[1]:
             return False
         companions.follow_the_user(obj, mod, st, False)
-    return all(mod.show_viewport for mod in mods)
+    return all(mod.show_viewport for mod in mods)  # (following the user may have switched one off)

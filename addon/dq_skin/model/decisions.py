@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .. import dqskin
 from .keys import FrameKey, Source
 from .methods import BLENDER_METHODS
 from .state import ResultMode, RouteKind
@@ -157,3 +158,23 @@ def switched_off_by_user(known_shown, known_deforms, now_shown: tuple[bool, bool
     if known_shown is None or known_deforms is None:
         return (False, False)
     return tuple(now_shown[i] and not known_shown[i] and known_deforms[i] and dq_shown[i] for i in range(2))
+
+
+# -- where the extension is not installed ---------------------------------------------------------
+
+
+def renders_elsewhere(method, blend_range: tuple[float, float] | None, baked: str) -> str:
+    """How a DQ Skin modifier that renders here renders where the extension is not installed (a
+    render farm node, a colleague's Blender), if that differs from its own result: the reason,
+    or "". There the companion Armature modifier deforms (files are saved that way): Linear and
+    Dual Quaternion are its own results; Blend (with `blend_range`, the lowest and highest
+    amount of Dual Quaternion it mixes in) is Dual Quaternion only where every vertex takes all
+    of it; Optimized Centers never is. `baked`: "" where DQ Skin renders itself, else what the
+    bake that plays in its place lacks ("ok" when it plays)."""
+    if baked:
+        return "" if baked == "ok" else f"its bake does not play there: {baked}"
+    if method in BLENDER_METHODS:
+        return ""
+    if method == dqskin.Method.BLEND and blend_range == (1.0, 1.0):
+        return ""
+    return f"renders as Blender's Preserve Volume there, not {method.label} (bake it to render it anywhere)"

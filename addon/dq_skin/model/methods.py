@@ -40,8 +40,12 @@ class Settings:
     blend_amount: float = 1.0  # the Blend Amount's value where no vertex group drives it
 
     def key(self) -> tuple:
+        """What the result depends on, as plain values (made once: compared every frame)."""
+        known = self.__dict__.get("_key")
+        if known is not None:
+            return known
         arm = self.armature.session_uid if self.armature is not None else 0
-        return (
+        key = (
             arm,
             self.method.name,
             self.blend_group,
@@ -52,6 +56,8 @@ class Settings:
             self.invert_mask,
             self.blend_amount,
         )
+        object.__setattr__(self, "_key", key)  # (a frozen dataclass: its fields never change)
+        return key
 
     @property
     def preserve_volume(self) -> bool:

@@ -83,10 +83,12 @@ class BindingCache:
     uses_bbones: bool = False
     centers: np.ndarray | None = field(default=None, repr=False)  # Optimized Centers of this binding
     centers_of: object = None  # the influences they were computed for (with B-Bones: this frame's)
+    centers_pending: str = ""  # the key of the centers being updated (the last ones show meanwhile)
 
     def clear(self) -> None:
         self.key = self.binding = self.blend = self.envelopes = self.segments = self.centers = self.centers_of = None
         self.uses_envelopes = self.uses_bbones = False
+        self.centers_pending = ""
 
 
 @dataclass
@@ -103,6 +105,7 @@ class Output:
     copied_revision: int = -1  # and its revision (see `meshdata.revision`)
     generation: int = 0  # counts the outputs (a following DQ Skin's input key)
     spaces: tuple | None = field(default=None, repr=False)  # (premat, postmat) last computed
+    spaces_of: tuple = field(default=(), repr=False)  # the (object, armature) world matrices they are of
     pointcache: object = None  # the file a Mesh Cache carrier reads (`routes.pointcache.PointCache`)
 
     def invalidate(self) -> None:

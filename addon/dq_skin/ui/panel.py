@@ -8,7 +8,7 @@ from types import MappingProxyType
 import bpy
 
 from .. import dqskin
-from ..blender import nodes, settings
+from ..blender import elsewhere, nodes, settings
 from ..engine.context import dq_skin_modifiers
 from ..model.state import Mode
 from ..ops import blend_paint
@@ -78,6 +78,9 @@ def _tools(box, obj, mod) -> None:
     if is_blend:
         box.label(text=blend_paint.describe(obj, mod), icon="GROUP_VERTEX")
         box.operator("object.dq_skin_paint_blend", icon="BRUSH_DATA").modifier = mod.name
+    why = elsewhere.reason(obj, mod, lambda name: SESSION.meshes.get(obj, SESSION.readers.mesh).group_weights(name))
+    if why:
+        box.label(text=f"Without the DQ Skin extension (render farms) it {why}", icon="ERROR")
     row = box.row()
     row.operator("object.dq_skin_apply_as_shape_key", text="Apply as Shape Key", icon="SHAPEKEY_DATA").modifier = mod.name
     row.operator("object.dq_skin_bake", text="Bake to Cache", icon="FILE_CACHE")

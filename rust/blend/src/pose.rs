@@ -149,8 +149,10 @@ impl PoseLayout {
 ///
 /// # Safety
 /// `object` must be the address of a live `Object` of the Blender whose SDNA built `layout`, not
-/// changed by another thread during the call (Python handlers and operators run while nothing
-/// else touches it). The object type, the channel count and every B-Bone segment count are
+/// changed by another thread during the call: Python handlers and operators run while nothing
+/// else touches it; inside a depsgraph evaluation (a driver), only once every operation that
+/// writes the object's pose, bones and B-Bone caches has run in that evaluation (the driver
+/// ordered after them), since Blender's other threads then only read them. The object type, the channel count and every B-Bone segment count are
 /// checked before anything they lead to is followed, so a mismatched layout is reported rather
 /// than followed far.
 pub unsafe fn read_pose(

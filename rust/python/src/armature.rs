@@ -63,8 +63,14 @@ impl PyPoseMemory {
             }
             let channels: usize = pose.getattr("bones")?.len()?;
             let ptr: usize = armature.call_method0("as_pointer")?.extract()?;
-            // SAFETY: the address is `Object.as_pointer()` of a live armature object, read from a
-            // handler or operator while Blender is not evaluating (see `read_pose`).
+            // SAFETY: the address is `Object.as_pointer()` of a live armature object (checked
+            // above to be a `bpy.types.Object` of type ARMATURE with this many channels). The
+            // extension reads it from a handler or operator, while Blender does not evaluate, or
+            // from the feed's driver inside an evaluation, which Blender runs after every
+            // operation writing what is read (the driver's variables order it after each bound
+            // bone and each B-Bone's segments: `routes.feed.order_after_bones`); nothing else
+            // writes a pose during an evaluation. See `read_pose`; the extension checks the first
+            // read of a session against Blender's own data (`blender.memory_check`).
             let channels = unsafe { read_pose(&self.0, ptr, channels) }
                 .map_err(|e| PyValueError::new_err(format!("armature: {e}")))?;
             ArmaturePose::new(channels).map(PyPoseData).map_err(|e| PyValueError::new_err(format!("armature: {e}")))

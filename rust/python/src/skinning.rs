@@ -3,7 +3,7 @@
 //! (`job.rs`).
 
 use dqskin_core::glam::Mat4;
-use dqskin_core::{Influences, SkinError};
+use dqskin_core::{Centers, Influences, SkinError};
 use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -308,13 +308,18 @@ fn polygon_area(points: &Bound<'_, PyAny>) -> PyResult<f64> {
 /// - ``progress``: called as ``progress(done, total)`` from the calling thread about a hundred
 ///   times; returning ``False`` stops the work with :class:`Cancelled`, and an exception it
 ///   raises stops it and is raised again.
+/// - ``previous``: ``(influences, centers)``, the centers this function returned for the same
+///   positions and triangles with other weights (``centers`` the array, or the ``(array, mask)``
+///   pair ``with_mask`` gives): only the vertices the weight change reaches are computed again
+///   (after a brush stroke, a small part of the mesh), with the result a full computation gives
+///   bit for bit. The caller vouches that positions and triangles are the same.
 ///
 /// A vertex without a center (fewer than two bones, or no triangle sharing two of them) gets its
 /// own position, with which centers-of-rotation skinning is exactly linear blend skinning.
 /// The GIL is released while it runs on dqskin's thread pool; Ctrl-C stops it
 /// (``KeyboardInterrupt``).
 #[pyfunction]
-#[pyo3(signature = (positions, triangles, influences, sigma = None, *, with_mask = None, progress = None))]
+#[pyo3(signature = (positions, triangles, influences, sigma = None, *, with_mask = None, progress = None, previous = None))]
 fn centers_of_rotation<'py>(
     positions: &Bound<'py, PyAny>,
     triangles: &Bound<'py, PyAny>,
@@ -322,6 +327,7 @@ fn centers_of_rotation<'py>(
     sigma: Option<&Bound<'py, PyAny>>,
     with_mask: Option<&Bound<'py, PyAny>>,
     progress: Option<&Bound<'py, PyAny>>,
+    previous: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
         let py = positions.py();
@@ -335,6 +341,10 @@ fn centers_of_rotation<'py>(
         let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
         let tris = triangle_indices(triangles)?;
         let points = as_points(pos.as_slice()?);
+        let previous = match previous {
+            Some(p) if !p.is_none() => Some(previous_centers(p, points)?),
+            _ => None,
+        };
         let callback = match progress {
             Some(p) if !p.is_none() => {
                 if !p.is_callable() {
@@ -375,9 +385,29 @@ fn centers_of_rotation<'py>(
                     }
                 })
             };
-            dqskin_core::centers_of_rotation_interruptible(points, &tris, infl, sigma, &mut progress, &mut || {
-                Python::attach(signalled)
-            })
+            let mut interrupted = || Python::attach(signalled);
+            match &previous {
+                Some((influences, centers)) => {
+                    let previous = dqskin_core::PreviousCenters { influences, centers };
+                    dqskin_core::centers_of_rotation_update(
+                        points,
+                        &tris,
+                        infl,
+                        sigma,
+                        previous,
+                        &mut progress,
+                        &mut interrupted,
+                    )
+                }
+                None => dqskin_core::centers_of_rotation_interruptible(
+                    points,
+                    &tris,
+                    infl,
+                    sigma,
+                    &mut progress,
+                    &mut interrupted,
+                ),
+            }
         });
         if let Some(e) = stopped.into_inner().unwrap_or_else(|p| p.into_inner()) {
             return Err(e);
@@ -392,6 +422,33 @@ fn centers_of_rotation<'py>(
             Ok(array)
         }
     })
+}
+
+/// `previous=(influences, centers)` read: the influences and the centers (with their mask, or
+/// the mask found from the rows holding their own vertex's position).
+fn previous_centers(previous: &Bound<'_, PyAny>, points: &[[f32; 3]]) -> PyResult<(Influences, Centers)> {
+    let bad = || {
+        PyTypeError::new_err(
+            "previous must be (influences, centers): the dqskin.Influences and the array (or (array, mask)) centers_of_rotation returned for them",
+        )
+    };
+    let (influences, centers): (Bound<'_, PyAny>, Bound<'_, PyAny>) = previous.extract().map_err(|_| bad())?;
+    let influences = influences.cast::<PyInfluences>().map_err(|_| bad())?.get().0.clone();
+    let v = points.len();
+    let (array, mask) = match centers.extract::<(Bound<'_, PyAny>, Bound<'_, PyAny>)>() {
+        Ok((a, m)) => (a, Some(m)),
+        Err(_) => (centers, None),
+    };
+    let array = arrays::readonly::<f32>(&array, "previous centers", &[Some(v), Some(3)], &["V"])?;
+    let rows: Vec<[f32; 3]> = as_points(array.as_slice()?).to_vec();
+    let has_center = match mask {
+        Some(m) => {
+            let m = arrays::readonly::<bool>(&m, "previous mask", &[Some(v)], &["V"])?;
+            m.as_slice()?.to_vec()
+        }
+        None => rows.iter().zip(points).map(|(c, p)| c != p).collect(),
+    };
+    Ok((influences, Centers { centers: rows, has_center }))
 }
 
 pyo3::create_exception!(

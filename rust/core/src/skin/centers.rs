@@ -36,6 +36,7 @@
 
 mod cells;
 mod sums;
+mod update;
 
 use std::collections::HashMap;
 
@@ -44,6 +45,7 @@ use rayon::prelude::*;
 use super::kernels::Simd;
 use super::{Influences, SkinError, MIN_TOTAL_WEIGHT};
 use sums::{PairList, WIDTH};
+use update::Reach;
 
 /// Above this `1/σ²` the exponents could underflow: the exact sums factor out the largest term
 /// (see [`PairIndex::center`]) and the fast path is not used.
@@ -113,6 +115,59 @@ pub fn centers_of_rotation_interruptible(
     .map(|(c, _)| c)
 }
 
+/// Centers computed before, for the same rest positions and triangles, with other weights:
+/// [`centers_of_rotation_update`] computes again only what the new weights reach.
+#[derive(Clone, Copy)]
+pub struct PreviousCenters<'a> {
+    /// The weights the centers were computed with.
+    pub influences: &'a Influences,
+    /// What [`centers_of_rotation`] returned for them.
+    pub centers: &'a Centers,
+}
+
+/// [`centers_of_rotation_interruptible`] after a weight change (weights painted): given the
+/// centers computed `previous`ly for the same `positions` and `triangles`, only the vertices
+/// whose sums the change reaches are computed again (see `update.rs`); the result is the one a
+/// full computation gives, bit for bit. The caller vouches that positions and triangles are
+/// those of `previous`.
+pub fn centers_of_rotation_update(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    previous: PreviousCenters<'_>,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+    interrupted: &mut dyn FnMut() -> bool,
+) -> Result<Centers, SkinError> {
+    let n = influences.vertex_count();
+    if previous.influences.vertex_count() != n {
+        return Err(SkinError::LengthMismatch {
+            what: "previous influences",
+            expected: n,
+            got: previous.influences.vertex_count(),
+        });
+    }
+    if previous.centers.centers.len() != n || previous.centers.has_center.len() != n {
+        return Err(SkinError::LengthMismatch {
+            what: "previous centers",
+            expected: n,
+            got: previous.centers.centers.len(),
+        });
+    }
+    centers_counted_since(
+        Simd::detect(),
+        Some(cells::TOLERANCE),
+        positions,
+        triangles,
+        influences,
+        sigma,
+        Some(previous),
+        progress,
+        interrupted,
+    )
+    .map(|(c, _)| c)
+}
+
 /// The precompute on a given compiled copy of the inner loop, with the fast path's tolerance on
 /// `E/D̃` (see `cells.rs`; `None`: exact sums only), also returning how many distinct weight
 /// vectors took the fast path. `interrupted` is asked between the setup's stages.
@@ -124,6 +179,22 @@ pub(super) fn centers_counted(
     triangles: &[[u32; 3]],
     influences: &Influences,
     sigma: f32,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+    interrupted: &mut dyn FnMut() -> bool,
+) -> Result<(Centers, usize), SkinError> {
+    centers_counted_since(simd, tolerance, positions, triangles, influences, sigma, None, progress, interrupted)
+}
+
+/// [`centers_counted`], computing again only what a weight change since `previous` reaches.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn centers_counted_since(
+    simd: Simd,
+    tolerance: Option<f64>,
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    previous: Option<PreviousCenters<'_>>,
     progress: &mut dyn FnMut(usize, usize) -> bool,
     interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<(Centers, usize), SkinError> {
@@ -146,10 +217,17 @@ pub(super) fn centers_counted(
     check()?;
     let index = PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance, &mut check)?;
     let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
+    // The classes to compute: every one, or those a weight change since `previous` reaches.
+    let reach = previous.map(|p| Reach::new(triangles, &WeightVectors::new(p.influences), &weights));
+    let todo: Vec<usize> = match &reach {
+        None => (0..classes.members.len()).collect(),
+        Some(r) => (0..classes.members.len()).filter(|&c| r.reaches(&weights, classes.members[c].first)).collect(),
+    };
+    check()?;
 
     // Parts of roughly equal work, so progress advances evenly and cancelling is quick.
     let work: Vec<usize> =
-        crate::pool::run(|| classes.members.par_iter().map(|c| index.work(&weights, c.first)).collect());
+        crate::pool::run(|| todo.par_iter().map(|&c| index.work(&weights, classes.members[c].first)).collect());
     check()?;
     let total: usize = work.iter().sum();
     let part_work = (total / 100).max(1 << 16);
@@ -169,12 +247,12 @@ pub(super) fn centers_counted(
     if !progress(0, total) {
         return Err(SkinError::Cancelled);
     }
-    let mut class_centers: Vec<(Option<[f64; 3]>, bool)> = vec![(None, false); classes.members.len()];
+    let mut class_centers: Vec<(Option<[f64; 3]>, bool)> = vec![(None, false); todo.len()];
     let mut done = 0;
     for part in parts.windows(2) {
         let range = part[0]..part[1];
-        let one = |(c, out): (usize, &mut (Option<[f64; 3]>, bool))| {
-            let v = classes.members[c].first;
+        let one = |(t, out): (usize, &mut (Option<[f64; 3]>, bool))| {
+            let v = classes.members[todo[t]].first;
             *out = index.center(simd, &weights, v, inv_sigma2);
         };
         let slots = &mut class_centers[range.clone()];
@@ -192,10 +270,23 @@ pub(super) fn centers_counted(
 
     let mut centers = positions.to_vec();
     let mut has_center = vec![false; n];
+    // Class → its slot in `todo` (the others keep the center from before).
+    let mut slot = vec![usize::MAX; classes.members.len()];
+    for (t, &c) in todo.iter().enumerate() {
+        slot[c] = t;
+    }
     for (v, class) in classes.of_vertex.iter().enumerate() {
-        if let Some(c) = class.and_then(|c| class_centers[c as usize].0) {
-            centers[v] = c.map(|x| x as f32);
-            has_center[v] = true;
+        let Some(c) = class.map(|c| c as usize) else { continue };
+        if slot[c] != usize::MAX {
+            if let Some(center) = class_centers[slot[c]].0 {
+                centers[v] = center.map(|x| x as f32);
+                has_center[v] = true;
+            }
+        } else if let Some(p) = previous {
+            // Not reached: the vertex's weights and lists are as before, and so is its center.
+            let first = classes.members[c].first;
+            centers[v] = p.centers.centers[first];
+            has_center[v] = p.centers.has_center[first];
         }
     }
     let fast = class_centers.iter().filter(|c| c.1).count();

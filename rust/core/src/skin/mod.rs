@@ -41,7 +41,8 @@ pub use bbone::{
     SegmentBoundary, MAX_BBONE_SEGMENTS,
 };
 pub use centers::{
-    centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_with_progress, Centers, DEFAULT_SIGMA,
+    centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_update,
+    centers_of_rotation_with_progress, Centers, PreviousCenters, DEFAULT_SIGMA,
 };
 pub use envelope::{distance_factor, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};

@@ -710,3 +710,102 @@ fn skin_many_runs_centers_of_rotation() {
     super::super::skin(Method::Linear, &c.positions, &c.influences, &pose, &SkinOptions::default(), &mut lbs).unwrap();
     assert!(want.iter().zip(&lbs).any(|(a, b)| (Vec3::from_array(*a) - Vec3::from_array(*b)).length() > 1e-3));
 }
+
+/// The creature's weights with a stroke painted: the vertices within `radius` of vertex `at`
+/// get `weight` more on `bone` (renormalized by the precompute), as a weight brush does.
+fn painted(c: &Creature, at: usize, radius: f32, bone: u32, weight: f32) -> (Influences, usize) {
+    let centre = Vec3::from_array(c.positions[at]);
+    let mut count = 0;
+    let lists: Vec<Vec<(u32, f32)>> = (0..c.influences.vertex_count())
+        .map(|v| {
+            let mut list: Vec<(u32, f32)> = c.influences.of_vertex(v).iter().map(|i| (i.bone, i.weight)).collect();
+            if Vec3::from_array(c.positions[v]).distance(centre) < radius {
+                count += 1;
+                list.push((bone, weight));
+            }
+            list
+        })
+        .collect();
+    (Influences::from_lists(&lists, c.influences.bone_count()).unwrap(), count)
+}
+
+#[test]
+fn after_a_stroke_the_update_equals_the_full_precompute_bit_for_bit_and_computes_less() {
+    let c = Creature::new(20_000).unwrap();
+    let (p, t) = (&c.positions, &c.triangles);
+    let before = centers_of_rotation(p, t, &c.influences, DEFAULT_SIGMA).unwrap();
+    let mut full_total = 0;
+    for (at, radius, bone, weight) in [(1234, 0.3, 5, 0.4), (9000, 0.15, 2, 0.2), (17_000, 0.05, 9, 1.0)] {
+        let (after, count) = painted(&c, at, radius, bone, weight);
+        assert!(count > 10, "the stroke paints {count} vertices");
+        let full = centers_counted(
+            Simd::detect(),
+            Some(cells::TOLERANCE),
+            p,
+            t,
+            &after,
+            DEFAULT_SIGMA,
+            &mut |_, total| {
+                full_total = total;
+                true
+            },
+            &mut || false,
+        )
+        .unwrap()
+        .0;
+        let mut update_total = 0;
+        let previous = PreviousCenters { influences: &c.influences, centers: &before };
+        let updated = centers_of_rotation_update(
+            p,
+            t,
+            &after,
+            DEFAULT_SIGMA,
+            previous,
+            &mut |_, total| {
+                update_total = total;
+                true
+            },
+            &mut || false,
+        )
+        .unwrap();
+        assert_eq!(updated, full, "a stroke of {count} vertices at {at}");
+        assert_ne!(updated, before, "the stroke moves centers");
+        assert!(update_total * 2 < full_total, "the update does {update_total} of the full {full_total}");
+    }
+    // Nothing painted: nothing computed, the same centers.
+    let mut total = usize::MAX;
+    let previous = PreviousCenters { influences: &c.influences, centers: &before };
+    let same = centers_of_rotation_update(
+        p,
+        t,
+        &c.influences,
+        DEFAULT_SIGMA,
+        previous,
+        &mut |_, n| {
+            total = n;
+            true
+        },
+        &mut || false,
+    )
+    .unwrap();
+    assert_eq!(same, before);
+    assert_eq!(total, 0);
+}
+
+#[test]
+fn the_update_refuses_previous_centers_of_another_mesh() {
+    let c = Creature::new(3000).unwrap();
+    let other = Creature::new(4000).unwrap();
+    let centers = centers_of_rotation(&other.positions, &other.triangles, &other.influences, DEFAULT_SIGMA).unwrap();
+    let previous = PreviousCenters { influences: &other.influences, centers: &centers };
+    let got = centers_of_rotation_update(
+        &c.positions,
+        &c.triangles,
+        &c.influences,
+        DEFAULT_SIGMA,
+        previous,
+        &mut |_, _| true,
+        &mut || false,
+    );
+    assert!(matches!(got, Err(SkinError::LengthMismatch { .. })), "{got:?}");
+}

@@ -11,7 +11,7 @@ PLATFORM ?= linux-x64
 STAMPS := .stamps
 RUST_SOURCES := $(shell find rust bench -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: setup build addon platforms test test-format test-rust test-clippy test-python test-blender test-blenders test-windows test-arm demo bench clean
+.PHONY: setup build addon platforms repo test test-format test-rust test-clippy test-python test-blender test-blenders test-windows test-arm demo bench clean
 
 setup: $(STAMPS)/deps $(STAMPS)/module $(STAMPS)/addon
 
@@ -32,11 +32,13 @@ $(STAMPS)/module: $(STAMPS)/deps $(RUST_SOURCES) python/dqskin/__init__.py
 # refuses a module that needs a newer glibc) in dist/, and the installable zip Blender's own
 # builder makes around it (validated by Blender's own tool); then the zip is installed and
 # enabled in the repo's Blender user folder, .blender_user/, which the Blender tests use through
-# BLENDER_USER_RESOURCES, as users' scripts do.
+# BLENDER_USER_RESOURCES, as users' scripts do. dist/ is also an extension repository: its
+# index.json (addon/repository.py) lists the zips built so far (`make repo` builds them all).
 ADDON_SOURCES := $(shell find addon -type f -not -path '*/__pycache__/*') $(wildcard python/dqskin/*.py python/dqskin/*.pyi)
 $(STAMPS)/addon: $(STAMPS)/module $(ADDON_SOURCES)
 	$(PY) addon/build_native.py $(PLATFORM) --out target/wheels/$(PLATFORM)
 	$(PY) addon/build.py target/wheels/$(PLATFORM)/dqskin-*.whl --out dist
+	$(PY) addon/repository.py dist
 	$(PY) addon/install.py dist/dq_skin-*-$(subst -,_,$(PLATFORM)).zip .blender_user
 	@mkdir -p $(STAMPS) && touch $@
 
@@ -50,6 +52,12 @@ OTHER_PLATFORMS := windows-x64 macos-arm64 macos-x64
 platforms: setup
 	for p in $(OTHER_PLATFORMS); do $(PY) addon/build_native.py $$p --out target/wheels/$$p || exit 1; done
 	$(PY) addon/build.py $(foreach p,linux-x64 $(OTHER_PLATFORMS),target/wheels/$(p)/dqskin-*.whl) --out dist
+	$(PY) addon/repository.py dist
+
+# The extension repository users add in Blender (Get Extensions > Repositories > Add Remote
+# Repository, the address of dist/index.json) to install DQ Skin and get its updates: every
+# platform's zip in dist/ and the index Blender's own `extension server-generate` writes for them.
+repo: platforms
 
 build: setup
 
@@ -110,7 +118,7 @@ test-windows: $(STAMPS)/deps $(STAMPS)/wine $(WINE_PRNG)
 # aarch64-unknown-linux-gnu, linked by zig from the pinned ziglang wheel (rust/cross/), run under
 # qemu's user-mode emulation against Debian's aarch64 C library. Installs what is missing (the
 # Rust target; qemu-user-static and libc6-arm64-cross through apt-get, as root on CI's fresh
-# Debian). Measures nothing: ARM speed needs an ARM machine (README, Performance).
+# Debian). Measures nothing: ARM speed needs an ARM machine (docs/performance.md).
 ARM_TARGET := aarch64-unknown-linux-gnu
 ARM_SYSROOT := /usr/aarch64-linux-gnu
 # The naive O(vertices × triangles) reference on the 3,000-vertex creature (twice) takes minutes under

@@ -8,7 +8,7 @@ exports, linked libraries, minimum macOS) for the platform its tag names, and it
 for byte to OUT/ beside the zips. The staged manifest keeps only the given wheels and their
 platforms; `blender_ext.py build --split-platforms` then writes `dq_skin-VERSION-PLATFORM.zip`
 for each, and `blender_ext.py validate` checks every zip.
-Usage: python addon/build.py WHEEL [WHEEL ...] [--out dist]
+Usage: python addon/build.py WHEEL [WHEEL ...] [--out dist] [--version X.Y.Z]
 """
 
 from __future__ import annotations
@@ -82,9 +82,9 @@ def check_wheel(wheel: Path, listed: list[str]) -> str:
     return platform
 
 
-def stage(wheels: list[Path], into: Path) -> dict[str, Path]:
+def stage(wheels: list[Path], into: Path, version: str | None = None) -> dict[str, Path]:
     """The add-on with the given wheels under wheels/ and a manifest naming exactly them and their
-    platforms; returns platform -> wheel."""
+    platforms (and `version` instead of the manifest's, if given); returns platform -> wheel."""
     manifest = tomllib.loads(MANIFEST.read_text())
     chosen: dict[str, Path] = {}
     for wheel in wheels:
@@ -101,6 +101,8 @@ def stage(wheels: list[Path], into: Path) -> dict[str, Path]:
     for line in MANIFEST.read_text().splitlines():
         if line.startswith("platforms"):
             line = "platforms = [" + ", ".join(f'"{p}"' for p in manifest["platforms"] if p in chosen) + "]"
+        elif line.startswith("version") and version is not None:
+            line = f'version = "{version}"'
         elif line.startswith('  "./wheels/') and line.strip().strip(",").strip('"') not in names:
             continue
         lines.append(line)
@@ -114,13 +116,16 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("wheels", type=Path, nargs="+")
     parser.add_argument("--out", type=Path, default=ROOT / "dist")
+    # An update's zip (the extension repository's upgrade test): the extension's version only;
+    # the bundled wheels stay the files they are.
+    parser.add_argument("--version", help="the extension version to write (default: the manifest's)")
     args = parser.parse_args()
     tool = blender_ext()
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         staged = Path(tmp) / "dq_skin"
-        chosen = stage(args.wheels, staged)
-        version = tomllib.loads(MANIFEST.read_text())["version"]
+        chosen = stage(args.wheels, staged, args.version)
+        version = tomllib.loads((staged / "blender_manifest.toml").read_text())["version"]
         for platform, wheel in chosen.items():
             for old in args.out.glob(f"dq_skin-*-{platform.replace('-', '_')}.zip"):
                 old.unlink()

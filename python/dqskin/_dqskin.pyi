@@ -212,7 +212,7 @@ def skin(
     positions: F32Array,
     influences: Influences,
     deform: F32Array,
-    rest: F32Array | None = None,
+    rest: F32Array | None,
     *,
     method: MethodName = Method.DUAL_QUATERNION,
     blend: F32Array | None = None,
@@ -225,8 +225,14 @@ def skin(
 ) -> F32Array:
     """Skins ``(V, 3)`` positions exactly as Blender's Armature modifier (or with centers of
     rotation, ``Method.CENTERS_OF_ROTATION`` with ``centers`` from :func:`centers_of_rotation`);
-    returns ``out``. ``method`` is a :class:`Method` or its name (strings are looked up as
-    ``Method(value)``)."""
+    returns ``out``. ``deform`` is ``(B, 4, 4)``: each bone's posed matrix times the inverse of its
+    rest matrix (Blender's ``PoseBone.matrix_channel``). ``rest`` is ``(B, 4, 4)``
+    (``Bone.matrix_local``) and must be given; it may be None only with ``method='linear'``.
+    ``method`` is a :class:`Method` or its name (strings are looked up as ``Method(value)``).
+    ``blend`` (``(V,)``, with ``method='blend'``) and ``blend_factor`` give each vertex's share of
+    Dual Quaternion; ``premat``/``postmat`` are the mesh-to-armature and armature-to-mesh
+    transforms (identity if None); ``mask`` ``(V,)`` scales each vertex's deformation; ``out`` is
+    a ``(V, 3)`` float32 buffer to write (allocated if None)."""
 
 @final
 class SkinJob:
@@ -239,7 +245,7 @@ class SkinJob:
         positions: F32Array,
         influences: Influences,
         deform: F32Array,
-        rest: F32Array | None = None,
+        rest: F32Array | None,
         *,
         method: MethodName = Method.DUAL_QUATERNION,
         blend: F32Array | None = None,

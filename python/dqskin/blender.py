@@ -32,6 +32,25 @@ def _user_resources(argv: list[str]) -> str | None:
     return None
 
 
+# What the launcher says where `bpy` cannot be imported (`pip install dqskin` alone).
+NEEDS_BPY = """{prog}: runs the DQ Skin Blender extension's batch commands (bake, apply, merge,
+compare) with Blender's `bpy` module, which this Python cannot import ({python}, {version}).
+It needs:
+  - the `bpy` module of your Blender release in this Python: `pip install bpy==5.0.1` on
+    CPython 3.11 (each Blender release has its own; see pypi.org/project/bpy);
+  - the DQ Skin extension installed in a Blender user folder, named by BLENDER_USER_RESOURCES or
+    --user-resources DIR.
+Or run the same commands with Blender itself: blender -b --command dq_skin COMMAND ...
+Without Blender, `import dqskin` gives the skinning functions for numpy arrays."""
+
+
+def _bpy_importable() -> bool:
+    """Whether `bpy` can be imported here, without importing it (which starts Blender)."""
+    import importlib.util
+
+    return importlib.util.find_spec("bpy") is not None
+
+
 def _stop(signum, _frame):
     # Before the extension takes over (importing bpy): nothing has been started or written.
     print(f"{PROG}: interrupted ({signal.Signals(signum).name}); nothing written", file=sys.stderr)
@@ -45,6 +64,9 @@ def main(argv: list[str] | None = None) -> int:
     folder = _user_resources(argv)
     if folder:
         os.environ["BLENDER_USER_RESOURCES"] = str(Path(folder).resolve())
+    if not _bpy_importable():
+        print(NEEDS_BPY.format(prog=PROG, python=sys.executable, version=sys.version.split()[0]), file=sys.stderr)
+        return 0 if argv and argv[0] in ("-h", "--help") else 1
     import bpy  # noqa: F401  (after BLENDER_USER_RESOURCES)
 
     import addon_utils

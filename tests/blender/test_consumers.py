@@ -4,7 +4,7 @@ of the armature and the mesh, side by side, playing the same action), Linear and
 Quaternion, with CesiumMan's bones as they are (vertex groups) and made B-Bones, skinned by the
 frame handler and by the feed (`scenes.RIGS`): simulations on and around the character, hair,
 modifiers and constraints targeting it, brushes on the posed mesh, exporters, Apply as Shape
-Key, bakes and ray casts (see the README's inventory).
+Key, bakes and ray casts (see docs/compatibility.md).
 
 Bar: <= 1e-5 of the bounding-box diagonal, every frame (Shrinkwrap: 1e-4).
 """
@@ -704,7 +704,7 @@ def test_usd_export_with_its_defaults_holds_the_posed_mesh(dq_skin, assets, tmp_
     """USD's skeleton export (on by default) takes the skin from an enabled Armature modifier and
     has no extension point before it writes: a DQ Skin character is written with DQ Skin's
     deformation in its mesh (every frame, with animation), as Alembic writes it; the pose is the
-    Armature modifier's (see the README's inventory)."""
+    Armature modifier's (see docs/compatibility.md)."""
     body, ref = characters(dq_skin, assets, method, rig)
     bpy.context.scene.frame_set(17)
     expected = world_positions(ref)

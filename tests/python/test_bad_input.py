@@ -658,3 +658,60 @@ def test_a_rust_panic_is_a_runtime_error_not_a_panic_exception():
     assert "internal error in dqskin" in str(exc) and "deliberate panic" in str(exc)
     # The module still works afterwards.
     assert dqskin.DualQuat.identity().is_unit()
+
+
+def test_rest_is_a_required_argument_that_only_linear_may_leave_none():
+    a = valid()
+    # The defaults do not skin (Dual Quaternion needs the rest matrices): the signature says so.
+    with pytest.raises(TypeError, match=r"missing 1 required positional argument: 'rest'"):
+        dqskin.skin(a["positions"], a["influences"], a["deform"])
+    with pytest.raises(TypeError, match=r"missing 1 required positional argument: 'rest'"):
+        dqskin.SkinJob(a["positions"], a["influences"], a["deform"])
+    with pytest.raises(ValueError, match=r"rest is required for method='dual_quaternion'.*only method='linear' takes rest=None"):
+        dqskin.skin(a["positions"], a["influences"], a["deform"], None)
+    linear = dqskin.skin(a["positions"], a["influences"], a["deform"], None, method="linear")
+    np.testing.assert_array_equal(linear, call(a, method="linear"))
+    np.testing.assert_array_equal(dqskin.skin(a["positions"], a["influences"], a["deform"], a["rest"]), call(a, method="dual_quaternion"))
+
+
+def _float64_calls():
+    """(name, call with float64 arrays, the same call with float32) for every public function that
+    takes a large array; small inputs (one matrix, a few keys) are converted."""
+    a = valid()
+    p, infl, d, r = a["positions"], a["influences"], a["deform"], a["rest"]
+    tri = np.array([[0, 1, 2], [0, 2, 3]])
+    return [
+        ("skin positions", lambda t: dqskin.skin(p.astype(t), infl, d, r)),
+        ("skin deform", lambda t: dqskin.skin(p, infl, d.astype(t), r)),
+        ("skin rest", lambda t: dqskin.skin(p, infl, d, r.astype(t))),
+        ("skin mask", lambda t: dqskin.skin(p, infl, d, r, mask=np.ones(V, t))),
+        ("SkinJob positions", lambda t: dqskin.SkinJob(p.astype(t), infl, d, r).out),
+        ("Influences weights", lambda t: dqskin.Influences(infl.offsets, infl.bones, infl.weights.astype(t), B).weights),
+        ("Influences.from_dense", lambda t: dqskin.Influences.from_dense(np.zeros((V, 1), int), np.ones((V, 1), t), 1).weights),
+        ("centers_of_rotation", lambda t: dqskin.centers_of_rotation(p.astype(t), tri, infl)),
+        ("mesh_volume", lambda t: dqskin.mesh_volume(p.astype(t), tri)),
+        ("polygon_area", lambda t: dqskin.polygon_area(p[:3].astype(t))),
+        ("transform_points", lambda t: dqskin.transform_points(np.eye(4), p.astype(t))),
+        ("dual_quats_from_matrices", lambda t: dqskin.dual_quats_from_matrices(r.astype(t))),
+        ("DualQuat.transform_points", lambda t: dqskin.DualQuat.identity().transform_points(p.astype(t))),
+        (
+            "sclerp (small: converted)",
+            lambda t: dqskin.sclerp(np.array([1, 0, 0, 0, 0, 0, 0, 0], t), np.array([1, 0, 0, 0, 0, 0.5, 0, 0], t), 0.5),
+        ),
+        ("skin premat (small: converted)", lambda t: dqskin.skin(p, infl, d, r, premat=np.eye(4, dtype=t))),
+    ]
+
+
+@pytest.mark.parametrize("index", range(len(_float64_calls())), ids=[c[0] for c in _float64_calls()])
+def test_float64_is_refused_with_a_message_that_says_so_or_converted(index):
+    name, run = _float64_calls()[index]
+    try:
+        got = run(np.float64)
+    except TypeError as e:
+        message = str(e)
+        assert "must have dtype float32, got float64" in message and "np.asarray(" in message, message
+        return
+    # Converted: the same result as with float32 input, returned as float32.
+    want = run(np.float32)
+    assert getattr(got, "dtype", np.dtype(np.float32)) == np.float32, name
+    np.testing.assert_array_equal(got, want)

@@ -193,4 +193,4 @@ def test_misaligned_arrays_are_refused_with_the_argument_named():
     assert not unaligned.flags.aligned
     inf = dqskin.Influences.from_dense(np.zeros((10, 1), int), np.ones((10, 1), np.float32), 1)
     with pytest.raises(ValueError, match=r"positions is not aligned"):
-        dqskin.skin(unaligned, inf, np.eye(4, dtype=np.float32)[None], method="linear")
+        dqskin.skin(unaligned, inf, np.eye(4, dtype=np.float32)[None], None, method="linear")

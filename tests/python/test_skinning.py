@@ -224,7 +224,7 @@ def test_linear_matches_reference(seed, options):
 @pytest.mark.parametrize("seed", SEEDS)
 def test_linear_needs_no_rest_matrices(seed, options):
     c = case(seed)
-    got = dqskin.skin(c["positions"], influences_of(c), c["deform"], method="linear", **options_for(c, options))
+    got = dqskin.skin(c["positions"], influences_of(c), c["deform"], None, method="linear", **options_for(c, options))
     want, _ = reference_result(seed, options, False)
     assert_close(got, want, what="linear without rest")
 

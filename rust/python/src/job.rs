@@ -139,7 +139,7 @@ impl<'py> Args<'py> {
         let rest = self.rest.as_ref().map(|r| per_bone(r, "rest", b)).transpose()?;
         if method != PyMethod::Linear && rest.is_none() {
             return Err(PyValueError::new_err(format!(
-                "rest is required for method='{}': the (B, 4, 4) rest matrices (Bone.matrix_local)",
+                "rest is required for method='{}': the (B, 4, 4) rest matrices (Bone.matrix_local); only method='linear' takes rest=None",
                 method.key()
             )));
         }
@@ -212,8 +212,9 @@ impl Borrowed<'_> {
 /// - ``influences``: an :class:`Influences` for the same ``V`` vertices.
 /// - ``deform``: ``(B, 4, 4)`` float32, each bone's posed matrix times the inverse of its rest
 ///   matrix in armature space (Blender's ``PoseBone.matrix_channel``), row-major.
-/// - ``rest``: ``(B, 4, 4)`` float32 rest matrices (``Bone.matrix_local``), required for every
-///   method but ``LINEAR`` (Blender's scale path depends on them).
+/// - ``rest``: ``(B, 4, 4)`` float32 rest matrices (``Bone.matrix_local``); a required argument,
+///   which may be None only with ``method='linear'`` (Blender's scale path for every other method
+///   depends on them, so there is no default that would be right).
 /// - ``method``: a :class:`Method` or its name (default ``Method.DUAL_QUATERNION``):
 ///   ``'linear'`` (Preserve Volume off), ``'dual_quaternion'`` (on), ``'blend'``:
 ///   ``(1−α)·linear + α·dual_quaternion`` with ``α = blend_factor · blend[v]`` (or
@@ -227,7 +228,7 @@ impl Borrowed<'_> {
 ///
 /// The GIL is released while the kernel runs on dqskin's thread pool.
 #[pyfunction]
-#[pyo3(signature = (positions, influences, deform, rest = None, *, method = None,
+#[pyo3(signature = (positions, influences, deform, rest, *, method = None,
     blend = None, blend_factor = None, premat = None, postmat = None, mask = None, out = None, centers = None))]
 #[allow(clippy::too_many_arguments)]
 fn skin<'py>(
@@ -343,7 +344,7 @@ fn optional<'py>(o: Option<&Py<PyAny>>, py: Python<'py>) -> Bound<'py, PyAny> {
 #[pymethods]
 impl SkinJob {
     #[new]
-    #[pyo3(signature = (positions, influences, deform, rest = None, *, method = None,
+    #[pyo3(signature = (positions, influences, deform, rest, *, method = None,
         blend = None, blend_factor = None, premat = None, postmat = None, mask = None, out = None, centers = None))]
     #[allow(clippy::too_many_arguments)]
     fn new<'py>(

@@ -41,13 +41,7 @@ pub struct AutoOptions {
 
 impl Default for AutoOptions {
     fn default() -> Self {
-        AutoOptions {
-            resolution: DEFAULT_RESOLUTION,
-            falloff: 0.2,
-            max_influences: 4,
-            smoothing: 0,
-            mirror: None,
-        }
+        AutoOptions { resolution: DEFAULT_RESOLUTION, falloff: 0.2, max_influences: 4, smoothing: 0, mirror: None }
     }
 }
 
@@ -97,7 +91,12 @@ pub fn automatic_weights(
             return Err(WeightsError::LengthMismatch { what: "mirror", expected: b, got: map.len() });
         }
         if let Some(&m) = map.iter().find(|&&m| m as usize >= b) {
-            return Err(WeightsError::OutOfRange { what: "mirror bone", value: f64::from(m), min: 0.0, max: (b - 1) as f64 });
+            return Err(WeightsError::OutOfRange {
+                what: "mirror bone",
+                value: f64::from(m),
+                min: 0.0,
+                max: (b - 1) as f64,
+            });
         }
     }
     let k = options.max_influences;
@@ -125,8 +124,7 @@ pub fn automatic_weights(
         .iter()
         .map(|b| (grid.to_grid(Vec3::from_array(b.head)), grid.to_grid(Vec3::from_array(b.tail))))
         .collect();
-    let mut search_progress =
-        |done: usize, total: usize| progress(STAGES + done * STAGES / total.max(1), 3 * STAGES);
+    let mut search_progress = |done: usize, total: usize| progress(STAGES + done * STAGES / total.max(1), 3 * STAGES);
     let (nearest, outside_bones) = nearest_bones(&solid, &segments, labels, &mut search_progress)?;
     let diag = diagonal(positions);
     // Distances in cells to fractions of the diagonal.

@@ -54,8 +54,9 @@ impl<'a> Bvh<'a> {
                 }
                 let axis = (hi - lo).max_position();
                 let mid = (start + end) / 2;
-                bvh.order[start..end]
-                    .select_nth_unstable_by(mid - start, |&a, &b| centers[a as usize][axis].total_cmp(&centers[b as usize][axis]));
+                bvh.order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
+                    centers[a as usize][axis].total_cmp(&centers[b as usize][axis])
+                });
                 let child = bvh.nodes.len();
                 bvh.nodes.push(Node { lo: Vec3::ZERO, hi: Vec3::ZERO, first: 0, count: 0 });
                 bvh.nodes.push(Node { lo: Vec3::ZERO, hi: Vec3::ZERO, first: 0, count: 0 });

@@ -83,10 +83,9 @@ impl core::fmt::Display for WeightsError {
                 write!(f, "{what}: expected {expected} entries, got {got}")
             }
             WeightsError::NotFinite { what, index } => write!(f, "{what}[{index}] has a NaN or infinite coordinate"),
-            WeightsError::InvalidTriangle { what, index, vertex, vertex_count } => write!(
-                f,
-                "{what}[{index}] refers to vertex {vertex}, but there are {vertex_count} positions"
-            ),
+            WeightsError::InvalidTriangle { what, index, vertex, vertex_count } => {
+                write!(f, "{what}[{index}] refers to vertex {vertex}, but there are {vertex_count} positions")
+            }
             WeightsError::OutOfRange { what, value, min, max } => {
                 write!(f, "{what} must be between {min} and {max}, got {value}")
             }
@@ -124,7 +123,11 @@ pub(crate) fn check_points(what: &'static str, points: &[[f32; 3]]) -> Result<()
     }
 }
 
-pub(crate) fn check_triangles(what: &'static str, triangles: &[[u32; 3]], vertex_count: usize) -> Result<(), WeightsError> {
+pub(crate) fn check_triangles(
+    what: &'static str,
+    triangles: &[[u32; 3]],
+    vertex_count: usize,
+) -> Result<(), WeightsError> {
     for (index, t) in triangles.iter().enumerate() {
         if let Some(&vertex) = t.iter().find(|&&v| v as usize >= vertex_count) {
             return Err(WeightsError::InvalidTriangle { what, index, vertex, vertex_count });

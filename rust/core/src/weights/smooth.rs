@@ -10,7 +10,13 @@ use super::sparse::{self, Pair};
 const STEP: f32 = 0.5;
 
 /// `passes` passes over the vertices where `chosen` is true (all when it is `None`).
-pub(crate) fn smooth(lists: &mut Vec<Vec<Pair>>, neighbours: &Neighbours, passes: u32, k: usize, chosen: Option<&[bool]>) {
+pub(crate) fn smooth(
+    lists: &mut Vec<Vec<Pair>>,
+    neighbours: &Neighbours,
+    passes: u32,
+    k: usize,
+    chosen: Option<&[bool]>,
+) {
     for _ in 0..passes {
         let next: Vec<Vec<Pair>> = crate::pool::run(|| {
             (0..lists.len())

@@ -30,7 +30,14 @@ fn column_dots(a: &[f64], b: &[f64], c: usize) -> Vec<f64> {
 /// Solves `A·X = B` (`c` columns, row-major) from the guess in `x`, until each column's residual
 /// is at most `tolerance` times its right-hand side (or `max_iterations`). Returns the
 /// iterations taken.
-pub(crate) fn conjugate_gradients(a: &Csr, b: &[f64], x: &mut [f64], c: usize, tolerance: f64, max_iterations: usize) -> usize {
+pub(crate) fn conjugate_gradients(
+    a: &Csr,
+    b: &[f64],
+    x: &mut [f64],
+    c: usize,
+    tolerance: f64,
+    max_iterations: usize,
+) -> usize {
     let n = a.rows();
     if n == 0 || c == 0 {
         return 0;
@@ -69,8 +76,7 @@ pub(crate) fn conjugate_gradients(a: &Csr, b: &[f64], x: &mut [f64], c: usize, t
         iterations += 1;
         multiply(a, &p, c, &mut q);
         let pq = column_dots(&p, &q, c);
-        let alpha: Vec<f64> =
-            (0..c).map(|k| if active[k] && pq[k] > 0.0 { rz[k] / pq[k] } else { 0.0 }).collect();
+        let alpha: Vec<f64> = (0..c).map(|k| if active[k] && pq[k] > 0.0 { rz[k] / pq[k] } else { 0.0 }).collect();
         for i in 0..n {
             for k in 0..c {
                 x[i * c + k] += alpha[k] * p[i * c + k];
@@ -85,8 +91,7 @@ pub(crate) fn conjugate_gradients(a: &Csr, b: &[f64], x: &mut [f64], c: usize, t
         }
         precondition(&r, &mut z);
         let rz_next = column_dots(&r, &z, c);
-        let beta: Vec<f64> =
-            (0..c).map(|k| if active[k] && rz[k] > 0.0 { rz_next[k] / rz[k] } else { 0.0 }).collect();
+        let beta: Vec<f64> = (0..c).map(|k| if active[k] && rz[k] > 0.0 { rz_next[k] / rz[k] } else { 0.0 }).collect();
         for (pr, zr) in p.chunks_exact_mut(c).zip(z.chunks_exact(c)) {
             for k in 0..c {
                 pr[k] = zr[k] + beta[k] * pr[k];

@@ -351,7 +351,9 @@ fn inpaint(
                 // The bones this group needs: those of its right-hand side and of its guess.
                 let mut bones: Vec<u32> = ids
                     .iter()
-                    .flat_map(|&i| rows[i as usize].1.iter().map(|p| p.0).chain(guess[unknown[i as usize]].iter().map(|p| p.0)))
+                    .flat_map(|&i| {
+                        rows[i as usize].1.iter().map(|p| p.0).chain(guess[unknown[i as usize]].iter().map(|p| p.0))
+                    })
                     .collect();
                 bones.sort_unstable();
                 bones.dedup();

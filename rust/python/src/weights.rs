@@ -101,7 +101,7 @@ fn names(obj: &Bound<'_, PyAny>, what: &str, count: usize) -> PyResult<Vec<Strin
 ///
 /// Returns ``(influences, report)``: :class:`Influences` over the ``B`` bones, and a dict with
 /// ``unreached`` (vertices weighted to their nearest bones in straight lines), ``outside_bones``
-/// (bones crossing no solid voxel, started from the solid nearest them), ``grid`` and
+/// (bones crossing no solid voxel: they reach the mesh in straight lines), ``grid`` and
 /// ``solid_voxels``. A resolution that would need more than 1 GB is refused (``ValueError``).
 #[pyfunction]
 #[pyo3(signature = (positions, triangles, heads, tails, *, resolution = None, falloff = None, max_influences = None,

@@ -52,7 +52,7 @@ pub struct AutoWeights {
     pub influences: Influences,
     /// Vertices no bone reached through the solid, weighted to their nearest bones instead.
     pub unreached: usize,
-    /// Bones that cross no solid voxel (outside the mesh), started from the solid nearest them.
+    /// Bones that cross no solid voxel (outside the mesh): they reach it in straight lines.
     pub outside_bones: Vec<u32>,
     /// The voxel grid's size and how many of its voxels are solid.
     pub grid: [usize; 3],

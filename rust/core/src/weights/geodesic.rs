@@ -11,8 +11,9 @@
 //! order of distance after a sort, without a heap.
 //!
 //! Each bone starts from the solid cells whose centers lie within one cell of its segment, at
-//! their distance from it. A bone that crosses no solid cell (outside the mesh) starts from the
-//! solid cells nearest to it, at their straight-line distance; the caller reports those bones.
+//! their distance from it. A bone that crosses no solid cell (outside the mesh, or inside an open
+//! garment that has no inside) reaches every solid cell in a straight line first, at its
+//! distance, and the search carries it on from there; the caller reports those bones.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -66,7 +67,7 @@ pub(crate) fn segment_distance(p: Vec3, a: Vec3, b: Vec3) -> f32 {
 }
 
 /// The starting cells of each bone (segments in grid coordinates): `(cell id, bone, distance)`,
-/// and the bones that had to start from the nearest solid instead.
+/// and the bones that cross no solid cell (they start from every solid cell, in straight lines).
 fn seeds(solid: &Solid, segments: &[(Vec3, Vec3)]) -> (Vec<Label>, Vec<u32>) {
     let grid = &solid.grid;
     let per_bone: Vec<Vec<Label>> = crate::pool::run(|| {
@@ -108,12 +109,7 @@ fn seeds(solid: &Solid, segments: &[(Vec3, Vec3)]) -> (Vec<Label>, Vec<u32>) {
             let dist: Vec<f32> = crate::pool::run(|| {
                 solid.cells.par_iter().map(|&c| segment_distance(grid.center(c as usize), a, b)).collect()
             });
-            let nearest = dist.iter().copied().fold(f32::INFINITY, f32::min);
-            for (id, &d) in dist.iter().enumerate() {
-                if d <= nearest + 1.0 {
-                    all.push(Label { dist: d, id: id as u32, bone: bone as u16 });
-                }
-            }
+            all.extend(dist.iter().enumerate().map(|(id, &d)| Label { dist: d, id: id as u32, bone: bone as u16 }));
         } else {
             all.extend(found);
         }

@@ -73,29 +73,40 @@ pub fn mirror_bone_map(names: &[&str]) -> Vec<u32> {
         .collect()
 }
 
-/// Mirrors `lists` (one per vertex at `positions`) with `bone_map`; `tolerance` is how far a
-/// mirror image may be from the vertex that stands for it, and how near the plane a vertex
-/// counts as on it.
+/// Mirrors `lists` (one per vertex at `positions`) with `bone_map`: a vertex on the plane (within
+/// a thousandth of `tolerance`) gets the mean of its weights and their mirror; a vertex on the −X
+/// side takes the mirrored weights of the vertex nearest its mirror image on the other side, if
+/// one is within `tolerance` (else it keeps its own).
 pub(crate) fn mirror(lists: &mut [Vec<Pair>], positions: &[[f32; 3]], bone_map: &[u32], tolerance: f32, k: usize) {
     let tolerance = tolerance.max(f32::MIN_POSITIVE);
+    let plane = tolerance * 1e-3;
+    let flip = |pairs: &[Pair]| -> Vec<Pair> { pairs.iter().map(|&(b, w)| (bone_map[b as usize], w)).collect() };
+    for (i, p) in positions.iter().enumerate() {
+        if p[0].abs() <= plane {
+            let mut both: Vec<Pair> = lists[i].iter().chain(flip(&lists[i]).iter()).copied().collect();
+            sparse::merge_repeated(&mut both);
+            sparse::keep_strongest(&mut both, usize::MAX);
+            // A mirrored pair weighs the same: keep both or neither, so the vertex stays symmetric.
+            let mut cut = k.min(both.len());
+            while cut > 1 && cut < both.len() && both[cut - 1].1 == both[cut].1 {
+                cut -= 1;
+            }
+            both.truncate(cut);
+            if sparse::normalize(&mut both) {
+                lists[i] = both;
+            }
+        }
+    }
     let key = |p: Vec3| (p / tolerance).floor().as_ivec3().to_array();
     let mut cells: HashMap<[i32; 3], Vec<u32>> = HashMap::new();
     for (i, p) in positions.iter().enumerate() {
-        if p[0] > tolerance {
+        if p[0] >= -plane {
             cells.entry(key(Vec3::from_array(*p))).or_default().push(i as u32);
         }
     }
-    let flip = |pairs: &[Pair]| -> Vec<Pair> { pairs.iter().map(|&(b, w)| (bone_map[b as usize], w)).collect() };
     for (i, p) in positions.iter().enumerate() {
         let p = Vec3::from_array(*p);
-        if p.x.abs() <= tolerance {
-            let mut both: Vec<Pair> = lists[i].iter().chain(flip(&lists[i]).iter()).copied().collect();
-            if sparse::limit_and_normalize(&mut both, k) {
-                lists[i] = both;
-            }
-            continue;
-        }
-        if p.x > 0.0 {
+        if p.x >= -plane {
             continue;
         }
         let image = Vec3::new(-p.x, p.y, p.z);

@@ -84,12 +84,12 @@ def write_groups(obj, bone_names: list[str], influences: dqskin.Influences, read
     for name in bone_names:
         group = obj.vertex_groups.get(name) or obj.vertex_groups.new(name=name)
         index.append(group.index)
-    # The old weights of these groups go first (one call per group that has any, in C).
+    # The old weights of these groups go first: one call per group, for the vertices that have it.
     old = meshdata.read_groups(mesh, reader)
-    if old is not None:
-        everything = list(range(len(mesh.vertices)))
+    if old is not None and len(old.groups):
+        owner = np.repeat(np.arange(len(mesh.vertices)), np.diff(old.offsets.astype(np.int64)))
         for g in set(index) & set(np.unique(old.groups).tolist()):
-            obj.vertex_groups[g].remove(everything)
+            obj.vertex_groups[g].remove(owner[old.groups == g].tolist())
     offsets = influences.offsets.tolist()
     bones = np.asarray(index, np.int64)[influences.bones].tolist() if len(influences) else []
     weights = influences.weights.tolist()

@@ -68,7 +68,7 @@ pub(crate) fn segment_distance(p: Vec3, a: Vec3, b: Vec3) -> f32 {
 
 /// The starting cells of each bone (segments in grid coordinates): `(cell id, bone, distance)`,
 /// and the bones that cross no solid cell (they start from every solid cell, in straight lines).
-fn seeds(solid: &Solid, segments: &[(Vec3, Vec3)]) -> (Vec<Label>, Vec<u32>) {
+fn seeds(solid: &Solid, segments: &[(Vec3, Vec3)], k: usize) -> (Vec<Label>, Vec<u32>) {
     let grid = &solid.grid;
     let per_bone: Vec<Vec<Label>> = crate::pool::run(|| {
         segments
@@ -101,20 +101,48 @@ fn seeds(solid: &Solid, segments: &[(Vec3, Vec3)]) -> (Vec<Label>, Vec<u32>) {
             .collect()
     });
     let mut all = Vec::new();
-    let mut snapped = Vec::new();
+    let mut outside = Vec::new();
     for (bone, found) in per_bone.into_iter().enumerate() {
-        if found.is_empty() && !solid.cells.is_empty() {
-            snapped.push(bone as u32);
-            let (a, b) = segments[bone];
-            let dist: Vec<f32> = crate::pool::run(|| {
-                solid.cells.par_iter().map(|&c| segment_distance(grid.center(c as usize), a, b)).collect()
-            });
-            all.extend(dist.iter().enumerate().map(|(id, &d)| Label { dist: d, id: id as u32, bone: bone as u16 }));
-        } else {
-            all.extend(found);
+        if found.is_empty() {
+            outside.push(bone as u32);
         }
+        all.extend(found);
     }
-    (all, snapped)
+    if !outside.is_empty() {
+        all.extend(straight_seeds(solid, segments, &outside, k));
+    }
+    (all, outside)
+}
+
+/// Seeds of the bones that cross no solid cell: each solid cell gets the `k` of them nearest in a
+/// straight line. That loses nothing: a path through the solid is never shorter than the straight
+/// line, so a bone that `k` others beat in a straight line at a cell cannot be among its `k`
+/// nearest by any path.
+fn straight_seeds(solid: &Solid, segments: &[(Vec3, Vec3)], outside: &[u32], k: usize) -> Vec<Label> {
+    let grid = &solid.grid;
+    crate::pool::run(|| {
+        solid
+            .cells
+            .par_iter()
+            .enumerate()
+            .with_min_len(1024)
+            .flat_map_iter(|(id, &cell)| {
+                let c = grid.center(cell as usize);
+                let mut near: Vec<Label> = outside
+                    .iter()
+                    .map(|&b| {
+                        let (a, t) = segments[b as usize];
+                        Label { dist: segment_distance(c, a, t), id: id as u32, bone: b as u16 }
+                    })
+                    .collect();
+                if near.len() > k {
+                    near.select_nth_unstable_by(k - 1, |x, y| x.dist.total_cmp(&y.dist).then(x.bone.cmp(&y.bone)));
+                    near.truncate(k);
+                }
+                near
+            })
+            .collect()
+    })
 }
 
 /// The `k` nearest bones of every solid cell by geodesic distance (in cells). Returns them and
@@ -127,7 +155,7 @@ pub(crate) fn nearest_bones(
 ) -> Result<(NearestBones, Vec<u32>), WeightsError> {
     let n = solid.len();
     let mut out = NearestBones { k, count: vec![0; n], bones: vec![0; n * k], dists: vec![0.0; n * k] };
-    let (start, snapped) = seeds(solid, segments);
+    let (start, snapped) = seeds(solid, segments, k);
     let grid = &solid.grid;
     let [nx, ny, _] = grid.dims;
     let mut steps: Vec<(isize, f32)> = Vec::with_capacity(26);

@@ -18,7 +18,7 @@ from .cli import batch, command  # noqa: F401  (`batch.main` is the launcher's e
 
 # Found by the glTF exporter in every enabled add-on's module (see `exports`).
 from .exports import glTF2_post_export_callback, glTF2_pre_export_callback  # noqa: F401
-from .ops import bake, blend_paint, modifiers, switch
+from .ops import automatic_weights, bake, blend_paint, modifiers, switch, transfer_weights
 from .session import SESSION  # noqa: F401  (scripts and tests reach the session here)
 from .tools import animation, compare
 from .ui import panel
@@ -28,6 +28,8 @@ CLASSES = (
     *switch.CLASSES,
     *blend_paint.CLASSES,
     *bake.CLASSES,
+    *automatic_weights.CLASSES,
+    *transfer_weights.CLASSES,
     *compare.CLASSES,
     *animation.CLASSES,
     *panel.CLASSES,

@@ -17,6 +17,10 @@ Volume off, ``Method.DUAL_QUATERNION`` (``'dual_quaternion'``) is Preserve Volum
 (``'centers_of_rotation'``) skins with optimized centers of rotation (Le & Hodgins 2016),
 precomputed once per mesh by :func:`centers_of_rotation`. Many meshes are skinned in one call by
 :func:`skin_many` from a :class:`SkinJob` each.
+
+Skin weights: :func:`automatic_weights` binds a rest mesh to bones (geodesic voxel binding,
+never leaving a vertex unweighted) and :func:`transfer_weights` carries a body's weights to
+clothing (closest-point matching and inpainting).
 """
 
 from ._dqskin import (  # noqa: F401
@@ -34,6 +38,7 @@ from ._dqskin import (  # noqa: F401
     _panic_for_tests,  # noqa: F401  (tests check panics become RuntimeError)
     angular_speeds,
     armature_spaces,
+    automatic_weights,
     bbone_segment_matrices,
     centers_of_rotation,
     continuous_signs,
@@ -47,6 +52,7 @@ from ._dqskin import (  # noqa: F401
     influences_from_deform_groups,
     matrices_from_dual_quats,
     mesh_volume,
+    mirrored_bone_name,
     polygon_area,
     sample_rotations,
     sample_transforms,
@@ -59,6 +65,7 @@ from ._dqskin import (  # noqa: F401
     spring,
     squad,
     squad_control_points,
+    transfer_weights,
     transform_points,
 )
 
@@ -81,6 +88,7 @@ __all__ = [
     "TwistCylinder",
     "__version__",
     "armature_spaces",
+    "automatic_weights",
     "bbone_segment_matrices",
     "centers_of_rotation",
     "dib",
@@ -91,6 +99,7 @@ __all__ = [
     "influences_from_deform_groups",
     "matrices_from_dual_quats",
     "mesh_volume",
+    "mirrored_bone_name",
     "polygon_area",
     "sclerp",
     "set_num_threads",
@@ -101,4 +110,5 @@ __all__ = [
     "squad",
     "squad_control_points",
     "transform_points",
+    "transfer_weights",
 ]

@@ -1,7 +1,7 @@
 """Type stubs for the compiled core of dqskin (see the package docstring for conventions)."""
 
 from collections.abc import Callable, Sequence
-from typing import Literal, SupportsFloat, final, overload
+from typing import Literal, SupportsFloat, TypedDict, final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -324,6 +324,60 @@ def centers_of_rotation(
 
 class Cancelled(Exception):
     """A long computation stopped because its progress callback returned False."""
+
+class AutomaticWeightsReport(TypedDict):
+    unreached: int
+    outside_bones: npt.NDArray[np.uint32]
+    grid: tuple[int, int, int]
+    solid_voxels: int
+
+def automatic_weights(
+    positions: F32Array,
+    triangles: IntArray,
+    heads: F32Array,
+    tails: F32Array,
+    *,
+    resolution: int = 128,
+    falloff: float = 0.2,
+    max_influences: int = 4,
+    smoothing: int = 0,
+    mirror: Sequence[str] | None = None,
+    progress: Callable[[int, int], bool | None] | None = None,
+) -> tuple[Influences, AutomaticWeightsReport]:
+    """Automatic skin weights of a rest mesh for bones given as segments ``heads`` → ``tails``
+    ``(B, 3)`` (geodesic voxel binding through a solid voxelization of the mesh); every vertex
+    gets 1 to ``max_influences`` bones with weights summing to one. ``mirror``: the bones' names,
+    to mirror across X = 0 by name. The report says how many vertices no bone reached (weighted
+    to their nearest bones in straight lines) and which bones lie outside the mesh."""
+
+class TransferReport(TypedDict):
+    matched: npt.NDArray[np.bool_]
+    matched_count: int
+    inpainted: int
+    from_nearest: int
+    max_distance: float
+    iterations: int
+
+def transfer_weights(
+    body_positions: F32Array,
+    body_triangles: IntArray,
+    body_influences: Influences,
+    cloth_positions: F32Array,
+    cloth_triangles: IntArray,
+    *,
+    max_distance: float | None = None,
+    max_angle: float = 30.0,
+    flipped_normals: bool = False,
+    smoothing: int = 0,
+    max_influences: int = 4,
+    progress: Callable[[int, int], bool | None] | None = None,
+) -> tuple[Influences, TransferReport]:
+    """Transfers skin weights from a body to clothing (closest points within ``max_distance``,
+    default 5 % of the clothing's bounding-box diagonal, and ``max_angle`` degrees; the rest
+    filled by a Laplacian-energy solve; loose parts with no match take the nearest match)."""
+
+def mirrored_bone_name(name: str) -> str | None:
+    """The bone name of the other side (``hand.L`` → ``hand.R``), or None."""
 
 def bbone_segment_matrices(
     channel: ArrayLike, rest: ArrayLike, pose_joints: ArrayLike, rest_joints: ArrayLike

@@ -13,6 +13,7 @@ from ..engine.context import dq_skin_modifiers
 from ..model.state import Mode
 from ..ops import blend_paint
 from ..session import SESSION
+from . import weights_menu
 
 
 class OBJECT_PT_dq_skin(bpy.types.Panel):
@@ -33,6 +34,7 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
         layout = self.layout
         obj = context.object
         mods = dq_skin_modifiers(obj)
+        weights_menu.draw_panel_row(layout)
         if not mods:
             row = layout.row()
             row.operator("object.dq_skin_add", icon="MOD_ARMATURE")
@@ -141,6 +143,7 @@ MENUS = (
     ("VIEW3D_MT_object_animation", draw_menu_entry),
     ("VIEW3D_MT_pose_motion", draw_menu_entry),
     ("OBJECT_MT_modifier_add_deform", draw_deform_entry),
+    ("VIEW3D_MT_object_parent", weights_menu.draw_parent_entries),
 )
 
 

@@ -12,6 +12,8 @@
 //! - [`pool`]: the thread pool the kernels run on.
 //! - [`shape_keys`]: Blender's relative shape-key mix.
 //! - [`tracks`]: keyed rotation and transform tracks (Slerp, Squad in time, ScLERP, Spring).
+//! - [`weights`]: automatic skin weights (geodesic voxel binding) and weight transfer to
+//!   clothing (closest-point matching and weight inpainting).
 //! - [`rigs`]: procedural test rigs (the twisted cylinder, a branching creature) and mesh
 //!   measurements.
 
@@ -32,6 +34,7 @@ pub mod skin;
 #[cfg(test)]
 mod test_support;
 pub mod tracks;
+pub mod weights;
 
 pub use blend::{dib, dlb, sclerp, BlendError, DibResult};
 pub use dual_quat::{DualNumber, DualQuat, NotRigid, Screw};

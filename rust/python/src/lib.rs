@@ -19,6 +19,7 @@ mod method;
 mod rigs;
 mod skinning;
 mod tracks;
+mod weights;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
@@ -80,5 +81,6 @@ fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     job::register(m)?;
     rigs::register(m)?;
     tracks::register(m)?;
+    weights::register(m)?;
     Ok(())
 }

@@ -238,7 +238,7 @@ pub(crate) fn space(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Opti
 }
 
 /// ``(T, 3)`` integer triangles as vertex indices (range checked by the core).
-fn triangle_indices(triangles: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
+pub(crate) fn triangle_indices(triangles: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
     let flat = arrays::index_array(triangles, "triangles", &[None, Some(3)], &["T"])?;
     Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }

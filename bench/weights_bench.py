@@ -24,9 +24,8 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 import dqskin
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -151,8 +150,9 @@ def check(influences, count: int, k: int) -> dict:
 def rigify_case(repeat: int):
     """The tests' Rigify character (tests/blender/characters.py) through the bpy module."""
     sys.path.insert(0, str(ROOT / "tests" / "blender"))
-    import bpy  # noqa: F401  (the bpy module of the pinned Blender)
     import characters
+
+    import bpy  # noqa: F401  (the bpy module of the pinned Blender)
 
     body, rig = characters.rigify_character()
     mesh = body.data
@@ -169,18 +169,27 @@ def rigify_case(repeat: int):
         return (p @ to_mesh[:3, :3].T + to_mesh[:3, 3]).astype(np.float32)
 
     positions = positions.reshape(-1, 3)
-    seconds, (inf, report) = best_of(repeat, lambda: dqskin.automatic_weights(positions, tris.reshape(-1, 3), points("head_local"), points("tail_local")))
-    return {"case": "Rigify character", "bones": len(deform), "seconds": seconds, "goal_seconds": 1.0, **check(inf, len(positions), 4), "unreached": report["unreached"]}
+    seconds, (inf, report) = best_of(
+        repeat, lambda: dqskin.automatic_weights(positions, tris.reshape(-1, 3), points("head_local"), points("tail_local"))
+    )
+    return {
+        "case": "Rigify character",
+        "bones": len(deform),
+        "seconds": seconds,
+        "goal_seconds": 1.0,
+        **check(inf, len(positions), 4),
+        "unreached": report["unreached"],
+    }
 
 
 def memory_case() -> dict:
     """Peak resident memory of automatic weights at the highest resolution, in a fresh process."""
     code = (
-        "import resource, sys, json; sys.path.insert(0, %r); import weights_bench as w, dqskin;"
+        f"import resource, sys, json; sys.path.insert(0, {str(Path(__file__).parent)!r}); import weights_bench as w, dqskin;"
         "p, t, h, e = w.creature(); base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss;"
         "dqskin.automatic_weights(p, t, h, e, resolution=512);"
         "print(json.dumps([base, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss]))"
-    ) % str(Path(__file__).parent)
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     before, peak = json.loads(out.strip().splitlines()[-1])
     return {"case": "peak memory at resolution 512 (100k creature)", "peak_mb": peak / 1024, "before_mb": before / 1024, "goal_mb": 1024}
@@ -199,14 +208,29 @@ def main(argv=None) -> int:
     positions, triangles, heads, tails = creature()
     seconds, (inf, report) = best_of(args.repeat, lambda: dqskin.automatic_weights(positions, triangles, heads, tails))
     results.append(
-        {"case": "automatic weights, 100k creature", "bones": len(heads), "grid": report["grid"], "seconds": seconds, "goal_seconds": 3.0, **check(inf, len(positions), 4), "unreached": report["unreached"]}
+        {
+            "case": "automatic weights, 100k creature",
+            "bones": len(heads),
+            "grid": report["grid"],
+            "seconds": seconds,
+            "goal_seconds": 3.0,
+            **check(inf, len(positions), 4),
+            "unreached": report["unreached"],
+        }
     )
     print(json.dumps(results[-1]), flush=True)
 
     cloth_pos, cloth_tris = garment(heads, tails)
     seconds, (moved, treport) = best_of(args.repeat, lambda: dqskin.transfer_weights(positions, triangles, inf, cloth_pos, cloth_tris))
     results.append(
-        {"case": "transfer to a 50k garment", "seconds": seconds, "goal_seconds": 1.0, "matched": treport["matched_count"], "inpainted": treport["inpainted"], **check(moved, len(cloth_pos), 4)}
+        {
+            "case": "transfer to a 50k garment",
+            "seconds": seconds,
+            "goal_seconds": 1.0,
+            "matched": treport["matched_count"],
+            "inpainted": treport["inpainted"],
+            **check(moved, len(cloth_pos), 4),
+        }
     )
     print(json.dumps(results[-1]), flush=True)
 

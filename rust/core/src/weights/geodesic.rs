@@ -12,8 +12,10 @@
 //!
 //! Each bone starts from the solid cells whose centers lie within one cell of its segment, at
 //! their distance from it. A bone that crosses no solid cell (outside the mesh, or inside an open
-//! garment that has no inside) reaches every solid cell in a straight line first, at its
-//! distance, and the search carries it on from there; the caller reports those bones.
+//! garment that has no inside) reaches the solid in straight lines first, at its distance (each
+//! cell from the `k` such bones nearest to it), and the search carries it on from there; the
+//! caller reports those bones. Where some bone starts inside the solid, outside bones reach only
+//! the connected parts such bones start in: a loose part no bone is inside stays unreached.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -109,16 +111,60 @@ fn seeds(solid: &Solid, segments: &[(Vec3, Vec3)], k: usize) -> (Vec<Label>, Vec
         all.extend(found);
     }
     if !outside.is_empty() {
-        all.extend(straight_seeds(solid, segments, &outside, k));
+        let reach = reached_parts(solid, &all);
+        all.extend(straight_seeds(solid, segments, &outside, k, reach.as_deref()));
     }
     (all, outside)
+}
+
+/// Which solid cells lie in a connected part of the solid (26-neighbours, the search's steps)
+/// that some bone starts inside, or None when no bone starts inside any part (every bone is
+/// outside: an open garment alone). Outside bones reach only those parts in straight lines: a
+/// loose part away from every inside bone (an eye) stays unreached, so its vertices take their
+/// nearest bones among all bones, not the outside bones alone.
+fn reached_parts(solid: &Solid, inside: &[Label]) -> Option<Vec<bool>> {
+    if inside.is_empty() {
+        return None;
+    }
+    let [nx, ny, _] = solid.grid.dims;
+    let mut reached = vec![false; solid.len()];
+    let mut stack: Vec<u32> = Vec::new();
+    for l in inside {
+        if !reached[l.id as usize] {
+            reached[l.id as usize] = true;
+            stack.push(l.id);
+        }
+    }
+    while let Some(id) = stack.pop() {
+        let cell = solid.cells[id as usize] as isize;
+        for dz in -1isize..=1 {
+            for dy in -1isize..=1 {
+                for dx in -1isize..=1 {
+                    let step = dx + nx as isize * (dy + ny as isize * dz);
+                    // Solid cells lie inside the grid's empty border, so every neighbour exists.
+                    let Some(next) = solid.id((cell + step) as usize) else { continue };
+                    if !reached[next as usize] {
+                        reached[next as usize] = true;
+                        stack.push(next);
+                    }
+                }
+            }
+        }
+    }
+    Some(reached)
 }
 
 /// Seeds of the bones that cross no solid cell: each solid cell gets the `k` of them nearest in a
 /// straight line. That loses nothing: a path through the solid is never shorter than the straight
 /// line, so a bone that `k` others beat in a straight line at a cell cannot be among its `k`
 /// nearest by any path.
-fn straight_seeds(solid: &Solid, segments: &[(Vec3, Vec3)], outside: &[u32], k: usize) -> Vec<Label> {
+fn straight_seeds(
+    solid: &Solid,
+    segments: &[(Vec3, Vec3)],
+    outside: &[u32],
+    k: usize,
+    parts: Option<&[bool]>,
+) -> Vec<Label> {
     let grid = &solid.grid;
     crate::pool::run(|| {
         solid
@@ -126,6 +172,7 @@ fn straight_seeds(solid: &Solid, segments: &[(Vec3, Vec3)], outside: &[u32], k: 
             .par_iter()
             .enumerate()
             .with_min_len(1024)
+            .filter(|(id, _)| parts.is_none_or(|reached| reached[*id]))
             .flat_map_iter(|(id, &cell)| {
                 let c = grid.center(cell as usize);
                 let mut near: Vec<Label> = outside

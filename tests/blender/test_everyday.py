@@ -199,6 +199,50 @@ def test_modifiers_copied_to_another_character(dq_skin, assets, how):
     assert output_of(a, dq_skin_mods(a)[0]) != output_of(b, dq_skin_mods(b)[0])
 
 
+@pytest.mark.parametrize("method", ["DUAL_QUATERNION", "CENTERS_OF_ROTATION"])
+def test_dq_skin_alone_copied_to_a_character_with_its_own_armature_modifier(dq_skin, assets, method):
+    """Copy to Selected from DQ Skin's own dropdown: the other character keeps its Armature
+    modifier (its own armature) and gets a DQ Skin after it. The source stays exactly as it was,
+    and the copy never shows the source's result (it once shared the source's result: the other
+    character then showed the source's pose)."""
+    a, a_mod = import_character(assets / "CesiumMan.glb")
+    a_arm = a_mod.object
+    b = a.copy()
+    b.data = a.data.copy()
+    bpy.context.scene.collection.objects.link(b)
+    b_arm = a_arm.copy()
+    b_arm.data = a_arm.data.copy()
+    bpy.context.scene.collection.objects.link(b_arm)
+    b_arm.location.x += 1.5
+    b.parent = b_arm
+    b.modifiers[a_mod.name].object = b_arm
+    b_arm.animation_data.action = a_arm.animation_data.action.copy()
+    for fc in getattr(b_arm.animation_data.action, "fcurves", []):
+        for k in fc.keyframe_points:
+            k.co.x *= 0.7
+    mod = add_dq_skin(a, method)
+    reference = twin(a, share_mesh=False) if method == "DUAL_QUATERNION" else None
+    bpy.context.scene.frame_set(5)
+    before = {f: None for f in (3, 11)}
+    for f in before:
+        bpy.context.scene.frame_set(f)
+        before[f] = evaluated_positions(a)
+    select_only(a, b)
+    with bpy.context.temp_override(object=a, active_object=a, selected_objects=[a, b], selected_editable_objects=[a, b]):
+        assert bpy.ops.object.modifier_copy_to_selected(modifier=mod.name) == {"FINISHED"}
+    assert len(dq_skin_mods(b)) == 1
+    for f in (11, 3):
+        bpy.context.scene.frame_set(f)
+        assert deviation(evaluated_positions(a), before[f]) <= 1e-6, f"the source changed at frame {f}"
+        if reference is not None:
+            assert_same(a, reference, f"the source at frame {f}")
+        # The copy shows its own character (moved 1.5 along x, walking at its own pace), never
+        # the source's result.
+        assert deviation(evaluated_positions(b), evaluated_positions(a)) > 0.05
+    assert output_of(a, mod) != output_of(b, dq_skin_mods(b)[0])
+    assert status(dq_skin, a).live
+
+
 @pytest.mark.parametrize("rig", RIGS)
 def test_a_modifier_duplicated_within_its_stack_gets_its_own_result(dq_skin, rig):
     obj, arm, _ = animated_tube(rig=rig)

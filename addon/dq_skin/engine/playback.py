@@ -13,7 +13,7 @@ from .context import Context, dq_skin_modifiers, mod_key
 def fed_frame_stands(obj, ctx: Context, bones_changed: bool = False) -> bool:
     """Whether the frame the feed skinned for every DQ Skin of `obj` in this evaluation is what
     the full path would publish, checked cheaply (a Rigify character's full path reads the whole
-    pose again: 0.4 ms). The driver read the pose, the transforms and the shape keys, and skinned
+    pose again). The driver read the pose, the transforms and the shape keys, and skinned
     only where the bones' binding signature and the mesh were the last full evaluation's;
     checked here is what it could not know: the settings, the mesh and its vertex groups, the
     scene's structure, exports, the toggles and the companion; with `bones_changed` (the

@@ -257,7 +257,7 @@ pub(crate) fn nearest_bones(
         }
         batch.clear();
         current += 1;
-        if current % 32 == 0 && !progress(settled, total) {
+        if current.is_multiple_of(32) && !progress(settled, total) {
             return Err(WeightsError::Cancelled);
         }
     }

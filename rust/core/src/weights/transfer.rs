@@ -14,6 +14,11 @@ use super::sparse::{self, Pair};
 use super::{check_points, check_range, check_triangles, smooth, Progress, WeightsError, MAX_WEIGHT_INFLUENCES};
 use crate::skin::Influences;
 
+/// One row of a sparse matrix: (column, value) pairs.
+type SparseRow = Vec<(u32, f64)>;
+/// A solved unknown: its vertex and weights.
+type Solved = (u32, Vec<Pair>);
+
 /// The paper's distance threshold: this fraction of the clothing's bounding-box diagonal.
 pub const DEFAULT_DISTANCE_FRACTION: f32 = 0.05;
 /// The paper's normal threshold, in degrees.
@@ -289,7 +294,7 @@ fn inpaint(
         local[v] = i as u32;
     }
     // Rows of Q among the unknowns, and the right-hand side −Q_uk·w_k per unknown.
-    let rows: Vec<(Vec<(u32, f64)>, Vec<(u32, f64)>)> = crate::pool::run(|| {
+    let rows: Vec<(SparseRow, SparseRow)> = crate::pool::run(|| {
         unknown
             .par_iter()
             .map_init(
@@ -344,7 +349,7 @@ fn inpaint(
         members.entry(root).or_default().push(i);
     }
     let groups: Vec<Vec<u32>> = members.into_values().collect();
-    let solved: Vec<(Vec<(u32, Vec<Pair>)>, usize)> = crate::pool::run(|| {
+    let solved: Vec<(Vec<Solved>, usize)> = crate::pool::run(|| {
         groups
             .par_iter()
             .map(|ids| {

@@ -210,7 +210,7 @@ fn enclosed(grid: &Grid, surface: &[u64]) -> Vec<u64> {
     }
     let mut solid: Vec<u64> = outside.iter().map(|w| !w).collect();
     // Bits past the last cell are not cells.
-    if n % 64 != 0 {
+    if !n.is_multiple_of(64) {
         let last = solid.len() - 1;
         solid[last] &= (1u64 << (n % 64)) - 1;
     }

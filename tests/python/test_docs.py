@@ -132,14 +132,22 @@ def test_every_public_name_of_the_module_is_in_the_stubs_and_back():
     public = {n for n in dir(dqskin._dqskin) if not n.startswith("_")} | {"__version__"}
     missing = sorted(public - set(stubs))
     assert not missing, f"in the compiled module but not in the stubs (so not in the API reference): {missing}"
-    aliases = {n for n, node in stubs.items() if isinstance(node, ast.Assign)} | {
-        "F32Array",
-        "IntArray",
-        "ArrayLike",
-        "Vec3",
-        "Quat",
-        "MethodName",
+    # Type-only names: aliases, and the TypedDicts that describe the dicts functions return.
+    typed_dicts = {
+        n for n, node in stubs.items() if isinstance(node, ast.ClassDef) and any(getattr(b, "id", None) == "TypedDict" for b in node.bases)
     }
+    aliases = (
+        typed_dicts
+        | {n for n, node in stubs.items() if isinstance(node, ast.Assign)}
+        | {
+            "F32Array",
+            "IntArray",
+            "ArrayLike",
+            "Vec3",
+            "Quat",
+            "MethodName",
+        }
+    )
     extra = sorted(n for n in stubs if not n.startswith("_") and n not in aliases and not hasattr(dqskin._dqskin, n))
     assert not extra, f"in the stubs but not in the compiled module: {extra}"
     assert set(dqskin.__all__) <= set(stubs)

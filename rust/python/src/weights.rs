@@ -134,7 +134,13 @@ fn automatic_weights<'py>(
         let tris = triangle_indices(triangles)?;
         let h = arrays::readonly::<f32>(heads, "heads", &[None, Some(3)], &["B"])?;
         let b = h.shape()[0];
-        let t = arrays::readonly::<f32>(tails, "tails", &[Some(b), Some(3)], &["B"])?;
+        let t = arrays::readonly::<f32>(tails, "tails", &[None, Some(3)], &["B"])?;
+        if t.shape()[0] != b {
+            return Err(PyValueError::new_err(format!(
+                "heads and tails must have one row per bone each: heads has {b}, tails {}",
+                t.shape()[0]
+            )));
+        }
         let bones: Vec<Bone> = as_points(h.as_slice()?)
             .iter()
             .zip(as_points(t.as_slice()?))

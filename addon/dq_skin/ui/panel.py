@@ -55,6 +55,9 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
                 box.label(text=line, icon=icon)
             if obj.library is None:
                 _tools(box, obj, mod)
+        if obj.library is None:
+            # The object's whole DQ Skin result (every DQ Skin modifier) in one cache.
+            layout.operator("object.dq_skin_bake", text="Bake to Cache", icon="FILE_CACHE")
         if SESSION.errors.last:
             layout.label(text=f"Internal error (please report it): {SESSION.errors.last}", icon="ERROR")
 
@@ -85,8 +88,7 @@ def _tools(box, obj, mod) -> None:
         box.label(text=f"Without the DQ Skin extension (render farms) it {why}", icon="ERROR")
     row = box.row()
     row.operator("object.dq_skin_apply_as_shape_key", text="Apply as Shape Key", icon="SHAPEKEY_DATA").modifier = mod.name
-    row.operator("object.dq_skin_bake", text="Bake to Cache", icon="FILE_CACHE")
-    box.operator("object.dq_skin_remove", icon="X").modifier = mod.name
+    row.operator("object.dq_skin_remove", icon="X").modifier = mod.name
 
 
 def draw_deform_entry(self, context):

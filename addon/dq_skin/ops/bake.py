@@ -239,7 +239,7 @@ def _cache_files(obj) -> list[str]:
     return [bpy.path.abspath(m.filepath, library=obj.library) for m in mods if m.type == "MESH_CACHE" and m.filepath]
 
 
-class OBJECT_OT_dq_skin_bake(modifiers.ActiveMeshOperator):
+class OBJECT_OT_dq_skin_bake(modifiers.DQSkinOperator):
     """Bake the object's DQ Skin result (every DQ Skin modifier) over a frame range to a PC2
     point cache and play it with a Mesh Cache modifier, so it plays and renders without this
     add-on. Esc cancels, leaving nothing written"""

@@ -13,7 +13,7 @@ from ..engine.context import dq_skin_modifiers
 from ..model.state import Mode
 from ..ops import blend_paint
 from ..session import SESSION
-from . import weights_menu
+from . import menus, weights_menu
 
 
 class OBJECT_PT_dq_skin(bpy.types.Panel):
@@ -140,8 +140,10 @@ def draw_menu_entry(self, context):
 
 
 # (menu, draw function): the animation tools in the Object and Pose menus; DQ Skin in the Add
-# Modifier menu's Deform column (the Properties editor's and the 3D Viewport's Object > Modifiers).
+# Modifier menu's Deform column (the Properties editor's and the 3D Viewport's Object > Modifiers);
+# the weighting operators in Object > Parent; every other operator in Object > DQ Skin.
 MENUS = (
+    ("VIEW3D_MT_object", menus.draw_object_entry),
     ("VIEW3D_MT_object_animation", draw_menu_entry),
     ("VIEW3D_MT_pose_motion", draw_menu_entry),
     ("OBJECT_MT_modifier_add_deform", draw_deform_entry),
@@ -163,4 +165,4 @@ def unregister_menus():
             menu.remove(fn)
 
 
-CLASSES = (OBJECT_PT_dq_skin, VIEW3D_MT_dq_skin_animation)
+CLASSES = (OBJECT_PT_dq_skin, VIEW3D_MT_dq_skin_animation, *menus.CLASSES)

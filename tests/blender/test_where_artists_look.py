@@ -273,3 +273,38 @@ def test_tools_are_greyed_out_where_they_cannot_run(dq_skin):
     assert all(poll(op, keyed) for op in (*rotation_tools, anim.dq_screw_inbetweens))
     assert not poll(anim.dq_blend_transforms, keyed)  # one transform: nothing to blend
     assert poll(anim.dq_blend_transforms, keyed, [keyed, still])
+
+
+def test_preferences_set_the_threads_and_the_centers_cache(dq_skin, tmp_path, monkeypatch):
+    """Edit > Preferences > Add-ons > DQ Skin: the core's threads (0: all) and the disk space of
+    the Optimized Centers cache, both acting as soon as they change."""
+    import os
+
+    from conftest import EXTENSION
+
+    core = dq_skin.dqskin
+    prefs = bpy.context.preferences.addons[EXTENSION].preferences
+    assert (prefs.threads, prefs.centers_cache_mb) == (0, 1024)
+    assert dq_skin.SESSION.centers.disk_bytes == 1 << 30
+    before = core.get_num_threads()
+    monkeypatch.setattr(dq_skin.engine.centers, "_folder", lambda: tmp_path)  # not the real cache
+    for i in range(3):  # 600 kB each, the newest last
+        path = tmp_path / f"{i}.npy"
+        np.save(path, np.zeros((50_000, 3), np.float32))
+        os.utime(path, (1000 + i, 1000 + i))
+    try:
+        for n in (1, 3):
+            prefs.threads = n
+            assert core.get_num_threads() == n
+        prefs.threads = 0
+        assert core.get_num_threads() == dq_skin.ui.preferences.all_threads()
+        prefs.centers_cache_mb = 2
+        assert dq_skin.SESSION.centers.disk_bytes == 2 << 20
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["0.npy", "1.npy", "2.npy"]  # 1.8 MB: kept
+        prefs.centers_cache_mb = 1
+        assert dq_skin.SESSION.centers.disk_bytes == 1 << 20
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["2.npy"]  # trimmed to 1 MB, oldest first
+    finally:
+        prefs.threads, prefs.centers_cache_mb = 0, 1024
+        core.set_num_threads(before)
+    assert dq_skin.SESSION.centers.disk_bytes == 1 << 30

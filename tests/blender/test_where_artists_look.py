@@ -308,3 +308,27 @@ def test_preferences_set_the_threads_and_the_centers_cache(dq_skin, tmp_path, mo
         prefs.threads, prefs.centers_cache_mb = 0, 1024
         core.set_num_threads(before)
     assert dq_skin.SESSION.centers.disk_bytes == 1 << 30
+
+
+def test_the_manifest_and_internal_errors_say_where_to_report(dq_skin):
+    """The extension's page (Get Extensions shows it) and what it may touch on disk; the panel's
+    internal error names where to report it, with a button to open the page."""
+    import tomllib
+    from pathlib import Path
+
+    manifest = tomllib.loads((Path(dq_skin.__file__).parent / "blender_manifest.toml").read_text())
+    assert manifest["website"] == "https://github.com/dqskin/dqskin"
+    files = manifest["permissions"]["files"]
+    assert "point caches" in files and "Optimized Centers" in files
+    issues = dq_skin.model.runtime.ISSUES_URL
+    assert issues == manifest["website"] + "/issues"
+    obj, arm, _ = rig_tube()
+    add_dq_skin(obj)
+    errors = dq_skin.SESSION.errors
+    errors.last = "ValueError: for the test"
+    try:
+        lines = draw_panel(dq_skin, obj)
+    finally:
+        errors.last = ""
+    assert f"Internal error (please report it at {issues}): ValueError: for the test" in lines
+    assert "[wm.url_open]" in lines

@@ -10,6 +10,7 @@ import bpy
 from .. import dqskin
 from ..blender import elsewhere, nodes, settings
 from ..engine.context import dq_skin_modifiers
+from ..model.runtime import ISSUES_URL
 from ..model.state import Mode
 from ..ops import blend_paint
 from ..session import SESSION
@@ -59,7 +60,8 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
             # The object's whole DQ Skin result (every DQ Skin modifier) in one cache.
             layout.operator("object.dq_skin_bake", text="Bake to Cache", icon="FILE_CACHE")
         if SESSION.errors.last:
-            layout.label(text=f"Internal error (please report it): {SESSION.errors.last}", icon="ERROR")
+            layout.label(text=f"Internal error (please report it at {ISSUES_URL}): {SESSION.errors.last}", icon="ERROR")
+            layout.operator("wm.url_open", text="Report It", icon="URL").url = ISSUES_URL
 
 
 def _tools(box, obj, mod) -> None:

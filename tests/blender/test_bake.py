@@ -194,6 +194,13 @@ def test_default_files_are_one_per_object_and_never_overwrite_others(dq_skin, tm
     assert_plays(second, live_second)
     # Again: the object's own bake is its default file.
     assert dq_skin.ops.bake.default_path(first) == "//shot_Body_L.pc2"
+    # A duplicate plays the original's file: neither bakes over it by default any more.
+    twin = first.copy()
+    bpy.context.scene.collection.objects.link(twin)
+    assert twin.modifiers["DQ Skin Cache"].filepath == "//shot_Body_L.pc2"
+    assert dq_skin.ops.bake.default_path(first) == "//shot_Body_L_4.pc2"
+    assert dq_skin.ops.bake.default_path(twin) == "//shot_Body_L_001.pc2"  # Body.L.001
+    bpy.data.objects.remove(twin)
     third, _, _ = rig_tube()
     third.name = "Body L"
     assert dq_skin.ops.bake.default_path(third) == "//shot_Body_L_4.pc2"

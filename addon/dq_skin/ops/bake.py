@@ -214,8 +214,8 @@ def current_bake(obj) -> str:
 def default_path(obj) -> str:
     """Where `obj` bakes unless the user names a file: `//<blend name>_<object name>.pc2` beside
     the blend file (in the home folder while the file is unsaved), letters and digits kept.
-    Never a file another object plays, nor any existing file but `obj`'s own current bake:
-    then `..._2.pc2`, `..._3.pc2` and so on."""
+    Never a file another object plays (a duplicate of a baked object plays its original's file),
+    nor any existing file but `obj`'s own current bake: then `..._2.pc2`, `..._3.pc2` and so on."""
     saved = bool(bpy.data.filepath)
     blend = Path(bpy.data.filepath).stem if saved else "untitled"
     base = bpy.path.clean_name(f"{blend}_{obj.name}")
@@ -226,10 +226,9 @@ def default_path(obj) -> str:
     while True:
         candidate = f"{folder}{base}{'' if n == 1 else f'_{n}'}{EXTENSION}"
         absolute = bpy.path.abspath(candidate)
-        if own and _same_file(absolute, own):
-            return candidate
-        if not os.path.exists(absolute) and not any(_same_file(absolute, p) for p in played):
-            return candidate
+        if not any(_same_file(absolute, p) for p in played):
+            if (own and _same_file(absolute, own)) or not os.path.exists(absolute):
+                return candidate
         n += 1
 
 

@@ -21,7 +21,7 @@ from .exports import glTF2_post_export_callback, glTF2_pre_export_callback  # no
 from .ops import automatic_weights, bake, blend_paint, modifiers, switch, transfer_weights
 from .session import SESSION  # noqa: F401  (scripts and tests reach the session here)
 from .tools import animation, compare
-from .ui import panel
+from .ui import panel, preferences
 
 CLASSES = (
     *modifiers.CLASSES,
@@ -33,12 +33,14 @@ CLASSES = (
     *compare.CLASSES,
     *animation.CLASSES,
     *panel.CLASSES,
+    *preferences.CLASSES,
 )
 
 
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    preferences.apply_saved()
     panel.register_menus()
     scheduling.register()
     command.register()

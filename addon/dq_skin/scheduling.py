@@ -32,6 +32,7 @@ from bpy.app.handlers import persistent
 from . import exports
 from .blender import node_group, nodes
 from .engine import saving
+from .model.runtime import ISSUES_URL
 from .session import SESSION
 
 
@@ -45,7 +46,7 @@ def _guarded(fn, *args) -> None:
     except Exception as e:  # a bug of the add-on: say it once, never stop Blender's work
         message = f"{type(e).__name__}: {e}"
         if message != errors.last:
-            print(f"DQ Skin: internal error in {getattr(fn, '__name__', 'a handler')}: {message}")
+            print(f"DQ Skin: internal error in {getattr(fn, '__name__', 'a handler')}: {message} (please report it at {ISSUES_URL})")
             if os.environ.get("DQSKIN_DEBUG"):
                 traceback.print_exc()
         errors.last = message

@@ -280,13 +280,16 @@ def test_b_bones_match_the_armature_modifier(dq_skin, method, preserve_volume, m
 
 def test_panel_shows_method_status_and_errors(dq_skin):
     obj, arm, arm_mod = rig_tube()
-    assert draw_panel(dq_skin, obj) == ["[object.dq_skin_add]"]
+    weights = ["[object.dq_skin_automatic_weights]", "[object.dq_skin_transfer_weights]"]  # the first row
+    assert draw_panel(dq_skin, obj) == [*weights, "[object.dq_skin_add]"]
     add_dq_skin(obj, "BLEND")
     bpy.context.scene.frame_set(2)
     lines = draw_panel(dq_skin, obj)
+    assert lines[:2] == weights
+    lines = lines[2:]
     assert lines[0] == "DQ Skin: Blend"
     assert "bones" in lines[1] and "influences" in lines[1] and "ms" in lines[1]
-    assert lines[-1] == "[object.dq_skin_remove]"
+    assert lines[-2:] == ["[object.dq_skin_remove]", "[object.dq_skin_bake]"]  # the bake is the object's
     arm_mod_obj = arm
     bpy.context.view_layer.objects.active = arm_mod_obj
     bpy.ops.object.mode_set(mode="EDIT")

@@ -158,7 +158,9 @@ def test_everything_an_artist_can_click_says_what_it_does(dq_skin):
         assert len(doc) > 20, f"{cls.__name__} has no description"
         rna = getattr(cls, "bl_rna", None)
         for prop in rna.properties if rna is not None else []:
-            if prop.identifier not in ("rna_type",) and not prop.is_hidden and prop.identifier in getattr(cls, "__annotations__", {}):
+            if prop.identifier not in ("rna_type",) and prop.identifier in getattr(cls, "__annotations__", {}):
+                # Hidden ones too: the preferences, the file browser and scripts show them.
+                assert prop.name.strip() and prop.name != prop.identifier, f"{cls.__name__}.{prop.identifier} has no name"
                 assert len(prop.description) > 10, f"{cls.__name__}.{prop.identifier} has no description"
     group = dq_skin.blender.node_group.ensure_group()
     for item in group.interface.items_tree:
@@ -168,3 +170,165 @@ def test_everything_an_artist_can_click_says_what_it_does(dq_skin):
     descriptions = " ".join(i.description for i in group.interface.items_tree if getattr(i, "item_type", "") == "SOCKET")
     for blender_name in ("Preserve Volume", "Vertex Groups", "Bone Envelopes"):
         assert blender_name in descriptions
+
+
+class _MenuRecorder(_Recorder):
+    """A layout that also records submenus (`{VIEW3D_MT_...}`)."""
+
+    def menu(self, idname, **_):
+        self.lines.append(f"{{{idname}}}")
+
+    def operator_context(self, *_):
+        pass
+
+
+def operators_in_menus(dq_skin, obj) -> set[str]:
+    """Every operator DQ Skin puts in Blender's menus (its draw functions and its own submenus)."""
+    lines = []
+    fake = type("M", (), {"layout": _MenuRecorder(lines)})()
+    context = type("C", (), {"object": obj, "active_object": obj, "mode": "OBJECT"})()
+    own_menus = {cls.bl_idname: cls for cls in dq_skin.CLASSES if issubclass(cls, bpy.types.Menu)}
+    for name, fn in dq_skin.panel.MENUS:
+        menu = getattr(bpy.types, name)
+        assert fn in menu.draw._draw_funcs, f"nothing of DQ Skin's in {name}"
+        fn(fake, context)
+    drawn_menus = set()
+    while True:
+        todo = {line[1:-1] for line in lines if line.startswith("{")} - drawn_menus
+        if not todo:
+            break
+        for idname in todo:
+            drawn_menus.add(idname)
+            if idname in own_menus:
+                own_menus[idname].draw(fake, context)
+    assert set(own_menus) <= drawn_menus, f"DQ Skin menus in no menu: {set(own_menus) - drawn_menus}"
+    return {line[1:-1] for line in lines if line.startswith("[")}
+
+
+def test_every_operator_is_in_a_menu_so_the_search_finds_it(dq_skin):
+    """F3 finds what is in a menu: every registered DQ Skin operator is in one (Object > DQ
+    Skin, Object > Parent, Add Modifier > Deform, Object and Pose > Animation > DQ Skin)."""
+    obj, arm, _ = rig_tube()
+    found = operators_in_menus(dq_skin, obj)
+    operators = {cls.bl_idname for cls in registered_operators(dq_skin)}
+    assert len(operators) >= 16
+    assert not operators - found, f"in no menu: {sorted(operators - found)}"
+
+
+def registered_operators(dq_skin) -> list:
+    """Every operator class of the add-on's modules that Blender has registered."""
+    found, todo = [], list(bpy.types.Operator.__subclasses__())
+    while todo:
+        cls = todo.pop()
+        todo.extend(cls.__subclasses__())
+        if cls.__module__.startswith(dq_skin.__name__) and getattr(cls, "is_registered", False) and getattr(cls, "bl_idname", ""):
+            found.append(cls)
+    return found
+
+
+def poll(op, obj, selected=None) -> bool:
+    selected = [obj] if selected is None else selected
+    with bpy.context.temp_override(object=obj, active_object=obj, selected_objects=selected, selected_editable_objects=selected):
+        return op.poll()
+
+
+def test_tools_are_greyed_out_where_they_cannot_run(dq_skin):
+    """The menu entries' polls: the DQ Skin tools need DQ Skin on the active mesh, Cancel
+    Optimized Centers a computation, the animation tools keyed rotation (or two transforms to
+    blend). Greyed out, a script's call says why."""
+    from mathutils import Quaternion
+
+    ops = bpy.ops.object
+    obj, arm, _ = rig_tube()
+    needs_dq_skin = (
+        ops.dq_skin_show_blender,
+        ops.dq_skin_paint_blend,
+        ops.dq_skin_apply_as_shape_key,
+        ops.dq_skin_bake,
+        ops.dq_skin_remove,
+    )
+    assert poll(ops.dq_skin_add, obj)
+    assert not any(poll(op, obj) for op in needs_dq_skin)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        with pytest.raises(RuntimeError, match="Tube has no DQ Skin modifier"):
+            ops.dq_skin_remove()
+    add_dq_skin(obj)
+    assert all(poll(op, obj) for op in needs_dq_skin)
+    assert not poll(ops.dq_skin_cancel_centers, obj)  # nothing computing
+
+    anim = bpy.ops.anim
+    rotation_tools = (anim.dq_quaternion_cleanup, anim.dq_rotation_bake, anim.dq_spring_smoothing, anim.dq_rotation_speed_plot)
+    still = bpy.data.objects.new("Still", None)
+    bpy.context.scene.collection.objects.link(still)
+    assert not any(poll(op, still) for op in (*rotation_tools, anim.dq_screw_inbetweens, anim.dq_blend_transforms))
+    with bpy.context.temp_override(object=still, active_object=still, selected_objects=[still]):
+        with pytest.raises(RuntimeError, match="Nothing selected has keyed rotation"):
+            anim.dq_rotation_bake()
+    keyed = bpy.data.objects.new("Keyed", None)
+    bpy.context.scene.collection.objects.link(keyed)
+    keyed.rotation_mode = "QUATERNION"
+    for frame, angle in ((1, 0.0), (10, 1.0)):
+        keyed.rotation_quaternion = Quaternion((0.0, 0.0, 1.0), angle)
+        keyed.keyframe_insert("rotation_quaternion", frame=frame)
+    assert all(poll(op, keyed) for op in (*rotation_tools, anim.dq_screw_inbetweens))
+    assert not poll(anim.dq_blend_transforms, keyed)  # one transform: nothing to blend
+    assert poll(anim.dq_blend_transforms, keyed, [keyed, still])
+
+
+def test_preferences_set_the_threads_and_the_centers_cache(dq_skin, tmp_path, monkeypatch):
+    """Edit > Preferences > Add-ons > DQ Skin: the core's threads (0: all) and the disk space of
+    the Optimized Centers cache, both acting as soon as they change."""
+    import os
+
+    from conftest import EXTENSION
+
+    core = dq_skin.dqskin
+    prefs = bpy.context.preferences.addons[EXTENSION].preferences
+    assert (prefs.threads, prefs.centers_cache_mb) == (0, 1024)
+    assert dq_skin.SESSION.centers.disk_bytes == 1 << 30
+    before = core.get_num_threads()
+    monkeypatch.setattr(dq_skin.engine.centers, "_folder", lambda: tmp_path)  # not the real cache
+    for i in range(3):  # 600 kB each, the newest last
+        path = tmp_path / f"{i}.npy"
+        np.save(path, np.zeros((50_000, 3), np.float32))
+        os.utime(path, (1000 + i, 1000 + i))
+    try:
+        for n in (1, 3):
+            prefs.threads = n
+            assert core.get_num_threads() == n
+        prefs.threads = 0
+        assert core.get_num_threads() == dq_skin.ui.preferences.all_threads()
+        prefs.centers_cache_mb = 2
+        assert dq_skin.SESSION.centers.disk_bytes == 2 << 20
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["0.npy", "1.npy", "2.npy"]  # 1.8 MB: kept
+        prefs.centers_cache_mb = 1
+        assert dq_skin.SESSION.centers.disk_bytes == 1 << 20
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["2.npy"]  # trimmed to 1 MB, oldest first
+    finally:
+        prefs.threads, prefs.centers_cache_mb = 0, 1024
+        core.set_num_threads(before)
+    assert dq_skin.SESSION.centers.disk_bytes == 1 << 30
+
+
+def test_the_manifest_and_internal_errors_say_where_to_report(dq_skin):
+    """The extension's page (Get Extensions shows it) and what it may touch on disk; the panel's
+    internal error names where to report it, with a button to open the page."""
+    import tomllib
+    from pathlib import Path
+
+    manifest = tomllib.loads((Path(dq_skin.__file__).parent / "blender_manifest.toml").read_text())
+    assert manifest["website"] == "https://github.com/dqskin/dqskin"
+    files = manifest["permissions"]["files"]
+    assert "point caches" in files and "Optimized Centers" in files
+    issues = dq_skin.model.runtime.ISSUES_URL
+    assert issues == manifest["website"] + "/issues"
+    obj, arm, _ = rig_tube()
+    add_dq_skin(obj)
+    errors = dq_skin.SESSION.errors
+    errors.last = "ValueError: for the test"
+    try:
+        lines = draw_panel(dq_skin, obj)
+    finally:
+        errors.last = ""
+    assert f"Internal error (please report it at {issues}): ValueError: for the test" in lines
+    assert "[wm.url_open]" in lines

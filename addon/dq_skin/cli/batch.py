@@ -142,14 +142,13 @@ def cmd_bake(args) -> str:
             raise Failure(f"{obj.name} has neither a DQ Skin nor an Armature modifier")
         _add_dq_skin(obj, args.method)
     start, end = _frames(args.frames, bpy.context.scene)
-    mod = dq_skin_modifiers(obj)[0]
     out = Path(args.out).resolve()
     try:
         with deferred():
-            bake.bake(bpy.context, obj, mod, out, start, end, check=check)
+            bake.bake(bpy.context, obj, out, start, end, check=check)
     except (RuntimeError, ValueError, OSError) as e:
         raise Failure(_last_line(e)) from None
-    bake.add_cache_modifier(obj, mod, out, start)
+    bake.add_cache_modifier(obj, out, start)
     return f"baked {obj.name} frames {start}-{end} to {args.out}"
 
 

@@ -42,7 +42,7 @@ INLINE_VERTICES = 30_000
 # reaches a part of the mesh: see docs/performance.md).
 UPDATE_INLINE_VERTICES = 30_000
 MEMORY_ENTRIES = 16
-DISK_BYTES = 1 << 30  # the on-disk cache is trimmed to this, oldest first
+DISK_BYTES = 1 << 30  # the on-disk cache is trimmed to this, oldest first (the add-on's preferences change it)
 POLL_SECONDS = 0.05  # how soon finished centers show (a stroke's update takes a few tenths)
 FORMAT = 1  # bump when the centers' definition changes: old files are then ignored
 
@@ -108,12 +108,13 @@ def _folder() -> Path | None:
         return None  # not installed as an extension (or no writable user folder): memory only
 
 
-def _trim(folder: Path) -> None:
+def _trim(folder: Path, limit: int) -> None:
+    """Removes the oldest centers of `folder` beyond `limit` bytes."""
     files = sorted(folder.glob("*.npy"), key=lambda p: p.stat().st_mtime, reverse=True)
     total = 0
     for p in files:
         total += p.stat().st_size
-        if total > DISK_BYTES:
+        if total > limit:
             p.unlink(missing_ok=True)
 
 
@@ -129,6 +130,22 @@ class Centers:
         self._latest: OrderedDict[str, tuple] = OrderedDict()
         self._jobs: dict[str, Job] = {}
         self._lock = threading.Lock()
+        self.disk_bytes = DISK_BYTES  # the user folder's centers are trimmed to this, oldest first
+
+    def set_disk_limit(self, limit: int) -> None:
+        """Keeps at most `limit` bytes of centers in the user folder (trimmed now, and after
+        every computation)."""
+        self.disk_bytes = max(int(limit), 0)
+        self.trim()
+
+    def trim(self, folder: Path | None = None) -> None:
+        """Trims the centers kept on disk (in `folder`, the user folder's by default) to the limit."""
+        folder = folder if folder is not None else _folder()
+        if folder is not None:
+            try:
+                _trim(Path(folder), self.disk_bytes)
+            except OSError:
+                pass  # a cache: trimming again later is enough
 
     def lookup(self, key: str, vertices: int) -> np.ndarray | None:
         """The centers for `key` if they were computed before (in this session or an earlier one)."""
@@ -166,7 +183,7 @@ class Centers:
         try:
             np.save(tmp, centers, allow_pickle=False)
             os.replace(tmp, folder / f"{key}.npy")
-            _trim(folder)
+            _trim(folder, self.disk_bytes)
         except OSError:
             pass  # a cache: failing to keep it only costs a recomputation
         finally:

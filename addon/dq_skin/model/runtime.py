@@ -41,3 +41,8 @@ class Errors:
     def __init__(self):
         self.last = ""
         self.busy = False
+
+
+# Where users report bugs (the manifest's website is the project's page).
+WEBSITE = "https://github.com/dqskin/dqskin"
+ISSUES_URL = f"{WEBSITE}/issues"

@@ -190,7 +190,22 @@ def remove_modifier(obj, mod, applied: bool = False) -> None:
         tracker.refresh(rec)
 
 
-class ModifierOperator(ActiveMeshOperator):
+class DQSkinOperator(ActiveMeshOperator):
+    """Base of the operators that need DQ Skin on the active mesh: greyed out without it (the
+    tooltip, and a script's error, say why)."""
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        if obj is None or obj.type != "MESH":
+            return False
+        if not dq_skin_modifiers(obj):
+            cls.poll_message_set(f"{obj.name} has no DQ Skin modifier")
+            return False
+        return True
+
+
+class ModifierOperator(DQSkinOperator):
     """Base of the operators acting on one DQ Skin modifier of the active object."""
 
     modifier: bpy.props.StringProperty(name="Modifier", description="Name of the DQ Skin modifier (default: the first)")
@@ -271,6 +286,14 @@ class OBJECT_OT_dq_skin_cancel_centers(bpy.types.Operator):
 
     bl_idname = "object.dq_skin_cancel_centers"
     bl_label = "Cancel Optimized Centers"
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        if obj is None or not any(obj.name in j.owners for j in SESSION.centers.running()):
+            cls.poll_message_set("No Optimized Centers are being computed for the active object")
+            return False
+        return True
 
     def execute(self, context):
         obj = context.object

@@ -33,12 +33,28 @@ def _keyed_rotation_targets(context) -> list:
     return targets
 
 
+def _allowed(cls, ok: bool, why: str) -> bool:
+    """A poll's answer: greyed out with `why` in the tooltip (and a script's error) unless `ok`."""
+    if not ok:
+        cls.poll_message_set(why)
+    return ok
+
+
+def _any_rotation(context, kind: str | None = None) -> bool:
+    """Whether a selected object or pose bone has keyed rotation (of `kind`, if given)."""
+    return any(keys.rotation_kind(t) in ((kind,) if kind else ("QUATERNION", "EULER")) for t in keys.selected_targets(context))
+
+
 class ANIM_OT_dq_quaternion_cleanup(bpy.types.Operator):
     """Make quaternion rotation keys sign-continuous (no sudden 360° spins) and normalize them"""
 
     bl_idname = "anim.dq_quaternion_cleanup"
     bl_label = "Quaternion Cleanup"
     bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return _allowed(cls, _any_rotation(context, "QUATERNION"), "Nothing selected has keyed quaternion rotation")
 
     def execute(self, context):
         targets = [t for t in keys.selected_targets(context) if keys.rotation_kind(t) == "QUATERNION"]
@@ -82,6 +98,10 @@ class ANIM_OT_dq_rotation_bake(bpy.types.Operator):
         name="Step", description="Frames between baked keys (sub-frames allowed)", default=1.0, min=0.01, soft_max=10.0
     )
 
+    @classmethod
+    def poll(cls, context):
+        return _allowed(cls, _any_rotation(context), "Nothing selected has keyed rotation")
+
     def execute(self, context):
         targets = _keyed_rotation_targets(context)
         if not targets:
@@ -119,6 +139,11 @@ class ANIM_OT_dq_screw_inbetweens(bpy.types.Operator):
     )
     frame_start: bpy.props.FloatProperty(name="Start", description="First frame to bake (with Frame Range)", default=1.0)
     frame_end: bpy.props.FloatProperty(name="End", description="Last frame to bake (with Frame Range)", default=250.0)
+
+    @classmethod
+    def poll(cls, context):
+        animated = any(keys.fcurves(t.owner) for t in keys.selected_targets(context))
+        return _allowed(cls, animated, "Nothing selected has keyed transforms")
 
     def execute(self, context):
         if self.use_frame_range and not self.frame_end > self.frame_start:
@@ -179,6 +204,14 @@ class ANIM_OT_dq_blend_transforms(bpy.types.Operator):
         min=0.0,
     )
     keyframe: bpy.props.BoolProperty(name="Insert Keyframe", description="Key the blended transform at the current frame", default=False)
+
+    @classmethod
+    def poll(cls, context):
+        if context.mode == "POSE":
+            ok = context.active_pose_bone is not None and len(context.selected_pose_bones or ()) >= 2
+        else:
+            ok = context.active_object is not None and len(context.selected_objects) >= 2
+        return _allowed(cls, ok, "Select the transforms to blend and make the target active")
 
     def execute(self, context):
         pose = context.mode == "POSE"
@@ -241,6 +274,10 @@ class ANIM_OT_dq_spring_smoothing(bpy.types.Operator):
         name="Key Weight", description="Extra weight of the curvature at the keys", default=1.2, min=0.01, soft_max=5.0
     )
 
+    @classmethod
+    def poll(cls, context):
+        return _allowed(cls, _any_rotation(context), "Nothing selected has keyed rotation")
+
     def execute(self, context):
         targets = _keyed_rotation_targets(context)
         if not targets:
@@ -297,6 +334,11 @@ class ANIM_OT_dq_rotation_speed_plot(bpy.types.Operator):
     width: bpy.props.IntProperty(name="Width", description="Width of the plot image in pixels", default=640, min=64, max=8192)
     height: bpy.props.IntProperty(name="Height", description="Height of the plot image in pixels", default=320, min=64, max=8192)
     filepath: bpy.props.StringProperty(name="Save As", description="PNG to write (optional)", subtype="FILE_PATH", default="")
+
+    @classmethod
+    def poll(cls, context):
+        target = active_target(context)
+        return _allowed(cls, target is not None and bool(keys.rotation_kind(target)), "The active object or bone has no keyed rotation")
 
     def execute(self, context):
         target = active_target(context)

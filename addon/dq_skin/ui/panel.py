@@ -10,10 +10,11 @@ import bpy
 from .. import dqskin
 from ..blender import elsewhere, nodes, settings
 from ..engine.context import dq_skin_modifiers
+from ..model.runtime import ISSUES_URL
 from ..model.state import Mode
 from ..ops import blend_paint
 from ..session import SESSION
-from . import weights_menu
+from . import menus, weights_menu
 
 
 class OBJECT_PT_dq_skin(bpy.types.Panel):
@@ -55,8 +56,12 @@ class OBJECT_PT_dq_skin(bpy.types.Panel):
                 box.label(text=line, icon=icon)
             if obj.library is None:
                 _tools(box, obj, mod)
+        if obj.library is None:
+            # The object's whole DQ Skin result (every DQ Skin modifier) in one cache.
+            layout.operator("object.dq_skin_bake", text="Bake to Cache", icon="FILE_CACHE")
         if SESSION.errors.last:
-            layout.label(text=f"Internal error (please report it): {SESSION.errors.last}", icon="ERROR")
+            layout.label(text=f"Internal error (please report it at {ISSUES_URL}): {SESSION.errors.last}", icon="ERROR")
+            layout.operator("wm.url_open", text="Report It", icon="URL").url = ISSUES_URL
 
 
 def _tools(box, obj, mod) -> None:
@@ -85,8 +90,7 @@ def _tools(box, obj, mod) -> None:
         box.label(text=f"Without the DQ Skin extension (render farms) it {why}", icon="ERROR")
     row = box.row()
     row.operator("object.dq_skin_apply_as_shape_key", text="Apply as Shape Key", icon="SHAPEKEY_DATA").modifier = mod.name
-    row.operator("object.dq_skin_bake", text="Bake to Cache", icon="FILE_CACHE")
-    box.operator("object.dq_skin_remove", icon="X").modifier = mod.name
+    row.operator("object.dq_skin_remove", icon="X").modifier = mod.name
 
 
 def draw_deform_entry(self, context):
@@ -138,8 +142,10 @@ def draw_menu_entry(self, context):
 
 
 # (menu, draw function): the animation tools in the Object and Pose menus; DQ Skin in the Add
-# Modifier menu's Deform column (the Properties editor's and the 3D Viewport's Object > Modifiers).
+# Modifier menu's Deform column (the Properties editor's and the 3D Viewport's Object > Modifiers);
+# the weighting operators in Object > Parent; every other operator in Object > DQ Skin.
 MENUS = (
+    ("VIEW3D_MT_object", menus.draw_object_entry),
     ("VIEW3D_MT_object_animation", draw_menu_entry),
     ("VIEW3D_MT_pose_motion", draw_menu_entry),
     ("OBJECT_MT_modifier_add_deform", draw_deform_entry),
@@ -161,4 +167,4 @@ def unregister_menus():
             menu.remove(fn)
 
 
-CLASSES = (OBJECT_PT_dq_skin, VIEW3D_MT_dq_skin_animation)
+CLASSES = (OBJECT_PT_dq_skin, VIEW3D_MT_dq_skin_animation, *menus.CLASSES)

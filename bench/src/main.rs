@@ -21,7 +21,7 @@ use std::time::Instant;
 
 use dqskin_core::glam::{Mat4, Quat, Vec3};
 use dqskin_core::rigs::Creature;
-use dqskin_core::{centers_of_rotation, kernel_copy, pool, skin, Influences, Method, Pose, SkinOptions};
+use dqskin_core::{centers_of_rotation, kernel_copies, pool, skin, Influences, Method, Pose, SkinOptions};
 use rayon::prelude::*;
 
 const BONES: usize = 64;
@@ -166,7 +166,7 @@ fn main() {
     let rounds = number("--rounds");
     let mut rows = Vec::new();
     // DQSKIN_SIMD=avx2 measures the AVX2 copy on a CPU that has AVX-512 (make bench runs both).
-    println!("kernels: the {} copy", kernel_copy());
+    println!("kernel copies: {:?}", kernel_copies());
     println!(
         "{:>9} {:>3} {:>3} {:<6} {:<6} {:>9} {:>10} {:>8} {:>10} {:>7}",
         "vertices", "inf", "thr", "method", "pose", "ms", "Mverts/s", "GB/s", "ref Mv/s", "of ref"
@@ -293,7 +293,7 @@ fn main() {
             .collect();
         let text = format!(
             "{{\"copy\":\"{}\",\"bones\":{BONES},\"threads_available\":{all},\"rows\":[\n{}\n],\"centers_precompute\":[\n{}\n]}}\n",
-            kernel_copy(),
+            kernel_copies().iter().find(|(v, _)| *v == "linear").map_or("", |(_, c)| *c),
             body.join(",\n"),
             pre.join(",\n")
         );

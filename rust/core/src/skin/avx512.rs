@@ -8,7 +8,7 @@ use core::arch::x86_64::*;
 
 use super::batch::BatchJob;
 use super::influences::{lane_record, Slot, LANES};
-use super::kernels::{DUAL_QUATERNION, LINEAR};
+use super::job::{DUAL_QUATERNION, LINEAR};
 use super::pose::{CorBone, DqBone, LinearBone, PivotBone};
 
 const _: () = assert!(LANES == 16);

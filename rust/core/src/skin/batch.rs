@@ -22,7 +22,7 @@ use core::mem::offset_of;
 use glam::Affine3A;
 
 use super::influences::{Slot, LANES};
-use super::kernels::{BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
+use super::job::{BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
 #[cfg(target_arch = "x86_64")]
 use super::pose::CorRigidBone;
 use super::pose::{CorBone, DqBone, LinearBone, PivotBone, PivotDualBone};

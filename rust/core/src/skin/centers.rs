@@ -42,7 +42,7 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
-use super::kernels::Simd;
+use super::isa::Simd;
 use super::{Influences, SkinError, MIN_TOTAL_WEIGHT};
 use sums::{PairList, WIDTH};
 use update::Reach;

@@ -1,81 +1,22 @@
-//! The kernels and their parallel driver. Inputs are validated by [`super::skin`]; nothing here
-//! can fail or panic on valid inputs.
+//! The dispatcher: runs a [`Job`] on the compiled copy of the kernels a [`Simd`] names, chunk by
+//! chunk on the thread pool. Inputs are validated by [`super::skin`]; nothing here can fail or
+//! panic on valid inputs.
 //!
 //! Vertices are processed [`LANES`] at a time from the lane-ordered influence slots: every lane
 //! is an independent vertex, so the serial chain of DQS's running-sum sign choice runs in all
 //! lanes at once. Compiled copies for AVX2+FMA and for AVX-512 (x86-64) and for NEON (aarch64)
-//! are chosen at run time by what the CPU has (see [`Simd::detect`]) and run their SIMD kernels
-//! (`batch.rs` for AVX2 and NEON, `avx512.rs`) on every batch, the last partial one padded; the
-//! baseline copy runs the portable kernels (`portable.rs`).
+//! run their SIMD kernels (`batch.rs` for AVX2 and NEON, `avx512.rs`) on every batch, the last
+//! partial one padded; the baseline copy runs the portable kernels (`portable.rs`). Which copy
+//! runs by default is measured (`calibration.rs`); what the CPU has is detected in `isa.rs`.
 
-use glam::{Affine3A, Mat4};
+use glam::Affine3A;
 use rayon::prelude::*;
 
 use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{Slot, LANES};
+use super::isa::{InstructionSet, Simd};
+use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
 use super::portable;
-use super::{Influences, Pose};
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Kind {
-    Linear,
-    DualQuaternion,
-    Blend,
-    CentersOfRotation,
-}
-
-/// One skinning call's inputs, as the kernels read them.
-///
-/// The kernels read bone records without bounds checks (see [`bone`]); what makes that sound
-/// is carried by this type: [`Job::new`] checks that the influences and the pose fit together
-/// (every bone index of the influences, validated against their bone count when they were
-/// built, indexes every table of the pose the method reads), and those fields are private.
-/// The other inputs are read through checked slices.
-pub(crate) struct Job<'a> {
-    kind: Kind,
-    influences: &'a Influences,
-    pose: &'a Pose,
-    pub positions: &'a [[f32; 3]],
-    pub premat: Option<Mat4>,
-    pub postmat: Option<Mat4>,
-    pub mask: Option<&'a [f32]>,
-    pub blend_amount: Option<&'a [f32]>,
-    pub blend_factor: f32,
-    /// One center per vertex (mesh space) for [`Kind::CentersOfRotation`].
-    pub centers: Option<&'a [[f32; 3]]>,
-}
-
-impl<'a> Job<'a> {
-    /// The pose (read-only: it was checked against the influences).
-    pub(crate) fn pose(&self) -> &'a Pose {
-        self.pose
-    }
-
-    /// A job without options (set the public fields for them).
-    ///
-    /// # Panics
-    /// If the pose does not have one bone per bone index of the influences, or a method other
-    /// than LBS is asked for without the pose's rest data, or `positions` does not have one
-    /// point per vertex. [`super::skin`] checks these first and reports what is wrong.
-    pub(crate) fn new(kind: Kind, positions: &'a [[f32; 3]], influences: &'a Influences, pose: &'a Pose) -> Self {
-        assert_eq!(pose.bone_count(), influences.bone_count(), "the pose must have one bone per bone index");
-        assert!(kind == Kind::Linear || pose.has_dual_quaternions(), "this method needs the rest matrices");
-        assert!(kind != Kind::CentersOfRotation || pose.has_centers(), "this method needs the centers tables");
-        assert_eq!(positions.len(), influences.vertex_count(), "one position per vertex");
-        Job {
-            kind,
-            influences,
-            pose,
-            positions,
-            premat: None,
-            postmat: None,
-            mask: None,
-            blend_amount: None,
-            blend_factor: 0.0,
-            centers: None,
-        }
-    }
-}
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
 /// A multiple of [`LANES`], so tasks start on batch boundaries.
@@ -84,8 +25,8 @@ const _: () = assert!(CHUNK.is_multiple_of(LANES));
 
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     assert_eq!(out.len(), job.positions.len(), "one output point per vertex");
-    assert!(job.kind != Kind::CentersOfRotation || job.centers.is_some(), "centers of rotation need the centers");
-    let task = |(i, chunk): (usize, &mut [[f32; 3]])| simd.chunk(job, i * CHUNK, chunk);
+    assert!(job.kind() != Kind::CentersOfRotation || job.centers.is_some(), "centers of rotation need the centers");
+    let task = |(i, chunk): (usize, &mut [[f32; 3]])| run_chunk(simd, job, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
     } else {
@@ -93,7 +34,7 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     }
 }
 
-/// Instruction sets the kernels are compiled for; the best one the CPU has is chosen at run time.
+/// The compiled copies as const-generic codes.
 const ISA_BASELINE: u8 = 0;
 #[cfg(target_arch = "x86_64")]
 const ISA_AVX2: u8 = 1;
@@ -102,110 +43,19 @@ const ISA_AVX512: u8 = 2;
 #[cfg(target_arch = "aarch64")]
 const ISA_NEON: u8 = 3;
 
-/// The compiled copies of the kernels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum InstructionSet {
-    /// Portable code, compiled for the target's baseline.
-    Baseline,
-    #[cfg(target_arch = "x86_64")]
-    Avx2Fma,
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
-    /// Part of every aarch64 target, so always there.
-    #[cfg(target_arch = "aarch64")]
-    Neon,
-}
-
-impl InstructionSet {
-    /// The name `DQSKIN_SIMD` gives the copy.
-    pub(crate) fn name(self) -> &'static str {
-        match self {
-            InstructionSet::Baseline => "baseline",
-            #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx2Fma => "avx2",
-            #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx512 => "avx512",
-            #[cfg(target_arch = "aarch64")]
-            InstructionSet::Neon => "neon",
-        }
-    }
-}
-
-/// Which compiled copy of the kernels to run. A value is proof that the CPU has the copy's
-/// instruction sets: it is only made by [`Simd::available`] (and so [`Simd::detect`]) after
-/// detecting them, so code holding one may run that copy's `#[target_feature]` functions.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Simd {
-    set: InstructionSet,
-}
-
-impl Simd {
-    /// The copies this CPU can run, best last.
-    pub(crate) fn available() -> Vec<Simd> {
-        let mut all = vec![Simd { set: InstructionSet::Baseline }];
+/// Runs the copy `simd` of the kernels on vertices `start..start + out.len()`.
+fn run_chunk(simd: Simd, job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+    match simd.instruction_set() {
+        InstructionSet::Baseline => chunk::<ISA_BASELINE>(job, start, out),
+        // SAFETY: a `Simd` of this set exists only where AVX2 and FMA were detected.
         #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::is_x86_feature_detected as has;
-            if has!("avx2") && has!("fma") {
-                all.push(Simd { set: InstructionSet::Avx2Fma });
-                if has!("avx512f") {
-                    all.push(Simd { set: InstructionSet::Avx512 });
-                }
-            }
-        }
+        InstructionSet::Avx2Fma => unsafe { chunk_avx2(job, start, out) },
+        // SAFETY: a `Simd` of this set exists only where AVX-512F, AVX2 and FMA were detected.
+        #[cfg(target_arch = "x86_64")]
+        InstructionSet::Avx512 => unsafe { chunk_avx512(job, start, out) },
+        // SAFETY: every aarch64 CPU has NEON.
         #[cfg(target_arch = "aarch64")]
-        all.push(Simd { set: InstructionSet::Neon });
-        all
-    }
-
-    /// The best available copy, or the one `DQSKIN_SIMD` (`baseline`, `avx2`, `avx512`, `neon`)
-    /// asks for if the CPU has it (for debugging and comparisons).
-    pub(crate) fn detect() -> Self {
-        let available = Self::available();
-        let requested = std::env::var("DQSKIN_SIMD").ok().and_then(|v| match v.trim() {
-            "baseline" => Some(InstructionSet::Baseline),
-            #[cfg(target_arch = "x86_64")]
-            "avx2" => Some(InstructionSet::Avx2Fma),
-            #[cfg(target_arch = "x86_64")]
-            "avx512" => Some(InstructionSet::Avx512),
-            #[cfg(target_arch = "aarch64")]
-            "neon" => Some(InstructionSet::Neon),
-            _ => None,
-        });
-        match available.iter().find(|s| Some(s.set) == requested) {
-            Some(s) => *s,
-            None => *available.last().expect("baseline is always available"),
-        }
-    }
-
-    /// The instruction set of this copy (a value of it proves the CPU has it).
-    pub(crate) fn instruction_set(self) -> InstructionSet {
-        self.set
-    }
-
-    fn chunk(self, job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
-        match self.set {
-            InstructionSet::Baseline => chunk::<ISA_BASELINE>(job, start, out),
-            // SAFETY: a `Simd` of this set exists only where AVX2 and FMA were detected.
-            #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx2Fma => unsafe { chunk_avx2(job, start, out) },
-            // DQS with scaled bones runs the AVX2 copy on CPUs with AVX-512: it transposes two
-            // 16-float records per slot at 512 bits, and Intel's cores run 512-bit shuffles on one
-            // port but 256-bit ones on two (Sapphire Rapids, 1M vertices: 108 → 125 Mverts/s at 4
-            // influences, 49 → 67 at 8; on a Zen 5 the two were within 10 % of each other). The
-            // AVX2 copy's own function, not its body inside the AVX-512 one, which ran 17 % slower.
-            // SAFETY: a `Simd` of this set exists only where AVX-512F, AVX2 and FMA were detected.
-            #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx512 if job.kind == Kind::DualQuaternion && job.pose.any_scaled() => unsafe {
-                chunk_avx2(job, start, out)
-            },
-            // SAFETY: as above.
-            #[cfg(target_arch = "x86_64")]
-            InstructionSet::Avx512 => unsafe { chunk_avx512(job, start, out) },
-            // SAFETY: every aarch64 CPU has NEON.
-            #[cfg(target_arch = "aarch64")]
-            InstructionSet::Neon => unsafe { chunk_neon(job, start, out) },
-        }
+        InstructionSet::Neon => unsafe { chunk_neon(job, start, out) },
     }
 }
 
@@ -235,7 +85,7 @@ unsafe fn chunk_neon(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
 
 #[inline(always)]
 fn chunk<const ISA: u8>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
-    match (job.kind, job.pose.any_scaled()) {
+    match (job.kind(), job.pose().any_scaled()) {
         (Kind::Linear, _) => batches::<ISA, LINEAR, false>(job, start, out),
         (Kind::DualQuaternion, false) => batches::<ISA, DUAL_QUATERNION, false>(job, start, out),
         (Kind::DualQuaternion, true) => batches::<ISA, DUAL_QUATERNION, true>(job, start, out),
@@ -246,17 +96,12 @@ fn chunk<const ISA: u8>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
     }
 }
 
-pub(super) const LINEAR: u8 = 0;
-pub(super) const DUAL_QUATERNION: u8 = 1;
-pub(super) const BLEND: u8 = 2;
-pub(super) const CENTERS: u8 = 3;
-
 /// Skins vertices `start..start + out.len()` batch by batch.
 #[inline(always)]
 fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
     let premat = job.premat.map(Affine3A::from_mat4);
     let postmat = job.postmat.map(Affine3A::from_mat4);
-    let pose = job.pose;
+    let pose = job.pose();
     let simd_job = BatchJob {
         linear: &pose.linear,
         dq: &pose.dq,
@@ -271,11 +116,11 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
         postmat: postmat.as_ref(),
         blend_factor: job.blend_factor,
     };
-    let mut scratch = Scratch::new(job.influences.max_per_vertex());
+    let mut scratch = Scratch::new(job.influences().max_per_vertex());
     for (k, out) in out.chunks_mut(LANES).enumerate() {
         let first = start + k * LANES;
         let n = out.len();
-        let slots = job.influences.batch(first / LANES);
+        let slots = job.influences().batch(first / LANES);
         prefetch_ahead(job, first, slots);
         if ISA != ISA_BASELINE {
             if n == LANES {

@@ -25,10 +25,13 @@ mod avx2;
 mod avx512;
 mod batch;
 mod bbone;
+mod calibration;
 mod centers;
 mod envelope;
 mod groups;
 mod influences;
+mod isa;
+mod job;
 mod kernels;
 #[cfg(target_arch = "aarch64")]
 mod neon;
@@ -40,6 +43,7 @@ pub use bbone::{
     bbone_joint_starts, bbone_segment_matrices, bbones_from_rest, bsp_depth, curved_segment, BBone, Mapping,
     SegmentBoundary, MAX_BBONE_SEGMENTS,
 };
+pub use calibration::set_kernel_copy;
 pub use centers::{
     centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_update,
     centers_of_rotation_with_progress, Centers, PreviousCenters, DEFAULT_SIGMA,
@@ -118,6 +122,8 @@ pub enum SkinError {
     InvalidSigma(f32),
     /// The progress callback asked to stop.
     Cancelled,
+    /// [`set_kernel_copy`] named a compiled copy of the kernels that this CPU cannot run.
+    UnavailableKernelCopy(String),
 }
 
 impl core::fmt::Display for SkinError {
@@ -148,6 +154,10 @@ impl core::fmt::Display for SkinError {
             ),
             SkinError::InvalidSigma(s) => write!(f, "sigma = {s} must be a finite number greater than 0"),
             SkinError::Cancelled => write!(f, "cancelled"),
+            SkinError::UnavailableKernelCopy(name) => {
+                let available: Vec<&str> = isa::Simd::available().iter().map(|s| s.instruction_set().name()).collect();
+                write!(f, "no kernel copy '{name}' on this CPU (it has: {})", available.join(", "))
+            }
         }
     }
 }
@@ -168,18 +178,22 @@ pub fn skin(
     options: &SkinOptions<'_>,
     out: &mut [[f32; 3]],
 ) -> Result<(), SkinError> {
-    skin_with(kernels::Simd::detect(), method, positions, influences, pose, options, out)
+    skin_with(None, method, positions, influences, pose, options, out)
 }
 
-/// The compiled copy of the kernels that [`skin`] and [`skin_many`] run here: `baseline`,
-/// `avx2`, `avx512` or `neon` (the best the CPU has, or the one `DQSKIN_SIMD` asks for).
-pub fn kernel_copy() -> &'static str {
-    kernels::Simd::detect().instruction_set().name()
+/// The compiled copy of the kernels that [`skin`] and [`skin_many`] run here for each kernel
+/// variant (`linear`, `dual_quaternion`, `dual_quaternion_scaled`, `blend`, `blend_scaled`,
+/// `centers`, `centers_scaled`): `baseline`, `avx2`, `avx512` or `neon`, the one measured fastest
+/// on this CPU unless [`set_kernel_copy`] or `DQSKIN_SIMD` asks for another. Measures the
+/// variants not measured yet (about a millisecond for all).
+pub fn kernel_copies() -> Vec<(&'static str, &'static str)> {
+    calibration::Variant::ALL.iter().map(|&v| (v.name(), calibration::copy_for(v).instruction_set().name())).collect()
 }
 
-/// [`skin`] on a given compiled copy of the kernels (tests run every copy the CPU has).
+/// [`skin`] on a given compiled copy of the kernels (tests run every copy the CPU has), or with
+/// `None` on the one chosen for the method (see [`kernel_copies`]).
 fn skin_with(
-    simd: kernels::Simd,
+    simd: Option<isa::Simd>,
     method: Method<'_>,
     positions: &[[f32; 3]],
     influences: &Influences,
@@ -215,10 +229,10 @@ fn skin_with(
     };
     let mut centers = None;
     let (kind, blend_amount, blend_factor) = match method {
-        Method::Linear => (kernels::Kind::Linear, None, 0.0),
-        Method::DualQuaternion => (needs_rest(kernels::Kind::DualQuaternion)?, None, 0.0),
+        Method::Linear => (job::Kind::Linear, None, 0.0),
+        Method::DualQuaternion => (needs_rest(job::Kind::DualQuaternion)?, None, 0.0),
         Method::CentersOfRotation { centers: c } => {
-            let kind = needs_rest(kernels::Kind::CentersOfRotation)?;
+            let kind = needs_rest(job::Kind::CentersOfRotation)?;
             check_len("centers", n, c.len())?;
             if let Some(index) = first_not_finite(c) {
                 return Err(SkinError::NotFinite { what: "centers", index });
@@ -227,7 +241,7 @@ fn skin_with(
             (kind, None, 0.0)
         }
         Method::Blend { amount, factor } => {
-            let kind = needs_rest(kernels::Kind::Blend)?;
+            let kind = needs_rest(job::Kind::Blend)?;
             if !(0.0..=1.0).contains(&factor) {
                 return Err(SkinError::OutOfRange { what: "blend_factor", index: None, value: factor });
             }
@@ -238,7 +252,8 @@ fn skin_with(
             (kind, amount, factor)
         }
     };
-    let mut job = kernels::Job::new(kind, positions, influences, pose);
+    let simd = simd.unwrap_or_else(|| calibration::copy_for(calibration::Variant::of(kind, pose.any_scaled())));
+    let mut job = job::Job::new(kind, positions, influences, pose);
     job.premat = options.premat;
     job.postmat = options.postmat;
     job.mask = options.mask;
@@ -271,7 +286,6 @@ pub struct ManyJob<'a> {
 /// run each on one thread. Returns one result per job; a failed job leaves its `out` untouched.
 pub fn skin_many(jobs: &mut [ManyJob<'_>]) -> Vec<Result<(), SkinError>> {
     use rayon::prelude::*;
-    let simd = kernels::Simd::detect();
     let one = move |j: &mut ManyJob<'_>| {
         let tables = match j.method {
             Method::Linear => Tables::Linear,
@@ -279,7 +293,7 @@ pub fn skin_many(jobs: &mut [ManyJob<'_>]) -> Vec<Result<(), SkinError>> {
             Method::CentersOfRotation { .. } => Tables::Centers,
         };
         let pose = Pose::with_tables(j.deform, j.rest, tables)?;
-        skin_with(simd, j.method, j.positions, j.influences, &pose, &j.options, j.out)
+        skin_with(None, j.method, j.positions, j.influences, &pose, &j.options, j.out)
     };
     if jobs.len() <= 1 {
         return jobs.iter_mut().map(one).collect();

@@ -6,7 +6,7 @@
 use glam::{Affine3A, Vec4};
 
 use super::influences::{lane_record, Slot, LANES};
-use super::kernels::{Job, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
+use super::job::{Job, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
 use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone};
 use super::MIN_TOTAL_WEIGHT;
 

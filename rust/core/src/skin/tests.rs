@@ -324,9 +324,9 @@ pub(in crate::skin) fn skin_all(
     options: &SkinOptions<'_>,
 ) -> Vec<[f32; 3]> {
     let mut results = Vec::new();
-    for simd in kernels::Simd::available() {
+    for simd in isa::Simd::available() {
         let mut out = vec![[f32::NAN; 3]; positions.len()];
-        skin_with(simd, method, positions, influences, pose, options, &mut out).unwrap();
+        skin_with(Some(simd), method, positions, influences, pose, options, &mut out).unwrap();
         results.push(out);
     }
     let last = results.pop().unwrap();
@@ -343,8 +343,8 @@ pub(in crate::skin) fn skin_all(
 fn every_compiled_copy_is_exercised_here() {
     // Say which copies the reference tests cover; the SIMD copy every CI machine has (AVX2 on
     // x86-64, NEON on aarch64) must be among them.
-    use kernels::InstructionSet;
-    let available: Vec<InstructionSet> = kernels::Simd::available().iter().map(|s| s.instruction_set()).collect();
+    use isa::InstructionSet;
+    let available: Vec<InstructionSet> = isa::Simd::available().iter().map(|s| s.instruction_set()).collect();
     assert_eq!(available[0], InstructionSet::Baseline);
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
@@ -427,9 +427,9 @@ proptest! {
             let options = SkinOptions { premat: Some(premat), postmat: Some(premat.inverse()), mask: Some(&masks) };
             let amount = vec![0.6f32; count];
             for method in [Method::Linear, Method::DualQuaternion, Method::Blend { amount: Some(&amount), factor: 0.7 }] {
-                for simd in kernels::Simd::available() {
+                for simd in isa::Simd::available() {
                     let mut out = vec![[f32::NAN; 3]; count];
-                    skin_with(simd, method, &points, &influences, &pose, &options, &mut out).unwrap();
+                    skin_with(Some(simd), method, &points, &influences, &pose, &options, &mut out).unwrap();
                     for (v, p) in out.iter().enumerate() {
                         prop_assert!(p.map(f32::to_bits) == out[0].map(f32::to_bits), "{:?} {:?}: vertex {} gives {:?}, vertex 0 {:?}", simd, method, v, p, out[0]);
                     }

@@ -21,7 +21,7 @@
 //! (a weighted mean of centroids) lie in the mesh's bounding box. A vertex keeps the fast
 //! result only if its bound `E ≤ TOLERANCE·D̃`; otherwise it is summed exactly.
 
-use super::super::kernels::{InstructionSet, Simd};
+use super::super::isa::{InstructionSet, Simd};
 use super::sums::exp_nonpositive;
 use super::Entry;
 

@@ -6,7 +6,7 @@
 //! `exp`. Copies for AVX2+FMA, AVX-512 and NEON are chosen at run time like the skinning
 //! kernels'.
 
-use super::super::kernels::{InstructionSet, Simd};
+use super::super::isa::{InstructionSet, Simd};
 
 /// Entries per step, and the padding of every pair's list.
 pub(super) const WIDTH: usize = 8;

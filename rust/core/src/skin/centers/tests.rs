@@ -1,7 +1,7 @@
 //! Centers of rotation: the precompute against the naive formula in f64, and the skinning
 //! kernel against a scalar f64 reference and the properties the method promises.
 
-use super::super::kernels::Simd;
+use super::super::isa::Simd;
 use super::super::tests::skin_all;
 use super::super::{Method, Pose, SkinError, SkinOptions};
 use super::*;

@@ -1,0 +1,88 @@
+//! The instruction sets the kernels are compiled for, and which of them this CPU has. Every copy
+//! of the kernels, the dispatcher (`kernels.rs`) and the precompute take a [`Simd`] from here;
+//! which copy runs by default is measured (`calibration.rs`).
+
+/// The compiled copies of the kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum InstructionSet {
+    /// Portable code, compiled for the target's baseline.
+    Baseline,
+    #[cfg(target_arch = "x86_64")]
+    Avx2Fma,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+    /// Part of every aarch64 target, so always there.
+    #[cfg(target_arch = "aarch64")]
+    Neon,
+}
+
+impl InstructionSet {
+    /// The name `DQSKIN_SIMD` and [`super::set_kernel_copy`] give the copy.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            InstructionSet::Baseline => "baseline",
+            #[cfg(target_arch = "x86_64")]
+            InstructionSet::Avx2Fma => "avx2",
+            #[cfg(target_arch = "x86_64")]
+            InstructionSet::Avx512 => "avx512",
+            #[cfg(target_arch = "aarch64")]
+            InstructionSet::Neon => "neon",
+        }
+    }
+}
+
+/// Which compiled copy of the kernels to run. A value is proof that the CPU has the copy's
+/// instruction sets: it is only made by [`Simd::available`] after detecting them, so code
+/// holding one may run that copy's `#[target_feature]` functions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Simd {
+    set: InstructionSet,
+}
+
+impl Simd {
+    /// The copies this CPU can run, widest last.
+    pub(crate) fn available() -> Vec<Simd> {
+        let mut all = vec![Simd { set: InstructionSet::Baseline }];
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx2") && has!("fma") {
+                all.push(Simd { set: InstructionSet::Avx2Fma });
+                if has!("avx512f") {
+                    all.push(Simd { set: InstructionSet::Avx512 });
+                }
+            }
+        }
+        #[cfg(target_arch = "aarch64")]
+        all.push(Simd { set: InstructionSet::Neon });
+        all
+    }
+
+    /// The widest copy this CPU has.
+    pub(crate) fn widest() -> Self {
+        *Self::available().last().expect("the baseline is always available")
+    }
+
+    /// The available copy named `name` (`baseline`, `avx2`, `avx512`, `neon`), if the CPU has it.
+    pub(crate) fn named(name: &str) -> Option<Self> {
+        Self::available().into_iter().find(|s| s.set.name() == name.trim())
+    }
+
+    /// The copy `DQSKIN_SIMD` asks for, if it names one the CPU has (for debugging and
+    /// comparisons; read once per process).
+    pub(crate) fn requested() -> Option<Self> {
+        static REQUESTED: std::sync::OnceLock<Option<Simd>> = std::sync::OnceLock::new();
+        *REQUESTED.get_or_init(|| std::env::var("DQSKIN_SIMD").ok().and_then(|v| Self::named(&v)))
+    }
+
+    /// The copy `DQSKIN_SIMD` asks for, else the widest: the precompute's inner loops, which are
+    /// compute-bound and gain from every wider copy.
+    pub(crate) fn detect() -> Self {
+        Self::requested().unwrap_or_else(Self::widest)
+    }
+
+    /// The instruction set of this copy (a value of it proves the CPU has it).
+    pub(crate) fn instruction_set(self) -> InstructionSet {
+        self.set
+    }
+}

@@ -239,7 +239,12 @@ pub(crate) fn space(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Opti
 
 /// ``(T, 3)`` integer triangles as vertex indices (range checked by the core).
 pub(crate) fn triangle_indices(triangles: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
-    let flat = arrays::index_array(triangles, "triangles", &[None, Some(3)], &["T"])?;
+    named_triangle_indices(triangles, "triangles")
+}
+
+/// [`triangle_indices`] of the argument `name`.
+pub(crate) fn named_triangle_indices(triangles: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<[u32; 3]>> {
+    let flat = arrays::index_array(triangles, name, &[None, Some(3)], &["T"])?;
     Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }
 

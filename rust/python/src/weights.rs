@@ -10,7 +10,7 @@ use pyo3::types::{PyDict, PyString, PyTuple};
 use crate::args;
 use crate::arrays;
 use crate::guard;
-use crate::skinning::{as_points, triangle_indices, Cancelled, PyInfluences};
+use crate::skinning::{as_points, named_triangle_indices, triangle_indices, Cancelled, PyInfluences};
 
 fn weights_error(e: WeightsError) -> PyErr {
     match e {
@@ -141,6 +141,11 @@ fn automatic_weights<'py>(
                 t.shape()[0]
             )));
         }
+        for (name, points) in [("heads", as_points(h.as_slice()?)), ("tails", as_points(t.as_slice()?))] {
+            if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+                return Err(PyValueError::new_err(format!("{name}[{i}] has a NaN or infinite coordinate")));
+            }
+        }
         let bones: Vec<Bone> = as_points(h.as_slice()?)
             .iter()
             .zip(as_points(t.as_slice()?))
@@ -222,11 +227,17 @@ fn transfer_weights<'py>(
             .cast::<PyInfluences>()
             .map_err(|_| PyTypeError::new_err("body_influences must be a dqskin.Influences (the body's weights)"))?;
         let infl = &infl.get().0;
-        let bp =
-            arrays::readonly::<f32>(body_positions, "body_positions", &[Some(infl.vertex_count()), Some(3)], &["V"])?;
-        let bt = triangle_indices(body_triangles)?;
+        let bp = arrays::readonly::<f32>(body_positions, "body_positions", &[None, Some(3)], &["V"])?;
+        if bp.shape()[0] != infl.vertex_count() {
+            return Err(PyValueError::new_err(format!(
+                "body_positions has {} vertices but body_influences has {}: they must be the same body",
+                bp.shape()[0],
+                infl.vertex_count()
+            )));
+        }
+        let bt = named_triangle_indices(body_triangles, "body_triangles")?;
         let cp = arrays::readonly::<f32>(cloth_positions, "cloth_positions", &[None, Some(3)], &["V"])?;
-        let ct = triangle_indices(cloth_triangles)?;
+        let ct = named_triangle_indices(cloth_triangles, "cloth_triangles")?;
         let options = TransferOptions { max_distance, max_angle, flipped_normals, smoothing, max_influences };
         let (bpts, cpts) = (as_points(bp.as_slice()?), as_points(cp.as_slice()?));
         let result = with_progress(py, progress, "transfer_weights", |p| {

@@ -68,6 +68,31 @@ pub(crate) fn segment_distance(p: Vec3, a: Vec3, b: Vec3) -> f32 {
     (a + ab * t).distance(p)
 }
 
+/// The part of the segment `a`-`b` inside the box `lo`-`hi` (Liang-Barsky), or None.
+pub(crate) fn clip_segment(a: Vec3, b: Vec3, lo: Vec3, hi: Vec3) -> Option<(Vec3, Vec3)> {
+    let d = b - a;
+    let (mut t0, mut t1) = (0.0f32, 1.0f32);
+    for axis in 0..3 {
+        let (p, q0, q1) = (d[axis], lo[axis] - a[axis], hi[axis] - a[axis]);
+        if p == 0.0 {
+            if q0 > 0.0 || q1 < 0.0 {
+                return None;
+            }
+            continue;
+        }
+        let (mut near, mut far) = (q0 / p, q1 / p);
+        if near > far {
+            std::mem::swap(&mut near, &mut far);
+        }
+        t0 = t0.max(near);
+        t1 = t1.min(far);
+        if t0 > t1 || !t0.is_finite() || !t1.is_finite() {
+            return None;
+        }
+    }
+    Some((a + d * t0, a + d * t1))
+}
+
 /// The starting cells of each bone (segments in grid coordinates): `(cell id, bone, distance)`,
 /// and the bones that cross no solid cell (they start from every solid cell, in straight lines).
 fn seeds(solid: &Solid, segments: &[(Vec3, Vec3)], k: usize) -> (Vec<Label>, Vec<u32>) {
@@ -78,6 +103,14 @@ fn seeds(solid: &Solid, segments: &[(Vec3, Vec3)], k: usize) -> (Vec<Label>, Vec
             .enumerate()
             .map(|(bone, &(a, b))| {
                 let mut found: Vec<Label> = Vec::new();
+                // Only the part of the bone inside the grid can touch a solid cell (and a bone
+                // far out, or huge, costs no more than one across the grid).
+                let [nx, ny, nz] = grid.dims;
+                let Some((a, b)) =
+                    clip_segment(a, b, Vec3::splat(-1.0), Vec3::new(nx as f32, ny as f32, nz as f32) + 1.0)
+                else {
+                    return found;
+                };
                 let steps = ((b - a).length() * 2.0).ceil().max(1.0) as usize;
                 for s in 0..=steps {
                     let p = a + (b - a) * (s as f32 / steps as f32);

@@ -84,7 +84,9 @@ impl core::fmt::Display for WeightsError {
             }
             WeightsError::NotFinite { what, index } => write!(f, "{what}[{index}] has a NaN or infinite coordinate"),
             WeightsError::InvalidTriangle { what, index, vertex, vertex_count } => {
-                write!(f, "{what}[{index}] refers to vertex {vertex}, but there are {vertex_count} positions")
+                // (`body_triangles` index `body_positions`, and so on.)
+                let positions = what.replace("triangles", "positions");
+                write!(f, "{what}[{index}] refers to vertex {vertex}, but {positions} has {vertex_count} points")
             }
             WeightsError::OutOfRange { what, value, min, max } => {
                 write!(f, "{what} must be between {min} and {max}, got {value}")
@@ -103,7 +105,7 @@ impl core::fmt::Display for WeightsError {
                 write!(f, "the body has no weights to transfer (no vertex has a weight above 0)")
             }
             WeightsError::NoSurface => {
-                write!(f, "the body has no faces: weights are transferred from the closest points of its surface")
+                write!(f, "body_triangles is empty (the body has no faces): weights are transferred from the closest points of its surface")
             }
             WeightsError::Cancelled => write!(f, "cancelled"),
         }

@@ -379,3 +379,16 @@ fn a_loose_part_without_a_match_moves_with_the_nearest_matched_point() {
         assert_eq!(r.influences.of_vertex(v), &first[..]);
     }
 }
+
+#[test]
+fn a_huge_bone_costs_no_more_than_one_across_the_grid() {
+    let (p, t) = tube(0.0, 4.0, 0.4, 41, 12, Vec3::ZERO);
+    let mut bones = chain(4);
+    bones.push(Bone { head: [2.0, 0.0, 0.0], tail: [1e30, 0.0, 0.0] });
+    bones.push(Bone { head: [-1e30, 5.0, 0.0], tail: [1e30, 5.0, 0.0] });
+    let start = std::time::Instant::now();
+    let w = run(&p, &t, &bones, &AutoOptions::default());
+    assert!(start.elapsed().as_secs_f64() < 10.0);
+    check_valid(&w.influences, p.len(), 4);
+    assert_eq!(w.outside_bones, vec![5]); // the first crosses the tube, the second misses it
+}

@@ -171,3 +171,13 @@ def test_out_of_range_options_are_usage_errors_naming_the_option(args, option, t
     assert r.returncode == 2, (r.returncode, r.stderr)
     assert f"error: argument {option}:" in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert not list(tmp_path.iterdir())  # nothing rendered or written
+
+
+@both
+def test_bake_reports_progress_in_logs(run, tmp_path):
+    """Not on a terminal (a farm's log): a line, flushed, each tenth of the frames."""
+    r = run("bake", str(ASSETS / "CesiumMan.glb"), "--object", "Cesium_Man", "--frames", "1-20", "--out", str(tmp_path / "c.pc2"))
+    assert r.returncode == 0, r.stderr
+    lines = [line for line in r.stderr.splitlines() if line.startswith("Baking Cesium_Man [")]
+    assert [line.split("] ")[1].split()[0] for line in lines] == [f"{n}/20" for n in range(2, 21, 2)], r.stderr
+    assert "\r" not in r.stderr

@@ -44,7 +44,7 @@ def installed_extension(bpy) -> str | None:
 def _user_resources(argv: list[str]) -> str | None:
     """`--user-resources DIR` (or `=DIR`) before the command, as the extension's parser reads it."""
     for i, arg in enumerate(argv):
-        if not arg.startswith("-"):
+        if not arg.startswith("-") and not (i and argv[i - 1] == "--threads"):
             return None  # the command: its own options follow
         if arg == "--user-resources" and i + 1 < len(argv):
             return argv[i + 1]

@@ -197,6 +197,26 @@ def test_bake_method_applies_to_an_object_that_has_dq_skin(run, method, tmp_path
     assert linear.read_bytes() == saved
 
 
+@pytest.mark.parametrize(
+    "entry, option",
+    [
+        ("python -m dqskin.blender", ["--threads", "1"]),
+        ("blender --command dq_skin", ["-t", "1"]),  # Blender's own option, before --command
+        ("blender --command dq_skin", ["--threads", "1"]),
+    ],
+    ids=["launcher --threads", "blender -t", "blender --command dq_skin --threads"],
+)
+def test_threads_size_dq_skins_pool(entry, option, tmp_path):
+    out = tmp_path / "one.pc2"
+    args = ["bake", str(ASSETS / "CesiumMan.glb"), "--object", "Cesium_Man", "--frames", "1-3", "--out", str(out)]
+    r = runner(entry)(*option, *args)
+    assert r.returncode == 0 and "(1 thread)" in r.stdout, r.stdout + r.stderr
+    r = runner(entry)(*args, "--threads", "2")  # after the command too
+    assert r.returncode == 0 and "(2 threads)" in r.stdout, r.stdout + r.stderr
+    r = runner(entry)("--threads", "0", *args)
+    assert r.returncode == 2 and "argument --threads" in r.stderr, r.stderr
+
+
 @pytest.fixture
 def bodies(tmp_path):
     """`Body R.blend`: three CesiumMan meshes on their Armature modifiers, Body/L, Body R and

@@ -20,6 +20,9 @@ Commands:
   ``comparison.png`` (the variants, labelled) and ``deviation.png`` (each variant coloured by its
   distance from Armature Linear, with a legend).
 
+``--threads N`` (before or after the command) sizes DQ Skin's thread pool; without it, inside
+Blender, Blender's own ``-t N`` does.
+
 Wrong usage (an unknown option, a value out of range) exits with 2 and argparse's message naming
 the option. On failure the exit code is 1 with a one-line reason (``DQSKIN_DEBUG=1`` adds the
 traceback), and no output file is written: all outputs go to a temporary file
@@ -40,6 +43,7 @@ from pathlib import Path
 
 import bpy
 
+from .. import dqskin
 from ..blender import nodes
 from ..dqskin import pc2
 from ..engine.context import dq_skin_modifiers
@@ -56,6 +60,7 @@ METHODS = ("AUTO", *BY_NAME)  # the operators' method values (`dqskin.Method` na
 PICTURE_SIZE = (4, 65536)
 SAMPLES = (1, 16777216)
 FRAMES = (-1048574, 1048574)
+THREADS = 1024  # Blender's own limit for -t (BLENDER_MAX_THREADS)
 
 
 class Failure(Exception):
@@ -231,8 +236,9 @@ def cmd_bake(args) -> str:
             for tmp in temporaries:
                 if tmp.exists():
                     tmp.unlink()
+    threads = dqskin.get_num_threads()
     where = args.out if len(objects) == 1 and not _is_pattern_or_folder(args.out) else ", ".join(map(str, outs))
-    return f"baked {', '.join(o.name for o in objects)} frames {start}-{end} to {where}"
+    return f"baked {', '.join(o.name for o in objects)} frames {start}-{end} to {where} ({threads} thread{'s' if threads > 1 else ''})"
 
 
 def _staging(out: Path) -> Path:
@@ -379,9 +385,20 @@ def cmd_compare(args) -> str:
 def parser(prog: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     p.add_argument("--user-resources", help=f"Blender user folder with DQ Skin installed (sets BLENDER_USER_RESOURCES; `{LAUNCHER}` only)")
+    p.add_argument(
+        "--threads",
+        type=_whole_number(1, THREADS),
+        metavar="N",
+        help="threads of DQ Skin's pool (default: Blender's -t N, else DQSKIN_NUM_THREADS, else one per core)",
+    )
     sub = p.add_subparsers(dest="command", required=True)
+    # --threads after the command too (there it does not reset a value given before it).
+    threads_after = argparse.ArgumentParser(add_help=False)
+    threads_after.add_argument(
+        "--threads", type=_whole_number(1, THREADS), metavar="N", default=argparse.SUPPRESS, help="as before the command"
+    )
     frames = {"type": _frame_range, "metavar": "A-B", "help": "first and last frame (default: the scene's)"}
-    b = sub.add_parser("bake", help="bake DQ Skin to a PC2 cache")
+    b = sub.add_parser("bake", parents=[threads_after], help="bake DQ Skin to a PC2 cache")
     b.add_argument("file")
     b.add_argument(
         "--object",
@@ -395,19 +412,21 @@ def parser(prog: str) -> argparse.ArgumentParser:
     b.add_argument("--out", required=True, help="FILE.pc2, FOLDER/ (one NAME.pc2 per object) or a pattern with {object}")
     b.set_defaults(run=cmd_bake)
     p.bake_parser = b
-    a = sub.add_parser("apply", help="replace Armature modifiers with DQ Skin and save")
+    a = sub.add_parser("apply", parents=[threads_after], help="replace Armature modifiers with DQ Skin and save")
     a.add_argument("file")
     a.add_argument("--method", choices=METHODS, default="AUTO")
     a.add_argument("--out", required=True)
     a.set_defaults(run=cmd_apply)
-    m = sub.add_parser("merge", help="join PC2 chunks")
+    m = sub.add_parser("merge", parents=[threads_after], help="join PC2 chunks")
     m.add_argument("out")
     m.add_argument("inputs", nargs="+")
     m.set_defaults(run=cmd_merge)
-    f = sub.add_parser("preflight", help="name the objects that would render differently without the extension (exit code 3)")
+    f = sub.add_parser(
+        "preflight", parents=[threads_after], help="name the objects that would render differently without the extension (exit code 3)"
+    )
     f.add_argument("file")
     f.set_defaults(run=cmd_preflight)
-    c = sub.add_parser("compare", help="a comparison scene, its report and a render")
+    c = sub.add_parser("compare", parents=[threads_after], help="a comparison scene, its report and a render")
     c.add_argument("file", nargs="?", help="a rigged file (default: the built-in test rigs)")
     c.add_argument("--frames", **frames)
     c.add_argument("--out", default="out")
@@ -420,15 +439,36 @@ def parser(prog: str) -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str], prog: str, launched: bool = False) -> int:
+def _use_blender_threads(threads: int) -> None:
+    """Blender's `-t N` for DQ Skin's pool too, at most DQ Skin's own limit (4 per core, at
+    least 16); if the system refuses, the pool keeps its default size."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # macOS and Windows have no sched_getaffinity
+        cores = os.cpu_count() or 1
+    try:
+        dqskin.set_num_threads(min(threads, max(16, min(1024, 4 * cores))))
+    except ValueError:
+        pass
+
+
+def main(argv: list[str], prog: str, launched: bool = False, threads: int | None = None) -> int:
     """Runs one command; returns its exit code. `launched`: from `python -m dqskin.blender`, which
-    has applied `--user-resources` before importing bpy (inside Blender it cannot be changed)."""
+    has applied `--user-resources` before importing bpy (inside Blender it cannot be changed).
+    `threads`: Blender's own `-t N` (`--threads N` of the command line goes first)."""
     interrupts.watch()
     try:
         p = parser(prog)
         args = p.parse_args(argv)
         if args.command == "bake" and len(set(args.object)) > 1 and not _is_pattern_or_folder(args.out):
             p.bake_parser.error(f"argument --out: several objects need a folder (ending with /) or a pattern with {OBJECT_FIELD}")
+        if args.threads:
+            try:
+                dqskin.set_num_threads(args.threads)
+            except ValueError as e:
+                p.error(f"argument --threads: {e}")
+        elif threads:
+            _use_blender_threads(threads)
     except SystemExit as e:  # --help, or a usage error (printed): argparse's own exit code
         return int(e.code or 0)
     try:

@@ -5,7 +5,10 @@
 // Flamenco add-on in Blender then offers "DQ Skin Bake" as a job type.
 // Each task runs the DQ Skin batch commands through the worker's `exec` command:
 // `{blender} -b --command dq_skin ...` by default ({blender} is the Manager's variable for each
-// worker's Blender), or `python -m dqskin.blender ...` with the bpy module.
+// worker's Blender), or `python -m dqskin.blender ...` with the bpy module. The command is split
+// into words as Python's shlex.split does: at blanks, with '...', "..." and \ quoting, nothing
+// expanded (`"/opt/Blender 4.5/blender" -b --command dq_skin`). The file paths are single
+// arguments: spaces in them are kept.
 
 const JOB_TYPE = {
     label: "DQ Skin Bake",
@@ -25,14 +28,14 @@ const JOB_TYPE = {
         { key: "output", type: "string", subtype: "file_path", required: true,
           description: "The merged PC2 cache (chunks go to OUTPUT.chunks/)" },
         { key: "dq_skin_command", type: "string", default: "{blender} -b --command dq_skin",
-          description: "The command that runs the DQ Skin batch commands, split at spaces" },
+          description: "The command that runs the DQ Skin batch commands, split into words as a shell does (quote a path with spaces)" },
     ],
 };
 
 function compileJob(job) {
     const settings = job.settings;
     const [first, last] = frameRange(settings.frames);
-    const [exe, ...commandArgs] = settings.dq_skin_command.trim().split(/\s+/);
+    const [exe, ...commandArgs] = splitCommand(settings.dq_skin_command);
     const chunkDir = `${settings.output}.chunks`;
 
     const merge = author.Task("merge", "blender");
@@ -70,4 +73,42 @@ function frameRange(frames) {
         throw `frames ${frames}: the end is before the start`;
     }
     return [first, last];
+}
+
+// The command as words, as Python's shlex.split (a POSIX shell) splits it: at blanks, with '...',
+// "..." (where \ escapes only " and \) and \ quoting; nothing is expanded.
+function splitCommand(text) {
+    const words = [];
+    let word = "", quote = "", inWord = false;
+    for (let i = 0; i < text.length; i++) {
+        const c = text[i];
+        if (quote === "'") {
+            if (c === "'") { quote = ""; } else { word += c; }
+        } else if (quote === '"') {
+            if (c === '"') {
+                quote = "";
+            } else if (c === "\\" && (text[i + 1] === '"' || text[i + 1] === "\\")) {
+                word += text[++i];
+            } else {
+                word += c;
+            }
+        } else if (/\s/.test(c)) {
+            if (inWord) { words.push(word); }
+            word = ""; inWord = false;
+        } else {
+            inWord = true;
+            if (c === "'" || c === '"') {
+                quote = c;
+            } else if (c === "\\") {
+                if (i + 1 === text.length) { throw `the DQ Skin command ends with a lone \\: ${text}`; }
+                word += text[++i];
+            } else {
+                word += c;
+            }
+        }
+    }
+    if (quote) { throw `the DQ Skin command has no closing ${quote}: ${text}`; }
+    if (inWord) { words.push(word); }
+    if (words.length === 0) { throw "the DQ Skin command is empty"; }
+    return words;
 }

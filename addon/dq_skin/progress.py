@@ -9,14 +9,19 @@ import time
 
 
 class Progress:
-    """Progress on the terminal (a text bar with the time left; on a non-terminal, as in farm
-    logs, only the last line) and in the UI (`window_manager.progress_*`). A context manager."""
+    """Progress on the terminal (a text bar with the time left, redrawn in place), in logs (a
+    non-terminal, as on a render farm: the same line, one per line, each time another tenth of
+    the work is done, at least every `LOG_SECONDS` while it advances, and at the end) and in the
+    UI (`window_manager.progress_*`). A context manager."""
+
+    LOG_SECONDS = 5.0
 
     def __init__(self, context, total: int, label: str):
         self.wm = getattr(context, "window_manager", None)
         self.total, self.label, self.done = max(total, 1), label, 0
         self.start = time.perf_counter()
         self.tty = sys.stderr.isatty()
+        self._logged = (0, self.start)  # in logs: the tenth and the time of the last line
         if self.wm is not None:
             self.wm.progress_begin(0, self.total)
 
@@ -34,7 +39,7 @@ class Progress:
         if self.wm is not None:
             self.wm.progress_update(self.done)
         finished = self.done == self.total
-        if not (self.tty or finished):
+        if not (self.tty or finished or self._log_due()):
             return
         width = 30
         filled = int(width * self.done / self.total)
@@ -43,10 +48,22 @@ class Progress:
             timing = f"{elapsed:.1f} s"
         else:
             timing = f"{elapsed / self.done * (self.total - self.done):.0f} s left" if self.done else ""
-        line = f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} {timing}"
-        sys.stderr.write(line.ljust(getattr(self, "_width", 0)) + ("\n" if finished else ""))
-        self._width = len(line)
+        line = f"{self.label} [{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} {timing}"
+        if self.tty:
+            line = "\r" + line
+            sys.stderr.write(line.ljust(getattr(self, "_width", 0)) + ("\n" if finished else ""))
+            self._width = len(line)
+        else:
+            sys.stderr.write(line.rstrip() + "\n")
         sys.stderr.flush()
+
+    def _log_due(self) -> bool:
+        """In logs: whether another tenth is done, or `LOG_SECONDS` passed, since the last line."""
+        tenth, now = self.done * 10 // self.total, time.perf_counter()
+        if tenth > self._logged[0] or now - self._logged[1] >= self.LOG_SECONDS:
+            self._logged = (tenth, now)
+            return True
+        return False
 
     def end(self) -> None:
         if self.wm is not None:

@@ -1,9 +1,10 @@
 """``python -m dqskin.blender COMMAND ...``: the DQ Skin extension's batch commands (bake, apply,
 merge, compare) with the ``bpy`` module, the same as ``blender -b --command dq_skin COMMAND ...``.
 
-This is only a launcher; the commands are the extension's, which must be installed in the
-Blender user folder named by ``BLENDER_USER_RESOURCES`` (or ``--user-resources DIR``, applied
-here because it must be set before ``bpy`` is imported). It imports ``bpy`` when run, never when
+This is only a launcher; the commands are the extension's, which must be installed in an
+extension repository (user, studio or system; local or remote) of the Blender user folder named
+by ``BLENDER_USER_RESOURCES`` (or ``--user-resources DIR``, applied here because it must be set
+before ``bpy`` is imported). It imports ``bpy`` when run, never when
 ``dqskin`` is imported, so the package itself needs no Blender. ``--help`` lists the commands.
 """
 
@@ -15,15 +16,35 @@ import sys
 from pathlib import Path
 
 PROG = "python -m dqskin.blender"
-# The extension's id as Blender installs it from a zip (`extension install-file -r user_default`)
-# and the entry point it exposes: `batch.main(argv, prog, launched)`.
-EXTENSION = "bl_ext.user_default.dq_skin"
+# The extension's id; Blender names its module `bl_ext.REPOSITORY.dq_skin` after the repository
+# it is installed in (`bl_ext.user_default.dq_skin` from a zip installed as users do). Its entry
+# point: `batch.main(argv, prog, launched)`.
+EXTENSION_ID = "dq_skin"
+
+
+def installed_extension(bpy) -> str | None:
+    """The module name of DQ Skin as installed in any extension repository of the user's
+    preferences (user, studio or system repositories, local or remote), as Blender reads them at
+    startup: the one enabled in the preferences first, else the first repository holding it."""
+    import addon_utils
+
+    userpref = Path(bpy.utils.resource_path("USER")) / "config" / "userpref.blend"
+    if userpref.is_file():  # the bpy module starts from factory preferences: the user's repositories
+        bpy.ops.wm.read_userpref()
+    enabled = [a.module for a in bpy.context.preferences.addons if a.module.startswith("bl_ext.") and a.module.endswith(f".{EXTENSION_ID}")]
+    installed = [
+        f"bl_ext.{repo.module}.{EXTENSION_ID}"
+        for repo in bpy.context.preferences.extensions.repos
+        if repo.enabled and (Path(repo.directory) / EXTENSION_ID / "blender_manifest.toml").is_file()
+    ]
+    known = {m.__name__ for m in addon_utils.modules(refresh=True)}
+    return next((name for name in [*enabled, *installed] if name in known), None)
 
 
 def _user_resources(argv: list[str]) -> str | None:
     """`--user-resources DIR` (or `=DIR`) before the command, as the extension's parser reads it."""
     for i, arg in enumerate(argv):
-        if not arg.startswith("-"):
+        if not arg.startswith("-") and not (i and argv[i - 1] == "--threads"):
             return None  # the command: its own options follow
         if arg == "--user-resources" and i + 1 < len(argv):
             return argv[i + 1]
@@ -67,14 +88,15 @@ def main(argv: list[str] | None = None) -> int:
     if not _bpy_importable():
         print(NEEDS_BPY.format(prog=PROG, python=sys.executable, version=sys.version.split()[0]), file=sys.stderr)
         return 0 if argv and argv[0] in ("-h", "--help") else 1
-    import bpy  # noqa: F401  (after BLENDER_USER_RESOURCES)
+    import bpy  # (after BLENDER_USER_RESOURCES)
 
     import addon_utils
 
-    extension = addon_utils.enable(EXTENSION, default_set=True)
+    name = installed_extension(bpy)
+    extension = addon_utils.enable(name, default_set=True) if name else None
     if extension is None:
         where = os.environ.get("BLENDER_USER_RESOURCES", "the default Blender user folder")
-        print(f"{PROG}: the DQ Skin extension is not installed in {where}", file=sys.stderr)
+        print(f"{PROG}: the DQ Skin extension is not installed in any extension repository of {where}", file=sys.stderr)
         return 1
     code = extension.batch.main(argv, prog=PROG, launched=True)
     # The command has written and closed everything: end here, without the bpy module's C++

@@ -1,6 +1,6 @@
 """Stands in for the `blender` program where the docs' examples run it (there is no Blender binary
-here, only the `bpy` module): `blender [-b] [--online-mode] [--factory-startup] (--command NAME
-ARGS... | --python FILE)`. It starts as Blender does, as far as the examples need: the user's
+here, only the `bpy` module): `blender [-b] [-t N] [--online-mode] [--factory-startup] (--command
+NAME ARGS... | --python FILE)`. It starts as Blender does, as far as the examples need: the user's
 preferences and add-ons from BLENDER_USER_RESOURCES (unless --factory-startup), online access
 with --online-mode, then the command (Blender's own `extension` command, or one that an
 installed extension registered, `dq_skin`, called as Blender calls it, exiting with its code) or
@@ -16,7 +16,7 @@ import bpy
 
 import addon_utils  # noqa: E402  (importable once bpy is)
 
-USAGE = "usage: blender [-b] [--online-mode] [--factory-startup] (--command NAME [ARGS...] | --python FILE)"
+USAGE = "usage: blender [-b] [-t N] [--online-mode] [--factory-startup] (--command NAME [ARGS...] | --python FILE)"
 
 
 def command_function(name: str):
@@ -52,6 +52,9 @@ def main(argv: list[str]) -> int:
     while argv and argv[0] not in ("-c", "--command", "-P", "--python"):
         option = argv.pop(0)
         if option in ("-b", "--background"):
+            continue
+        if option in ("-t", "--threads") and argv:
+            argv.pop(0)  # render threads: Blender's, left in sys.argv for the commands to read
             continue
         if option == "--online-mode":
             online = True

@@ -6,6 +6,7 @@ a studio script runs it (user_shell.py)."""
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import subprocess
 import sys
@@ -13,7 +14,7 @@ import tomllib
 from pathlib import Path
 
 import user_shell
-from conftest import ROOT
+from conftest import ASSETS, ROOT
 
 DIST = ROOT / "dist"
 MANIFEST = ROOT / "addon" / "dq_skin" / "blender_manifest.toml"
@@ -81,3 +82,31 @@ def test_blender_installs_from_the_repository_and_upgrades_to_a_newer_version(tm
     # The upgraded extension is enabled and its command runs (the module its wheel installed).
     r = user_shell.run("blender --command dq_skin --help", tmp_path, user, shell)
     assert r.returncode == 0 and "bake DQ Skin to a PC2 cache" in r.stdout, r.stdout + r.stderr
+    # The launcher finds it there too: `bl_ext.studio.dq_skin`, not the user_default one.
+    r = user_shell.run("python -m dqskin.blender --help", tmp_path, user, shell)
+    assert r.returncode == 0 and "bake DQ Skin to a PC2 cache" in r.stdout, r.stdout + r.stderr
+
+
+def test_the_launcher_runs_dq_skin_installed_in_a_local_studio_repository(tmp_path):
+    """A studio installs the zip into a repository of its own (not user_default): the launcher
+    `python -m dqskin.blender` enables it from there, as Blender does."""
+    zips = sorted(DIST.glob("dq_skin-*-linux_x64.zip"))
+    assert zips, "no Linux zip in dist/ (run make setup)"
+    user = user_shell.fresh_user_folder(tmp_path / "user")
+    shell = user_shell.bin_folder(tmp_path / "bin")
+    folder = tmp_path / "studio extensions"
+    for command in (
+        f"blender --command extension repo-add studio_local --name 'Studio' --directory {shlex.quote(str(folder))}",
+        f"blender --command extension install-file -r studio_local -e {shlex.quote(str(zips[-1]))}",
+    ):
+        r = user_shell.run(command, tmp_path, user, shell)
+        assert r.returncode == 0, r.stdout + r.stderr
+    assert (folder / "dq_skin" / "blender_manifest.toml").is_file()
+    assert not (user / "extensions" / "user_default" / "dq_skin").exists()
+    out = tmp_path / "body.pc2"
+    glb = shlex.quote(str(ASSETS / "CesiumMan.glb"))
+    r = user_shell.run(
+        f"python -m dqskin.blender bake {glb} --object Cesium_Man --frames 1-3 --out {shlex.quote(str(out))}", tmp_path, user, shell
+    )
+    assert r.returncode == 0 and "baked Cesium_Man frames 1-3" in r.stdout, r.stdout + r.stderr
+    assert out.is_file()

@@ -7,6 +7,8 @@ byte."""
 from __future__ import annotations
 
 import json
+import shlex
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -93,6 +95,125 @@ def test_openjd_run_bakes_every_chunk_and_merges_them_like_one_bake(shot, tmp_pa
     assert not stale.parent.exists()  # the merge removes the chunks
 
 
+def spaced(shot, tmp_path) -> tuple[Path, Path, str]:
+    """The shot's file in a folder whose name has spaces, an output there, and a command whose
+    program's path has spaces, quoted as the templates document: `"/a b/dq skin"` (a script that
+    runs `python -m dqskin.blender`)."""
+    folder = tmp_path / "my shots"
+    folder.mkdir()
+    blend = folder / "shot one.blend"
+    shutil.copyfile(shot[0], blend)
+    program = tmp_path / "bin dir" / "dq skin"
+    program.parent.mkdir()
+    program.write_text(f'#!/bin/sh\nexec {shlex.quote(sys.executable)} -m dqskin.blender "$@"\n')
+    program.chmod(0o755)
+    return blend, folder / "cache dir" / "body cache.pc2", f'"{program}"'
+
+
+def run_openjd(params: dict, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [
+            str(OPENJD),
+            "run",
+            str(OPENJD_TEMPLATE),
+            "--step",
+            "Merge",
+            "--run-dependencies",
+            *[a for k, v in params.items() for a in ("-p", f"{k}={v}")],
+        ],
+        capture_output=True,
+        text=True,
+        timeout=1200,
+        cwd=cwd,
+    )
+
+
+def test_openjd_run_keeps_paths_with_spaces(shot, tmp_path):
+    blend, out, command = spaced(shot, tmp_path)
+    params = {
+        "BlendFile": blend,
+        "Object": OBJECT,
+        "Frames": "{}-{}".format(*FRAMES),
+        "ChunkSize": "10",
+        "Output": out,
+        "DqSkinCommand": command,
+    }
+    r = run_openjd(params, tmp_path)
+    assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-2000:]
+    assert out.read_bytes() == shot[1]
+    assert sorted(p.name for p in out.parent.iterdir()) == ["body cache.pc2"]
+
+
+COMMANDS = [
+    "blender -b --command dq_skin",
+    '"/opt/Blender 4.5/blender" -b --command dq_skin',
+    "'/opt/Blender 4.5/blender'  -b\t--command dq_skin",
+    "/opt/Blender\\ 4.5/blender -b --command dq_skin",
+    '"C:\\Program Files\\Blender\\blender.exe" -b -c dq_skin',
+    'python -m dqskin.blender --user-resources "/studio/blender user" --threads 2',
+    "a''b '' \"say \\\"hi\\\"\" $HOME `x`",
+]
+
+
+def openjd_split(script: str, text: str) -> list[str]:
+    """What an embedded script of the template makes of DqSkinCommand `text`."""
+    split = script[script.index("split_command() {") : script.index('split_command "$1"\n')]
+    r = subprocess.run(
+        ["bash", "-c", f'set -euo pipefail\n{split}\nsplit_command "$1"\nprintf "%s\\0" "${{command[@]}}"', "-", text],
+        capture_output=True,
+        timeout=60,
+    )
+    assert r.returncode == 0, r.stderr
+    return r.stdout.decode().split("\0")[:-1]
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_both_templates_split_the_command_as_a_shell_does(command):
+    words = shlex.split(command)
+    for step in yaml.safe_load(OPENJD_TEMPLATE.read_text())["steps"]:
+        assert openjd_split(step["script"]["embeddedFiles"][0]["data"], command) == words, step["name"]
+    r = flamenco_graph(
+        {
+            "blendfile": "/my shots/a b.blend",
+            "object": "Body",
+            "frames": "1-2",
+            "chunk_size": 4,
+            "output": "/cache dir/b c.pc2",
+            "dq_skin_command": command,
+        }
+    )
+    assert r.returncode == 0, r.stderr
+    bake = json.loads(r.stdout)["tasks"][0]["commands"][0]["parameters"]
+    assert [bake["exe"], *bake["args"]] == [
+        *words,
+        "bake",
+        "/my shots/a b.blend",
+        "--object",
+        "Body",
+        "--frames",
+        "1-2",
+        "--method",
+        "AUTO",
+        "--out",
+        "/cache dir/b c.pc2.chunks/1-2.pc2",
+    ]
+
+
+@pytest.mark.parametrize("command", ['"unclosed', "ends with \\", "  "])
+def test_both_templates_refuse_a_command_they_cannot_split(command):
+    for step in yaml.safe_load(OPENJD_TEMPLATE.read_text())["steps"]:
+        script = step["script"]["embeddedFiles"][0]["data"]
+        split = script[script.index("split_command() {") : script.index('split_command "$1"\n')]
+        r = subprocess.run(
+            ["bash", "-c", f'set -euo pipefail\n{split}\nsplit_command "$1"', "-", command], capture_output=True, text=True, timeout=60
+        )
+        assert r.returncode == 2 and "DqSkinCommand" in r.stderr, r.stderr
+    r = flamenco_graph(
+        {"blendfile": "a.blend", "object": "B", "frames": "1-2", "chunk_size": 4, "output": "o.pc2", "dq_skin_command": command}
+    )
+    assert r.returncode != 0 and "DQ Skin command" in r.stderr, r.stderr
+
+
 def flamenco_graph(settings: dict) -> subprocess.CompletedProcess:
     return subprocess.run(
         ["node", str(ROOT / "tests" / "farm" / "flamenco_compile.js"), str(FLAMENCO_JOB_TYPE), json.dumps(settings)],
@@ -147,9 +268,12 @@ def test_the_flamenco_job_type_refuses_frames_that_are_not_one_range(frames):
     assert r.returncode != 0 and ("frames" in r.stderr), r.stderr
 
 
-def test_the_flamenco_tasks_run_in_order_give_the_single_bake(shot, tmp_path):
+@pytest.mark.parametrize("paths", ["plain", "with spaces"])
+def test_the_flamenco_tasks_run_in_order_give_the_single_bake(shot, tmp_path, paths):
     blend, single = shot
-    out = tmp_path / "body.pc2"
+    out, command = tmp_path / "body.pc2", COMMAND
+    if paths == "with spaces":
+        blend, out, command = spaced(shot, tmp_path)
     r = flamenco_graph(
         {
             "blendfile": str(blend),
@@ -157,7 +281,7 @@ def test_the_flamenco_tasks_run_in_order_give_the_single_bake(shot, tmp_path):
             "frames": "{}-{}".format(*FRAMES),
             "chunk_size": 8,
             "output": str(out),
-            "dq_skin_command": COMMAND,
+            "dq_skin_command": command,
         }
     )
     assert r.returncode == 0, r.stderr

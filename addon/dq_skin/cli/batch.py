@@ -4,8 +4,10 @@ the ``bpy`` module, ``python -m dqskin.blender COMMAND ...`` (a launcher that en
 extension and calls `main`).
 
 Commands:
-- ``bake FILE --object NAME [--frames A-B] [--method M] --out FILE.pc2``: bake the object's DQ
-  Skin result (added from its Armature modifier if missing) to a PC2 cache.
+- ``bake FILE --object NAME [--object NAME ...] [--frames A-B] [--method M] --out OUT``: bake
+  each object's DQ Skin result (added from its Armature modifier if missing; set to M if given,
+  in the loaded file, which no command saves) to a PC2 cache: OUT is FILE.pc2 (one object),
+  FOLDER/ (FOLDER/NAME.pc2 each) or a pattern with ``{object}``.
 - ``apply FILE --out FILE.blend``: replace every Armature modifier with DQ Skin and save.
 - ``merge OUT IN [IN ...]``: join PC2 chunks of consecutive frame ranges (farm bakes).
 - ``preflight FILE``: name every object that would render differently on a node without the
@@ -17,6 +19,9 @@ Commands:
   ``report.md`` (deviations from each built-in method, volume relative to rest, per-frame time),
   ``comparison.png`` (the variants, labelled) and ``deviation.png`` (each variant coloured by its
   distance from Armature Linear, with a legend).
+
+``--threads N`` (before or after the command) sizes DQ Skin's thread pool; without it, inside
+Blender, Blender's own ``-t N`` does.
 
 Wrong usage (an unknown option, a value out of range) exits with 2 and argparse's message naming
 the option. On failure the exit code is 1 with a one-line reason (``DQSKIN_DEBUG=1`` adds the
@@ -38,6 +43,8 @@ from pathlib import Path
 
 import bpy
 
+from .. import dqskin
+from ..blender import nodes
 from ..dqskin import pc2
 from ..engine.context import dq_skin_modifiers
 from ..model.methods import BY_NAME
@@ -53,6 +60,7 @@ METHODS = ("AUTO", *BY_NAME)  # the operators' method values (`dqskin.Method` na
 PICTURE_SIZE = (4, 65536)
 SAMPLES = (1, 16777216)
 FRAMES = (-1048574, 1048574)
+THREADS = 1024  # Blender's own limit for -t (BLENDER_MAX_THREADS)
 
 
 class Failure(Exception):
@@ -99,7 +107,7 @@ def _temporary(path: Path) -> Path:
 def _load(path: str) -> None:
     p = Path(path)
     if not p.is_file():
-        raise Failure(f"{path}: no such file")
+        raise Failure(f"{path}: {'not a file' if p.exists() else 'no such file'}")
     ext = p.suffix.lower()
     if ext not in (".blend", ".glb", ".gltf", ".fbx"):
         raise Failure(f"{path}: unsupported file type {ext} (use .blend, .glb, .gltf or .fbx)")
@@ -132,24 +140,136 @@ def _add_dq_skin(obj, method: str) -> None:
         bpy.ops.object.dq_skin_add(method=method)
 
 
+def _mesh(path: str, name: str):
+    obj = bpy.data.objects.get(name)
+    if obj is None:
+        raise Failure(f"{path}: no mesh object named {name!r}")
+    if obj.type != "MESH":
+        kind = obj.type.lower().replace("_", " ")
+        raise Failure(f"{path}: {name!r} is {'an' if kind[0] in 'aeiou' else 'a'} {kind} object, not a mesh")
+    return obj
+
+
+def _check_rigged(obj) -> None:
+    """A Failure naming what the object lacks for DQ Skin to deform it."""
+    mods = dq_skin_modifiers(obj)
+    if mods:
+        if nodes.get(mods[0], "Armature") is None:
+            raise Failure(f"{obj.name}: its DQ Skin modifier has no armature")
+        return
+    armatures = [m for m in obj.modifiers if m.type == "ARMATURE"]
+    if not armatures:
+        raise Failure(f"{obj.name} has neither a DQ Skin nor an Armature modifier")
+    if armatures[0].object is None or armatures[0].object.type != "ARMATURE":
+        raise Failure(f"{obj.name}: its Armature modifier {armatures[0].name!r} has no armature object")
+
+
+# Characters no file name may hold on some system: an object's name becomes `_` for each.
+_UNSAFE = re.compile(r'[\\/:*?"<>|\x00-\x1f]')
+OBJECT_FIELD = "{object}"
+
+
+def _file_name(name: str) -> str:
+    return _UNSAFE.sub("_", name)
+
+
+def _is_pattern_or_folder(out: str) -> bool:
+    return OBJECT_FIELD in out or out.endswith(("/", os.sep)) or Path(out).is_dir()
+
+
+def _outputs(args, objects) -> list[Path]:
+    """Each object's cache: `--out` with `{object}` replaced by its name, or FOLDER/NAME.pc2, or
+    (one object) `--out` itself. Two objects never share a file, and no cache is the input."""
+    if OBJECT_FIELD in args.out:
+        outs = [Path(args.out.replace(OBJECT_FIELD, _file_name(o.name))).resolve() for o in objects]
+    elif _is_pattern_or_folder(args.out):
+        outs = [(Path(args.out) / f"{_file_name(o.name)}.pc2").resolve() for o in objects]
+    else:
+        outs = [Path(args.out).resolve()]
+    seen: dict[Path, str] = {}
+    for obj, out in zip(objects, outs, strict=True):
+        if out in seen:
+            raise Failure(f"{seen[out]!r} and {obj.name!r} would both be baked to {out}: use {OBJECT_FIELD} in --out")
+        if out.exists() and out.samefile(args.file):
+            raise Failure(f"{out}: that is the input file; a cache needs a file of its own")
+        if out.is_dir():
+            raise Failure(f"{out}: is a folder (end --out with / to bake into a folder)")
+        seen[out] = obj.name
+    return outs
+
+
 def cmd_bake(args) -> str:
     _load(args.file)
-    obj = bpy.data.objects.get(args.object)
-    if obj is None or obj.type != "MESH":
-        raise Failure(f"{args.file}: no mesh object named {args.object!r}")
-    if not dq_skin_modifiers(obj):
-        if not any(m.type == "ARMATURE" for m in obj.modifiers):
-            raise Failure(f"{obj.name} has neither a DQ Skin nor an Armature modifier")
-        _add_dq_skin(obj, args.method)
-    start, end = _frames(args.frames, bpy.context.scene)
-    out = Path(args.out).resolve()
+    objects = [_mesh(args.file, name) for name in dict.fromkeys(args.object)]
+    for obj in objects:
+        _check_rigged(obj)
+    outs = _outputs(args, objects)
+    scene = bpy.context.scene
+    start, end = _frames(args.frames, scene)
+    # One object: written in place (a temporary renamed at its end, as every output). Several:
+    # each staged in its output's temporary, all renamed once every one is baked.
+    temporaries = [_staging(out) for out in outs] if len(outs) > 1 else outs
     try:
-        with deferred():
-            bake.bake(bpy.context, obj, out, start, end, check=check)
-    except (RuntimeError, ValueError, OSError) as e:
-        raise Failure(_last_line(e)) from None
-    bake.add_cache_modifier(obj, out, start)
-    return f"baked {obj.name} frames {start}-{end} to {args.out}"
+        for obj, tmp, out in zip(objects, temporaries, outs, strict=True):
+            check()
+            try:
+                with deferred():
+                    _dq_skin_with_method(obj, args.method)
+            except (RuntimeError, ValueError) as e:
+                raise Failure(f"{obj.name}: DQ Skin cannot be added ({_last_line(e)})") from None
+            try:
+                with deferred():
+                    bake.bake(bpy.context, obj, tmp, start, end, check=check)  # every DQ Skin modifier
+            except OSError as e:
+                raise Failure(f"{out}: cannot be written ({e.strerror or _last_line(e)})") from None
+            except (RuntimeError, ValueError) as e:
+                raise Failure(f"{obj.name}: {_last_line(e)}") from None
+        check()
+        if len(outs) > 1:
+            for tmp, out in zip(temporaries, outs, strict=True):
+                try:
+                    os.replace(tmp, out)
+                except OSError as e:
+                    raise Failure(f"{out}: cannot be written ({_last_line(e)})") from None
+    finally:
+        if len(outs) > 1:
+            for tmp in temporaries:
+                if tmp.exists():
+                    tmp.unlink()
+    threads = dqskin.get_num_threads()
+    where = args.out if len(objects) == 1 and not _is_pattern_or_folder(args.out) else ", ".join(map(str, outs))
+    return f"baked {', '.join(o.name for o in objects)} frames {start}-{end} to {where} ({threads} thread{'s' if threads > 1 else ''})"
+
+
+def _staging(out: Path) -> Path:
+    """Where one of several caches is baked before it is renamed to `out`: its temporary path,
+    which the bake writes through a temporary of its own (``..NAME.dqskin-PID.tmp.dqskin-PID.tmp``).
+    Both kinds left by processes that no longer run (SIGKILL) are removed first."""
+    stale = re.compile(rf"\.\.{re.escape(out.name)}\.dqskin-\d+\.tmp\.dqskin-(\d+)\.tmp")
+    try:
+        entries = list(out.parent.iterdir())
+    except OSError:
+        entries = []
+    for p in entries:
+        m = stale.fullmatch(p.name)
+        if m and not pc2._alive(int(m[1])):
+            p.unlink(missing_ok=True)
+    return _temporary(out)
+
+
+def _dq_skin_with_method(obj, method: str):
+    """The object's first DQ Skin modifier, added from its Armature modifier if it has none, set
+    to `method` (AUTO: as it is, or from the Armature modifier's Preserve Volume) in the loaded
+    file only: the batch commands never save the file they read."""
+    if not dq_skin_modifiers(obj):
+        _add_dq_skin(obj, method)
+        return dq_skin_modifiers(obj)[0]
+    mod = dq_skin_modifiers(obj)[0]
+    if method != "AUTO" and nodes.get_method(mod) != BY_NAME[method].label:
+        if not nodes.put_method(mod, BY_NAME[method].label):
+            raise RuntimeError(f"its DQ Skin modifier cannot be set to {BY_NAME[method].label}")
+        bpy.context.view_layer.update()
+    return mod
 
 
 def cmd_apply(args) -> str:
@@ -157,11 +277,16 @@ def cmd_apply(args) -> str:
     objects = _skinned()
     if not objects:
         raise Failure(f"{args.file}: no object has an Armature modifier")
+    for obj in objects:
+        _check_rigged(obj)
     with Progress(bpy.context, len(objects) + 1, f"Adding DQ Skin to {len(objects)} object(s)") as progress:
         for obj in objects:
             check()
-            with deferred():
-                _add_dq_skin(obj, args.method)
+            try:
+                with deferred():
+                    _add_dq_skin(obj, args.method)
+            except (RuntimeError, ValueError) as e:
+                raise Failure(f"{obj.name}: DQ Skin cannot be added ({_last_line(e)})") from None
             progress.step()
         _save(Path(args.out).resolve())
         progress.step()
@@ -260,28 +385,48 @@ def cmd_compare(args) -> str:
 def parser(prog: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     p.add_argument("--user-resources", help=f"Blender user folder with DQ Skin installed (sets BLENDER_USER_RESOURCES; `{LAUNCHER}` only)")
+    p.add_argument(
+        "--threads",
+        type=_whole_number(1, THREADS),
+        metavar="N",
+        help="threads of DQ Skin's pool (default: Blender's -t N, else DQSKIN_NUM_THREADS, else one per core)",
+    )
     sub = p.add_subparsers(dest="command", required=True)
+    # --threads after the command too (there it does not reset a value given before it).
+    threads_after = argparse.ArgumentParser(add_help=False)
+    threads_after.add_argument(
+        "--threads", type=_whole_number(1, THREADS), metavar="N", default=argparse.SUPPRESS, help="as before the command"
+    )
     frames = {"type": _frame_range, "metavar": "A-B", "help": "first and last frame (default: the scene's)"}
-    b = sub.add_parser("bake", help="bake DQ Skin to a PC2 cache")
+    b = sub.add_parser("bake", parents=[threads_after], help="bake DQ Skin to a PC2 cache")
     b.add_argument("file")
-    b.add_argument("--object", required=True)
+    b.add_argument(
+        "--object",
+        required=True,
+        action="append",
+        metavar="NAME",
+        help="the mesh to bake; repeat it for several (then --out is a FOLDER/ or has {object} in it)",
+    )
     b.add_argument("--frames", **frames)
     b.add_argument("--method", choices=METHODS, default="AUTO")
-    b.add_argument("--out", required=True)
+    b.add_argument("--out", required=True, help="FILE.pc2, FOLDER/ (one NAME.pc2 per object) or a pattern with {object}")
     b.set_defaults(run=cmd_bake)
-    a = sub.add_parser("apply", help="replace Armature modifiers with DQ Skin and save")
+    p.bake_parser = b
+    a = sub.add_parser("apply", parents=[threads_after], help="replace Armature modifiers with DQ Skin and save")
     a.add_argument("file")
     a.add_argument("--method", choices=METHODS, default="AUTO")
     a.add_argument("--out", required=True)
     a.set_defaults(run=cmd_apply)
-    m = sub.add_parser("merge", help="join PC2 chunks")
+    m = sub.add_parser("merge", parents=[threads_after], help="join PC2 chunks")
     m.add_argument("out")
     m.add_argument("inputs", nargs="+")
     m.set_defaults(run=cmd_merge)
-    f = sub.add_parser("preflight", help="name the objects that would render differently without the extension (exit code 3)")
+    f = sub.add_parser(
+        "preflight", parents=[threads_after], help="name the objects that would render differently without the extension (exit code 3)"
+    )
     f.add_argument("file")
     f.set_defaults(run=cmd_preflight)
-    c = sub.add_parser("compare", help="a comparison scene, its report and a render")
+    c = sub.add_parser("compare", parents=[threads_after], help="a comparison scene, its report and a render")
     c.add_argument("file", nargs="?", help="a rigged file (default: the built-in test rigs)")
     c.add_argument("--frames", **frames)
     c.add_argument("--out", default="out")
@@ -294,12 +439,36 @@ def parser(prog: str) -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str], prog: str, launched: bool = False) -> int:
+def _use_blender_threads(threads: int) -> None:
+    """Blender's `-t N` for DQ Skin's pool too, at most DQ Skin's own limit (4 per core, at
+    least 16); if the system refuses, the pool keeps its default size."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # macOS and Windows have no sched_getaffinity
+        cores = os.cpu_count() or 1
+    try:
+        dqskin.set_num_threads(min(threads, max(16, min(1024, 4 * cores))))
+    except ValueError:
+        pass
+
+
+def main(argv: list[str], prog: str, launched: bool = False, threads: int | None = None) -> int:
     """Runs one command; returns its exit code. `launched`: from `python -m dqskin.blender`, which
-    has applied `--user-resources` before importing bpy (inside Blender it cannot be changed)."""
+    has applied `--user-resources` before importing bpy (inside Blender it cannot be changed).
+    `threads`: Blender's own `-t N` (`--threads N` of the command line goes first)."""
     interrupts.watch()
     try:
-        args = parser(prog).parse_args(argv)
+        p = parser(prog)
+        args = p.parse_args(argv)
+        if args.command == "bake" and len(set(args.object)) > 1 and not _is_pattern_or_folder(args.out):
+            p.bake_parser.error(f"argument --out: several objects need a folder (ending with /) or a pattern with {OBJECT_FIELD}")
+        if args.threads:
+            try:
+                dqskin.set_num_threads(args.threads)
+            except ValueError as e:
+                p.error(f"argument --threads: {e}")
+        elif threads:
+            _use_blender_threads(threads)
     except SystemExit as e:  # --help, or a usage error (printed): argparse's own exit code
         return int(e.code or 0)
     try:

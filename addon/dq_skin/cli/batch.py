@@ -51,7 +51,8 @@ from ..model.methods import BY_NAME
 from ..ops import bake
 from ..progress import Progress
 from ..tools import compare
-from . import interrupts, preflight
+from . import interrupts, outputs, preflight
+from .errors import Failure
 from .interrupts import check, deferred
 
 LAUNCHER = "python -m dqskin.blender"
@@ -61,10 +62,6 @@ PICTURE_SIZE = (4, 65536)
 SAMPLES = (1, 16777216)
 FRAMES = (-1048574, 1048574)
 THREADS = 1024  # Blender's own limit for -t (BLENDER_MAX_THREADS)
-
-
-class Failure(Exception):
-    """A one-line reason to stop with a non-zero exit code."""
 
 
 def _whole_number(low: int, high: int):
@@ -97,11 +94,6 @@ def _frame_range(text: str) -> tuple[int, int]:
 
 def _frames(chosen: tuple[int, int] | None, scene) -> tuple[int, int]:
     return chosen if chosen else (scene.frame_start, scene.frame_end)
-
-
-def _temporary(path: Path) -> Path:
-    pc2.remove_stale_temporaries(path)
-    return pc2.temporary_path(path)
 
 
 def _load(path: str) -> None:
@@ -164,51 +156,17 @@ def _check_rigged(obj) -> None:
         raise Failure(f"{obj.name}: its Armature modifier {armatures[0].name!r} has no armature object")
 
 
-# Characters no file name may hold on some system: an object's name becomes `_` for each.
-_UNSAFE = re.compile(r'[\\/:*?"<>|\x00-\x1f]')
-OBJECT_FIELD = "{object}"
-
-
-def _file_name(name: str) -> str:
-    return _UNSAFE.sub("_", name)
-
-
-def _is_pattern_or_folder(out: str) -> bool:
-    return OBJECT_FIELD in out or out.endswith(("/", os.sep)) or Path(out).is_dir()
-
-
-def _outputs(args, objects) -> list[Path]:
-    """Each object's cache: `--out` with `{object}` replaced by its name, or FOLDER/NAME.pc2, or
-    (one object) `--out` itself. Two objects never share a file, and no cache is the input."""
-    if OBJECT_FIELD in args.out:
-        outs = [Path(args.out.replace(OBJECT_FIELD, _file_name(o.name))).resolve() for o in objects]
-    elif _is_pattern_or_folder(args.out):
-        outs = [(Path(args.out) / f"{_file_name(o.name)}.pc2").resolve() for o in objects]
-    else:
-        outs = [Path(args.out).resolve()]
-    seen: dict[Path, str] = {}
-    for obj, out in zip(objects, outs, strict=True):
-        if out in seen:
-            raise Failure(f"{seen[out]!r} and {obj.name!r} would both be baked to {out}: use {OBJECT_FIELD} in --out")
-        if out.exists() and out.samefile(args.file):
-            raise Failure(f"{out}: that is the input file; a cache needs a file of its own")
-        if out.is_dir():
-            raise Failure(f"{out}: is a folder (end --out with / to bake into a folder)")
-        seen[out] = obj.name
-    return outs
-
-
 def cmd_bake(args) -> str:
     _load(args.file)
     objects = [_mesh(args.file, name) for name in dict.fromkeys(args.object)]
     for obj in objects:
         _check_rigged(obj)
-    outs = _outputs(args, objects)
+    outs = outputs.outputs(args, objects)
     scene = bpy.context.scene
     start, end = _frames(args.frames, scene)
     # One object: written in place (a temporary renamed at its end, as every output). Several:
     # each staged in its output's temporary, all renamed once every one is baked.
-    temporaries = [_staging(out) for out in outs] if len(outs) > 1 else outs
+    temporaries = [outputs.staging(out) for out in outs] if len(outs) > 1 else outs
     try:
         for obj, tmp, out in zip(objects, temporaries, outs, strict=True):
             check()
@@ -237,24 +195,8 @@ def cmd_bake(args) -> str:
                 if tmp.exists():
                     tmp.unlink()
     threads = dqskin.get_num_threads()
-    where = args.out if len(objects) == 1 and not _is_pattern_or_folder(args.out) else ", ".join(map(str, outs))
+    where = args.out if len(objects) == 1 and not outputs.is_pattern_or_folder(args.out) else ", ".join(map(str, outs))
     return f"baked {', '.join(o.name for o in objects)} frames {start}-{end} to {where} ({threads} thread{'s' if threads > 1 else ''})"
-
-
-def _staging(out: Path) -> Path:
-    """Where one of several caches is baked before it is renamed to `out`: its temporary path,
-    which the bake writes through a temporary of its own (``..NAME.dqskin-PID.tmp.dqskin-PID.tmp``).
-    Both kinds left by processes that no longer run (SIGKILL) are removed first."""
-    stale = re.compile(rf"\.\.{re.escape(out.name)}\.dqskin-\d+\.tmp\.dqskin-(\d+)\.tmp")
-    try:
-        entries = list(out.parent.iterdir())
-    except OSError:
-        entries = []
-    for p in entries:
-        m = stale.fullmatch(p.name)
-        if m and not pc2._alive(int(m[1])):
-            p.unlink(missing_ok=True)
-    return _temporary(out)
 
 
 def _dq_skin_with_method(obj, method: str):
@@ -296,7 +238,7 @@ def cmd_apply(args) -> str:
 def _save(out: Path) -> None:
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = _temporary(out)
+        tmp = outputs.temporary(out)
         try:
             check()
             with deferred():
@@ -361,7 +303,7 @@ def cmd_compare(args) -> str:
             ("deviation.png", f"distance from Armature Linear at frame {end}", compare.render_deviation, (bpy.context, scene, rows)),
         )
         for filename, caption, draw, first_args in views:
-            tmp = _temporary(out / filename).with_suffix(".png")
+            tmp = outputs.temporary(out / filename).with_suffix(".png")
             try:
                 check()
                 print(f"rendering {filename} ({args.samples} samples)", file=sys.stderr, flush=True)
@@ -460,8 +402,8 @@ def main(argv: list[str], prog: str, launched: bool = False, threads: int | None
     try:
         p = parser(prog)
         args = p.parse_args(argv)
-        if args.command == "bake" and len(set(args.object)) > 1 and not _is_pattern_or_folder(args.out):
-            p.bake_parser.error(f"argument --out: several objects need a folder (ending with /) or a pattern with {OBJECT_FIELD}")
+        if args.command == "bake" and len(set(args.object)) > 1 and not outputs.is_pattern_or_folder(args.out):
+            p.bake_parser.error(f"argument --out: several objects need a folder (ending with /) or a pattern with {outputs.OBJECT_FIELD}")
         if args.threads:
             try:
                 dqskin.set_num_threads(args.threads)

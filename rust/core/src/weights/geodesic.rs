@@ -265,7 +265,8 @@ pub(crate) fn nearest_bones(
     let mut current = 0usize;
     let mut batch: Vec<Label> = Vec::new();
     while current < buckets.len() {
-        std::mem::swap(&mut batch, &mut buckets[current]);
+        // Taken (not swapped): a settled bucket's memory is freed, not kept in its slot.
+        batch = std::mem::take(&mut buckets[current]);
         batch.sort_unstable_by(|a, b| a.dist.total_cmp(&b.dist).then(a.bone.cmp(&b.bone)).then(a.id.cmp(&b.id)));
         for &l in &batch {
             let id = l.id as usize;

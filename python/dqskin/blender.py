@@ -26,11 +26,24 @@ def installed_extension(bpy) -> str | None:
     """The module name of DQ Skin as installed in any extension repository of the user's
     preferences (user, studio or system repositories, local or remote), as Blender reads them at
     startup: the one enabled in the preferences first, else the first repository holding it."""
+    found = _extension_in_preferences(bpy)
+    if found is not None:
+        return found
+    # The bpy module starts from factory preferences (which know user_default and the system
+    # repositories): the user's own repositories are in their userpref.blend. Blender 4.2's bpy
+    # module crashes reading it (a segmentation fault in wm.read_userpref), so there DQ Skin is
+    # found in the repositories it starts with only.
+    userpref = Path(bpy.utils.resource_path("USER")) / "config" / "userpref.blend"
+    if userpref.is_file() and bpy.app.version >= (4, 3):
+        bpy.ops.wm.read_userpref()
+        return _extension_in_preferences(bpy)
+    return None
+
+
+def _extension_in_preferences(bpy) -> str | None:
+    """DQ Skin's module in the preferences as they are: enabled first, else installed."""
     import addon_utils
 
-    userpref = Path(bpy.utils.resource_path("USER")) / "config" / "userpref.blend"
-    if userpref.is_file():  # the bpy module starts from factory preferences: the user's repositories
-        bpy.ops.wm.read_userpref()
     enabled = [a.module for a in bpy.context.preferences.addons if a.module.startswith("bl_ext.") and a.module.endswith(f".{EXTENSION_ID}")]
     installed = [
         f"bl_ext.{repo.module}.{EXTENSION_ID}"

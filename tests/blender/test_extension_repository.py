@@ -13,8 +13,11 @@ import sys
 import tomllib
 from pathlib import Path
 
+import pytest
 import user_shell
 from conftest import ASSETS, ROOT
+
+import bpy
 
 DIST = ROOT / "dist"
 MANIFEST = ROOT / "addon" / "dq_skin" / "blender_manifest.toml"
@@ -82,11 +85,19 @@ def test_blender_installs_from_the_repository_and_upgrades_to_a_newer_version(tm
     # The upgraded extension is enabled and its command runs (the module its wheel installed).
     r = user_shell.run("blender --command dq_skin --help", tmp_path, user, shell)
     assert r.returncode == 0 and "bake DQ Skin to a PC2 cache" in r.stdout, r.stdout + r.stderr
-    # The launcher finds it there too: `bl_ext.studio.dq_skin`, not the user_default one.
+    # The launcher finds it there too: `bl_ext.studio.dq_skin`, not the user_default one (not on
+    # Blender 4.2, whose bpy module crashes reading the user's preferences: it says so instead).
     r = user_shell.run("python -m dqskin.blender --help", tmp_path, user, shell)
-    assert r.returncode == 0 and "bake DQ Skin to a PC2 cache" in r.stdout, r.stdout + r.stderr
+    if bpy.app.version >= (4, 3):
+        assert r.returncode == 0 and "bake DQ Skin to a PC2 cache" in r.stdout, r.stdout + r.stderr
+    else:
+        assert r.returncode == 1 and "not installed" in r.stderr, r.stdout + r.stderr
 
 
+@pytest.mark.skipif(
+    bpy.app.version < (4, 3),
+    reason="Blender 4.2's bpy module crashes in wm.read_userpref: the launcher finds DQ Skin in the repositories it starts with only",
+)
 def test_the_launcher_runs_dq_skin_installed_in_a_local_studio_repository(tmp_path):
     """A studio installs the zip into a repository of its own (not user_default): the launcher
     `python -m dqskin.blender` enables it from there, as Blender does."""

@@ -263,10 +263,9 @@ pub(crate) fn nearest_bones(
     let total = n * k;
     let mut settled = 0usize;
     let mut current = 0usize;
-    let mut batch: Vec<Label> = Vec::new();
     while current < buckets.len() {
         // Taken (not swapped): a settled bucket's memory is freed, not kept in its slot.
-        batch = std::mem::take(&mut buckets[current]);
+        let mut batch = std::mem::take(&mut buckets[current]);
         batch.sort_unstable_by(|a, b| a.dist.total_cmp(&b.dist).then(a.bone.cmp(&b.bone)).then(a.id.cmp(&b.id)));
         for &l in &batch {
             let id = l.id as usize;
@@ -289,7 +288,6 @@ pub(crate) fn nearest_bones(
                 push(&mut buckets, Label { dist: l.dist + length, id: next, bone: l.bone });
             }
         }
-        batch.clear();
         current += 1;
         if current.is_multiple_of(32) && !progress(settled, total) {
             return Err(WeightsError::Cancelled);

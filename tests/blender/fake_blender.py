@@ -68,8 +68,16 @@ def main(argv: list[str]) -> int:
         return 2
     name, args = argv[1], argv[2:]
     if not factory and os.path.isfile(os.path.join(bpy.utils.resource_path("USER"), "config", "userpref.blend")):
-        bpy.ops.wm.read_userpref()
-        addon_utils.reset_all()
+        if bpy.app.version >= (4, 3):
+            bpy.ops.wm.read_userpref()
+            addon_utils.reset_all()
+        else:
+            # Blender 4.2's bpy module crashes in wm.read_userpref: the extensions installed in
+            # User Default are enabled instead (what installing them there did); repositories
+            # added by the user are not known (the tests that need them skip on 4.2).
+            for mod in addon_utils.modules(refresh=True):
+                if mod.__name__.startswith("bl_ext.user_default."):
+                    addon_utils.enable(mod.__name__, default_set=True)
     if online:
         bpy.context.preferences.system.use_online_access = True
     if argv[0] in ("-P", "--python"):

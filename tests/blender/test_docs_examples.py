@@ -36,6 +36,10 @@ def blocks(language: str) -> list[tuple[str, int, str]]:
     return found
 
 
+# The examples run through the fake `blender` (fake_blender.py), which needs the user's
+# preferences: Blender 4.2's bpy module crashes reading them, and crashes again as a command ends.
+pytestmark = pytest.mark.skipif(bpy.app.version < (4, 3), reason="Blender 4.2's bpy module cannot run the fake blender")
+
 SHELL_EXAMPLES = [b for b in blocks("sh") if RUNS.search(b[2])]
 SCRIPT_EXAMPLES = [b for b in blocks("python") if "import bpy" in b[2]]
 

@@ -125,8 +125,9 @@ def test_the_apply_command_writes_clean_files(dq_skin, tmp_path):
 # -- copied modifiers -------------------------------------------------------------------------
 
 
-def two_characters(assets):
-    """Two CesiumMen, each with its own armature playing the walk at its own pace."""
+def two_characters(assets, keep_armature_modifier: bool = False):
+    """Two CesiumMen, each with its own armature playing the walk at its own pace; the second
+    without modifiers, or with its own Armature modifier (on its own armature)."""
     a, a_mod = import_character(assets / "CesiumMan.glb")
     a_arm = a_mod.object
     b = a.copy()
@@ -141,7 +142,10 @@ def two_characters(assets):
     for fc in getattr(b_arm.animation_data.action, "fcurves", []):
         for k in fc.keyframe_points:
             k.co.x *= 0.7
-    b.modifiers.clear()
+    if keep_armature_modifier:
+        next(m for m in b.modifiers if m.type == "ARMATURE").object = b_arm
+    else:
+        b.modifiers.clear()
     return a, b, a_arm, b_arm
 
 
@@ -205,21 +209,7 @@ def test_dq_skin_alone_copied_to_a_character_with_its_own_armature_modifier(dq_s
     modifier (its own armature) and gets a DQ Skin after it. The source stays exactly as it was,
     and the copy never shows the source's result (it once shared the source's result: the other
     character then showed the source's pose)."""
-    a, a_mod = import_character(assets / "CesiumMan.glb")
-    a_arm = a_mod.object
-    b = a.copy()
-    b.data = a.data.copy()
-    bpy.context.scene.collection.objects.link(b)
-    b_arm = a_arm.copy()
-    b_arm.data = a_arm.data.copy()
-    bpy.context.scene.collection.objects.link(b_arm)
-    b_arm.location.x += 1.5
-    b.parent = b_arm
-    b.modifiers[a_mod.name].object = b_arm
-    b_arm.animation_data.action = a_arm.animation_data.action.copy()
-    for fc in getattr(b_arm.animation_data.action, "fcurves", []):
-        for k in fc.keyframe_points:
-            k.co.x *= 0.7
+    a, b, _, _ = two_characters(assets, keep_armature_modifier=True)
     mod = add_dq_skin(a, method)
     reference = twin(a, share_mesh=False) if method == "DUAL_QUATERNION" else None
     bpy.context.scene.frame_set(5)

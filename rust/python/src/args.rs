@@ -117,3 +117,20 @@ pub fn or<'py, T>(
         _ => Ok(default),
     }
 }
+
+/// An optional ``progress(done, total)`` callback: None for an absent or None argument, else the
+/// callable (anything else is a TypeError naming it).
+pub fn progress_callback(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Option<Py<PyAny>>> {
+    match obj {
+        Some(p) if !p.is_none() => {
+            if !p.is_callable() {
+                let ty = p.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+                return Err(PyTypeError::new_err(format!(
+                    "progress must be callable as progress(done, total), got {ty}"
+                )));
+            }
+            Ok(Some(p.clone().unbind()))
+        }
+        _ => Ok(None),
+    }
+}

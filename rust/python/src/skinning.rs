@@ -350,18 +350,7 @@ fn centers_of_rotation<'py>(
             Some(p) if !p.is_none() => Some(previous_centers(p, points)?),
             _ => None,
         };
-        let callback = match progress {
-            Some(p) if !p.is_none() => {
-                if !p.is_callable() {
-                    let ty = p.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-                    return Err(PyTypeError::new_err(format!(
-                        "progress must be callable as progress(done, total), got {ty}"
-                    )));
-                }
-                Some(p.clone().unbind())
-            }
-            _ => None,
-        };
+        let callback = crate::args::progress_callback(progress)?;
         // Between parts of the work the GIL is taken back: Ctrl-C, then the callback; between
         // the stages of the setup (before the callback's total is known), Ctrl-C only.
         let stopped: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);

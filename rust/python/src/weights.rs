@@ -27,18 +27,7 @@ fn with_progress<T: Send>(
     what: &str,
     work: impl FnOnce(&mut dyn FnMut(usize, usize) -> bool) -> Result<T, WeightsError> + Send,
 ) -> PyResult<T> {
-    let callback = match callback {
-        Some(p) if !p.is_none() => {
-            if !p.is_callable() {
-                let ty = p.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-                return Err(PyTypeError::new_err(format!(
-                    "progress must be callable as progress(done, total), got {ty}"
-                )));
-            }
-            Some(p.clone().unbind())
-        }
-        _ => None,
-    };
+    let callback = crate::args::progress_callback(callback)?;
     let stopped: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
     let stop = |e: PyErr| {
         *stopped.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);

@@ -24,7 +24,7 @@ from ..blender.nodes import GROUP_TAG
 from ..model.state import ResultMode, RouteKind
 from . import pointcache
 from .base import Target
-from .feed import PATH
+from .feed import drive_carrier
 from .result_route import set_mode
 
 NAME = "DQ Skin positions"
@@ -171,18 +171,7 @@ class CacheRoute:
 
 def _drive(obj, carrier, feed) -> None:
     """The carrier's Factor driven by the feed's property (always 1: the driver orders it)."""
-    fc = obj.animation_data.drivers.find(f'modifiers["{carrier.name}"].factor') if obj.animation_data else None
-    if fc is None:
-        fc = carrier.driver_add("factor")
-        driver = fc.driver
-        driver.type = "SCRIPTED"
-        v = driver.variables.new()
-        v.name, v.type = "go", "SINGLE_PROP"
-        driver.expression = "go"
-    v = fc.driver.variables[0]
-    if v.targets[0].id != feed:
-        v.targets[0].id = feed
-        v.targets[0].data_path = PATH
+    drive_carrier(obj, carrier, "factor", "go", feed)
 
 
 def _undrive(obj, carrier) -> None:

@@ -216,6 +216,24 @@ def _alive(datablock) -> bool:
         return False
 
 
+def drive_carrier(owner, carrier, prop: str, expression: str, feed) -> None:
+    """`carrier.prop` on `owner` driven by the feed's property through `expression` (a value that
+    leaves the carrier as it is): the driver orders the carrier after the feed."""
+    path = f'modifiers["{carrier.name}"].{prop}'
+    fc = owner.animation_data.drivers.find(path) if owner.animation_data else None
+    if fc is None:
+        fc = carrier.driver_add(prop)
+        driver = fc.driver
+        driver.type = "SCRIPTED"
+        v = driver.variables.new()
+        v.name, v.type = "go", "SINGLE_PROP"
+        driver.expression = expression
+    v = fc.driver.variables[0]
+    if v.targets[0].id != feed:
+        v.targets[0].id = feed
+        v.targets[0].data_path = PATH
+
+
 def order_after_inputs(driver, members) -> int:
     """Variables that make Blender evaluate `driver` after every input of `members`: their
     armatures' bound bones (`order_after_bones`), their objects' and armatures' transforms, and

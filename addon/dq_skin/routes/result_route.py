@@ -19,7 +19,7 @@ from ..blender import nodes
 from ..model.state import ResultMode, RouteKind
 from . import results
 from .base import Target
-from .feed import PATH
+from .feed import drive_carrier
 
 
 class MeshSource:
@@ -146,15 +146,4 @@ class ResultRoute:
 
 def _drive(result, carrier, feed) -> None:
     """The carrier's angle driven by the feed's property (always 0: the driver orders it)."""
-    fc = result.animation_data.drivers.find(f'modifiers["{carrier.name}"].angle') if result.animation_data else None
-    if fc is None:
-        fc = carrier.driver_add("angle")
-        driver = fc.driver
-        driver.type = "SCRIPTED"
-        v = driver.variables.new()
-        v.name, v.type = "go", "SINGLE_PROP"
-        driver.expression = "0 * go"
-    v = fc.driver.variables[0]
-    if v.targets[0].id != feed:
-        v.targets[0].id = feed
-        v.targets[0].data_path = PATH
+    drive_carrier(result, carrier, "angle", "0 * go", feed)

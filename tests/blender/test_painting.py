@@ -86,9 +86,12 @@ def _subdivided_character(assets, levels: int):
 
 
 @pytest.mark.parametrize("levels", [0, 2])
-def test_centers_follow_each_stroke(dq_skin, assets, monkeypatch, levels):
+def test_centers_follow_each_stroke(dq_skin, assets, monkeypatch, tmp_path, levels):
     """In Weight Paint with Optimized Centers each stroke updates the centers (levels 2: about
     52,000 vertices; the time the update takes is in the benchmark)."""
+    # A disk cache of its own: the user folder's may hold this very stroke's centers already.
+    monkeypatch.setattr(dq_skin.engine.centers, "_folder", lambda: tmp_path)
+    dq_skin.SESSION.centers.forget_memory()
     body = _subdivided_character(assets, levels) if levels else import_character(assets / "CesiumMan.glb")[0]
     add_dq_skin(body, "CENTERS_OF_ROTATION")
     bpy.context.scene.frame_set(17)
@@ -123,5 +126,43 @@ def test_centers_follow_each_stroke(dq_skin, assets, monkeypatch, levels):
         assert np.array_equal(got, full)
         assert np.abs(got - before).max() > 1e-4  # the stroke moved centers
         assert deviation(evaluated_positions(body), shown) > 1e-6  # and what shows
+    finally:
+        bpy.ops.object.mode_set(mode="OBJECT")
+
+
+def test_centers_found_on_disk_follow_strokes_too(dq_skin, assets, tmp_path, monkeypatch):
+    """Open a file in a new session (the centers come from the disk cache, not computed here),
+    then paint: the first stroke updates those centers, it does not compute them anew."""
+    # A disk cache of its own: the user folder's may hold this very stroke's centers already.
+    (tmp_path / "centers").mkdir()
+    monkeypatch.setattr(dq_skin.engine.centers, "_folder", lambda: tmp_path / "centers")
+    dq_skin.SESSION.centers.forget_memory()  # (earlier tests computed these very centers)
+    body = import_character(assets / "CesiumMan.glb")[0]
+    add_dq_skin(body, "CENTERS_OF_ROTATION")
+    bpy.context.scene.frame_set(17)
+    assert list((tmp_path / "centers").iterdir()), "the centers were not kept on disk"
+    name, path = body.name, tmp_path / "painted.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    dq_skin.SESSION.centers.forget_memory()  # as in a new Blender session: only the disk has them
+    body = bpy.data.objects[name]
+    bpy.context.scene.frame_set(17)
+    assert status(dq_skin, body).live
+    store = dq_skin.SESSION.centers
+    updates = []
+    real = store.compute
+
+    def compute(*args, **kwargs):
+        updates.append(kwargs.get("previous") is not None)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(store, "compute", compute)
+    bpy.context.view_layer.objects.active = body
+    bpy.ops.object.mode_set(mode="WEIGHT_PAINT")
+    try:
+        group = max(body.vertex_groups, key=lambda g: (group_weights(body, g.name) > 0.5).sum())
+        stroke(body, group, under_brush(body, 0.15, int(np.argmax(group_weights(body, group.name)))), 1.0)
+        assert status(dq_skin, body).live
+        assert updates == [True], updates
     finally:
         bpy.ops.object.mode_set(mode="OBJECT")

@@ -90,6 +90,9 @@ def centers_of(obj, st: ModifierState, data: MeshData, influences, ctx: Context)
     key = centers.key_of(data.positions, triangles, influences)
     got = store.lookup(key, data.vertex_count)
     if got is not None:
+        # Found (this session, or on disk from an earlier one): the next weight change updates
+        # from these, as from centers computed here.
+        store.remember_latest(centers.geometry_of(data.positions, triangles), influences, got)
         if cache.centers_pending:
             st.output.invalidate()  # the updated centers replace the last ones: skin again
         cache.centers, cache.centers_of, cache.centers_pending = got, influences, ""

@@ -196,7 +196,7 @@ class Centers:
         self._latest.clear()
 
     def latest(self, geometry: str) -> tuple | None:
-        """`(influences, centers)` computed last for this geometry in this session, or None."""
+        """`(influences, centers)` computed or found last for this geometry in this session, or None."""
         return self._latest.get(geometry)
 
     def remember_latest(self, geometry: str, influences, centers: np.ndarray) -> None:

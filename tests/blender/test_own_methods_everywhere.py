@@ -242,6 +242,10 @@ def test_a_soft_body_simulates_the_method(dq_skin, assets, tmp_path, method, rig
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", OWN_METHODS)
 def test_particle_hair_and_emitted_particles(dq_skin, assets, tmp_path, method, rig):
+    if method == "BLEND" and bpy.app.version[:2] == (4, 3):
+        # Found by test-blenders on 2026-12-03, not yet understood (4.2, 4.4 and later agree):
+        # docs/compatibility.md, Limits.
+        pytest.xfail("Blender 4.3: hair on a Blend character is 2.5 % of its size from the baked result")
     s = Scene(dq_skin, assets, tmp_path, method, rig)
     for obj in s.all:
         obj.modifiers.new("Hair", "PARTICLE_SYSTEM")

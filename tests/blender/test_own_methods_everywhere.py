@@ -239,13 +239,15 @@ def test_a_soft_body_simulates_the_method(dq_skin, assets, tmp_path, method, rig
     assert moves((1, 12), s.body) > 0.01
 
 
+# Found by test-blenders on 2026-12-03, not yet understood (4.2, 4.4 and later agree): on 4.3 the
+# first hair scene of a session grows its hair 2.4-2.5 % of the size away from the baked copy's,
+# whichever method it has; the later ones agree (docs/compatibility.md, known defects).
+@pytest.mark.xfail(
+    bpy.app.version[:2] == (4, 3), reason="Blender 4.3: the first hair scene of a session differs from its bake", strict=False
+)
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", OWN_METHODS)
 def test_particle_hair_and_emitted_particles(dq_skin, assets, tmp_path, method, rig):
-    if method == "BLEND" and bpy.app.version[:2] == (4, 3):
-        # Found by test-blenders on 2026-12-03, not yet understood (4.2, 4.4 and later agree):
-        # docs/compatibility.md, Limits.
-        pytest.xfail("Blender 4.3: hair on a Blend character is 2.5 % of its size from the baked result")
     s = Scene(dq_skin, assets, tmp_path, method, rig)
     for obj in s.all:
         obj.modifiers.new("Hair", "PARTICLE_SYSTEM")

@@ -71,6 +71,20 @@ def test_paint_blend_shows_the_blend_while_painting(dq_skin, assets, rig):
         bpy.ops.object.mode_set(mode="OBJECT")
 
 
+def computations(store, monkeypatch) -> list[bool]:
+    """Each centers computation from now on, as whether it updated the last centers (True) or
+    computed them anew (False)."""
+    updates = []
+    real = store.compute
+
+    def compute(*args, **kwargs):
+        updates.append(kwargs.get("previous") is not None)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(store, "compute", compute)
+    return updates
+
+
 def _subdivided_character(assets, levels: int):
     """CesiumMan subdivided at rest (the weights interpolated, as Blender subdivides them)."""
     body, arm_mod = import_character(assets / "CesiumMan.glb")
@@ -96,14 +110,7 @@ def test_centers_follow_each_stroke(dq_skin, assets, monkeypatch, tmp_path, leve
     add_dq_skin(body, "CENTERS_OF_ROTATION")
     bpy.context.scene.frame_set(17)
     store = dq_skin.SESSION.centers
-    updates = []
-    real = store.compute
-
-    def compute(*args, **kwargs):
-        updates.append(kwargs.get("previous") is not None)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(store, "compute", compute)
+    updates = computations(store, monkeypatch)
     bpy.context.view_layer.objects.active = body
     bpy.ops.object.mode_set(mode="WEIGHT_PAINT")
     try:
@@ -149,14 +156,7 @@ def test_centers_found_on_disk_follow_strokes_too(dq_skin, assets, tmp_path, mon
     bpy.context.scene.frame_set(17)
     assert status(dq_skin, body).live
     store = dq_skin.SESSION.centers
-    updates = []
-    real = store.compute
-
-    def compute(*args, **kwargs):
-        updates.append(kwargs.get("previous") is not None)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(store, "compute", compute)
+    updates = computations(store, monkeypatch)
     bpy.context.view_layer.objects.active = body
     bpy.ops.object.mode_set(mode="WEIGHT_PAINT")
     try:

@@ -21,6 +21,7 @@
 
 mod automatic;
 mod closest;
+mod envelope;
 mod falloff;
 mod geodesic;
 mod laplacian;

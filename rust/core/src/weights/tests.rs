@@ -2,6 +2,7 @@ use glam::Vec3;
 use proptest::prelude::*;
 
 use super::closest::{closest_on_triangle, Bvh};
+use super::envelope::Envelope;
 use super::laplacian::Csr;
 use super::solve::conjugate_gradients;
 use super::voxels::{Grid, Solid};
@@ -390,4 +391,64 @@ fn a_huge_bone_costs_no_more_than_one_across_the_grid() {
     let w = run(&p, &t, &bones, &AutoOptions::default());
     check_valid(&w.influences, p.len(), 4);
     assert_eq!(w.outside_bones, vec![5]); // the first crosses the tube, the second misses it
+}
+
+/// A `w`×`h` grid's Laplacian plus `shift` times the identity (5-point stencil).
+fn grid_system(w: usize, h: usize, shift: f64) -> Csr {
+    let mut trip = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as u32;
+            trip.push((i, i, 4.0 + shift));
+            for (dx, dy) in [(1i64, 0i64), (0, 1)] {
+                let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                if nx < w as i64 && ny < h as i64 {
+                    let j = (ny as usize * w + nx as usize) as u32;
+                    trip.push((i, j, -1.0));
+                    trip.push((j, i, -1.0));
+                }
+            }
+        }
+    }
+    Csr::from_triplets(w * h, trip)
+}
+
+#[test]
+fn the_envelope_solve_is_exact_on_a_grid_system() {
+    let a = grid_system(37, 23, 0.01);
+    let (n, c) = (a.rows(), 3);
+    let b: Vec<f64> = (0..n * c).map(|i| (i as f64 * 0.731).sin()).collect();
+    let factor = Envelope::factor(&a, f64::INFINITY).expect("positive definite");
+    let mut x = vec![0.0; n * c];
+    factor.solve(&b, &mut x, c);
+    for i in 0..n {
+        for k in 0..c {
+            let ax: f64 = a.row(i).map(|(j, v)| v * x[j * c + k]).sum();
+            assert!((ax - b[i * c + k]).abs() < 1e-10, "row {i} column {k}: {ax} vs {}", b[i * c + k]);
+        }
+    }
+    // Conjugate gradients from there have nothing left to do.
+    assert_eq!(conjugate_gradients(&a, &b, &mut x, c, 1e-9, 100), 0);
+}
+
+#[test]
+fn the_envelope_solve_refuses_what_it_cannot_do() {
+    // Not positive definite (a shift below the Laplacian's smallest eigenvalue's negative).
+    assert!(Envelope::factor(&grid_system(10, 10, -1.0), f64::INFINITY).is_none());
+    // Beyond the budget: a 40×40 grid's envelope is about 40 wide.
+    assert!(Envelope::factor(&grid_system(40, 40, 0.1), 1000.0).is_none());
+    assert!(Envelope::factor(&grid_system(40, 40, 0.1), 1e7).is_some());
+}
+
+#[test]
+fn a_zero_right_hand_side_column_ends_with_the_others() {
+    // The solution of the zero column is zero; starting away from it, the solve stops once it
+    // is small against the other column's scale instead of running to the iteration limit.
+    let a = grid_system(20, 20, 0.0);
+    let (n, c) = (a.rows(), 2);
+    let b: Vec<f64> = (0..n * c).map(|i| if i % 2 == 0 { 1.0 } else { 0.0 }).collect();
+    let mut x: Vec<f64> = (0..n * c).map(|i| if i % 2 == 1 { 0.5 } else { 0.0 }).collect();
+    let its = conjugate_gradients(&a, &b, &mut x, c, 1e-8, 5000);
+    assert!(its < 1000, "{its} iterations");
+    assert!(x.iter().skip(1).step_by(2).all(|v| v.abs() < 1e-5));
 }

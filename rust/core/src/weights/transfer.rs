@@ -7,6 +7,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::closest::Bvh;
+use super::envelope::Envelope;
 use super::laplacian::{q_row, stiffness_and_mass, Csr};
 use super::mesh::{diagonal, parts, vertex_normals, Neighbours};
 use super::solve::conjugate_gradients;
@@ -26,6 +27,8 @@ pub const DEFAULT_MAX_ANGLE: f32 = 30.0;
 /// Residual of the inpainting solve relative to its right-hand side, per bone.
 const TOLERANCE: f64 = 1e-6;
 const MAX_ITERATIONS: usize = 5000;
+/// The most multiply-adds a direct solve of one group may take (about a tenth of a second).
+const DIRECT_BUDGET: f64 = 2e8;
 
 /// How weights are transferred.
 #[derive(Clone, Debug, PartialEq)]
@@ -384,6 +387,11 @@ fn inpaint(
                     }
                 }
                 let a = Csr::from_triplets(ids.len(), triplets);
+                // Directly where the envelope is cheap; conjugate gradients then only check the
+                // residual (or iterate, from the guess, where it is not).
+                if let Some(factor) = Envelope::factor(&a, DIRECT_BUDGET) {
+                    factor.solve(&rhs, &mut x, c);
+                }
                 let its = conjugate_gradients(&a, &rhs, &mut x, c, TOLERANCE, MAX_ITERATIONS);
                 let out = ids
                     .iter()

@@ -75,9 +75,9 @@ def prepare(version: str, minor: str, extras: list[str]) -> Path:
 
 
 FULL = ("4.2.23",)
-# The newest release also runs what changed there beyond the core files: the extension
-# repository and the launcher's install of it (bpy 5.2 installs differently), and the docs'
-# examples that use them.
+# The newest release also runs, beyond the core files, what depends on Blender's extension
+# system as it is there: installing from the extension repository, the launcher finding the
+# extension, and the docs' examples that do both.
 EXTRA = {"5.2.3": ("test_extension_repository.py", "test_docs_examples.py")}
 
 # What differs between releases and what these files exercise: the memory readers' struct layouts

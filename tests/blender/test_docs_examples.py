@@ -82,9 +82,6 @@ def test_every_command_line_example_runs_as_written(example, shot, tmp_path):
     page, index, code = example
     folder = workspace(tmp_path, shot)
     installs = "--command extension" in code
-    if installs and bpy.app.version >= (5, 2):
-        # As in test_extension_repository: bpy 5.2 cannot import the just-installed wheel's dqskin.
-        pytest.xfail("bpy 5.2: No module named 'dqskin' right after the install")
     user = user_shell.fresh_user_folder(tmp_path / "user") if installs else USER
     r = user_shell.run(code, folder, user, user_shell.bin_folder(tmp_path / "bin"))
     assert r.returncode == 0, f"{page}, shell example {index + 1}:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"

@@ -23,11 +23,6 @@ import bpy
 # fake `blender` cannot read them on Blender 4.2, whose bpy module crashes in wm.read_userpref.
 pytestmark = [
     pytest.mark.skipif(bpy.app.version < (4, 3), reason="Blender 4.2's bpy module crashes reading the user's preferences"),
-    # Found by test-blenders on 2026-12-03, not yet understood: with the bpy module of 5.2, the
-    # fake `blender` installs the extension's wheel but the same process cannot import `dqskin`
-    # when enabling it (Blender's own install-file; make setup's install, a process of its own,
-    # works). Not checked with a Blender 5.2 binary.
-    pytest.mark.xfail(bpy.app.version >= (5, 2), reason="bpy 5.2: No module named 'dqskin' right after the install", strict=False),
 ]
 
 DIST = ROOT / "dist"

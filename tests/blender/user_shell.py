@@ -42,6 +42,11 @@ def fresh_user_folder(folder: Path) -> Path:
     )
     r = subprocess.run([sys.executable, "-c", script], env=environment(folder, None), capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
+    # The wheels' folder exists before any command starts with it on PYTHONPATH: Python would
+    # otherwise remember at startup that the path holds nothing, and a wheel Blender installs
+    # there later in the same process would not be found (Blender adds the folder to sys.path
+    # itself only when it is not there yet).
+    site_packages(folder).mkdir(parents=True, exist_ok=True)
     return folder
 
 

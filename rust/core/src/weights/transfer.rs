@@ -27,7 +27,7 @@ pub const DEFAULT_MAX_ANGLE: f32 = 30.0;
 /// Residual of the inpainting solve relative to its right-hand side, per bone.
 const TOLERANCE: f64 = 1e-6;
 const MAX_ITERATIONS: usize = 5000;
-/// The most multiply-adds a direct solve of one group may take (about a tenth of a second).
+/// The most multiply-adds a direct solve of one group may take (a few tenths of a second).
 const DIRECT_BUDGET: f64 = 2e8;
 
 /// How weights are transferred.

@@ -38,7 +38,7 @@ mod cells;
 mod sums;
 mod update;
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use rayon::prelude::*;
 
@@ -215,8 +215,6 @@ pub(super) fn centers_counted_since(
     check()?;
     let classes = VertexClasses::new(&weights);
     check()?;
-    let index = PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance, &mut check)?;
-    let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
     // The classes to compute: every one, or those a weight change since `previous` reaches.
     let reach = previous.map(|p| Reach::new(triangles, &WeightVectors::new(p.influences), &weights));
     let todo: Vec<usize> = match &reach {
@@ -224,6 +222,12 @@ pub(super) fn centers_counted_since(
         Some(r) => (0..classes.members.len()).filter(|&c| r.reaches(&weights, classes.members[c].first)).collect(),
     };
     check()?;
+    // After a weight change only the lists of the pairs the recomputed classes read are built
+    // (each exactly as a full build makes it, so their centers are the same bit for bit).
+    let needed = reach.is_some().then(|| pairs_of(&weights, todo.iter().map(|&c| classes.members[c].first)));
+    let index =
+        PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance, needed.as_ref(), &mut check)?;
+    let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
 
     // Parts of roughly equal work, so progress advances evenly and cancelling is quick.
     let work: Vec<usize> =
@@ -291,6 +295,18 @@ pub(super) fn centers_counted_since(
     }
     let fast = class_centers.iter().filter(|c| c.1).count();
     Ok((Centers { centers, has_center }, fast))
+}
+
+/// The bone pairs `(j, k)`, `j < k`, of the weight vectors of `vertices`.
+fn pairs_of(weights: &WeightVectors, vertices: impl Iterator<Item = usize>) -> HashSet<(u32, u32)> {
+    let mut pairs = HashSet::new();
+    for v in vertices {
+        let a = weights.of(v);
+        for (x, &(j, _)) in a.iter().enumerate() {
+            pairs.extend(a[x + 1..].iter().map(|&(k, _)| (j, k)));
+        }
+    }
+    pairs
 }
 
 /// Every vertex's weights, repeated bones added up, normalized to sum 1, sorted by bone, zero
@@ -445,15 +461,17 @@ struct Entry {
 }
 
 impl PairIndex {
-    /// The index, or `check`'s error between its stages.
+    /// The index (of the pairs in `needed` only, if given), or `check`'s error between its stages.
     fn new(
         positions: &[[f32; 3]],
         triangles: &[[u32; 3]],
         weights: &WeightVectors,
         sigma: f64,
         tolerance: Option<f64>,
+        needed: Option<&HashSet<(u32, u32)>>,
         check: &mut dyn FnMut() -> Result<(), SkinError>,
     ) -> Result<Self, SkinError> {
+        let wanted = |j: u32, k: u32| needed.is_none_or(|n| n.contains(&(j, k)));
         let inv_sigma2 = 1.0 / (sigma * sigma);
         // Per triangle (in parallel): its weight vector, area and area × centroid.
         let each: Vec<(WeightKey, f64, [f64; 3])> = crate::pool::run(|| {
@@ -472,6 +490,13 @@ impl PairIndex {
                     }
                     add_up_repeated_bones(mean);
                     if mean.len() < 2 {
+                        return None;
+                    }
+                    // (A triangle of no wanted pair is in no list built: its whole weight
+                    // vector's group is left out, so the others' sums keep their order.)
+                    if needed.is_some()
+                        && !(0..mean.len()).any(|x| mean[x + 1..].iter().any(|e| wanted(mean[x].0, e.0)))
+                    {
                         return None;
                     }
                     let key: WeightKey = mean.iter().map(|&(bone, w)| (bone, (w / 3.0).to_bits())).collect();
@@ -508,6 +533,9 @@ impl PairIndex {
         for (key, (area, area_c)) in &merged {
             for (x, &(j, bj)) in key.iter().enumerate() {
                 for &(k, bk) in &key[x + 1..] {
+                    if !wanted(j, k) {
+                        continue;
+                    }
                     let (bj, bk) = (f64::from_bits(bj), f64::from_bits(bk));
                     let id = *ids.entry((j, k)).or_insert_with(|| {
                         lists.push(Vec::new());

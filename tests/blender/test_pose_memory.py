@@ -502,3 +502,71 @@ def test_the_readers_are_checked_against_blenders_data_on_their_first_read(dq_sk
     st = dq_skin.SESSION.status_of(obj, [m for m in obj.modifiers if m.type == "NODES"][0])
     assert st.live, st.message
     assert relative_deviation(evaluated_positions(obj), evaluated_positions(ref)) <= REL_TOL
+
+
+def _heap_bytes() -> int | None:
+    """Bytes in use on the C heap (glibc's `mallinfo2`), or None where it is not available."""
+    import ctypes
+    import ctypes.util
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return None
+
+    class MallInfo2(ctypes.Structure):
+        _fields_ = [
+            (n, ctypes.c_size_t)
+            for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")
+        ]
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.mallinfo2.restype = MallInfo2
+    except (OSError, AttributeError):
+        return None
+    info = libc.mallinfo2()
+    return info.uordblks + info.hblkhd
+
+
+def test_positions_read_from_memory_are_blenders_and_leave_copies_sharing(dq_skin):
+    """The positions reader gives exactly what the Python API gives, finds the `position` layer
+    among other vector attributes, and reading a copy of a mesh does not make Blender give the
+    copy its own array (reading through the Python API does: 12 bytes per vertex)."""
+    check = dq_skin.blender.memory_check
+    meshdata = dq_skin.blender.meshdata
+    obj = tube("Positions", 40, 24, 4.0, 0.5)
+    mesh = obj.data
+    mesh.attributes.new("positions", "FLOAT_VECTOR", "POINT").data.foreach_set("vector", np.full(len(mesh.vertices) * 3, 7.0, np.float32))
+    mesh.attributes.new("rest", "FLOAT_VECTOR", "POINT")
+    reader = dq_skin.SESSION.readers.mesh
+    assert reader is not None, dq_skin.SESSION.readers.mesh_error
+    got = reader.positions(mesh)
+    assert got is not None, dq_skin.SESSION.readers.positions_error
+    want = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.attributes["position"].data.foreach_get("vector", want)
+    assert got.dtype == np.float32 and got.shape == (len(mesh.vertices), 3)
+    assert np.array_equal(got.ravel(), want)
+    assert np.array_equal(meshdata.read_positions(mesh, reader), got)
+    # What the first-read check compares: another mesh's positions disagree.
+    other = tube("Other", 40, 24, 4.0, 0.5)
+    other.data.vertices[0].co.x += 0.5
+    assert check.positions_differ(got, mesh) == ""
+    assert check.positions_differ(got, other.data) != ""
+    with pytest.raises(TypeError, match="bpy.types.Mesh"):
+        reader.positions(obj)
+    # Copies share their positions until one is read through the Python API.
+    heap = _heap_bytes()
+    if heap is None:
+        pytest.skip("no heap statistics on this platform")
+    copies = [mesh.copy() for _ in range(30)]
+    before = _heap_bytes()
+    kept = [reader.positions(c) for c in copies]
+    by_memory = (_heap_bytes() - before) / len(copies)
+    before = _heap_bytes()
+    for c in copies:
+        c.attributes["position"].data.foreach_get("vector", want)
+    by_python = (_heap_bytes() - before) / len(copies)
+    size = 12 * len(mesh.vertices)
+    assert all(np.array_equal(k, got) for k in kept)
+    assert by_python >= 0.9 * size, (by_python, size)  # (what the reader avoids)
+    assert by_memory <= size + 1024, (by_memory, size)  # only our own array

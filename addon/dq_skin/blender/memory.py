@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The readers of Blender's memory (`dqskin.memory.MeshMemory` for vertex-group weights,
+"""The readers of Blender's memory (`dqskin.memory.MeshMemory` for vertex-group weights and positions,
 `dqskin.memory.PoseMemory` for armature poses), built once per session from the SDNA of a tiny .blend
 this Blender writes: the file describes the structs in memory whatever the version. Each reader's
 first read in the session is checked against Blender's own data (`memory_check`). If a reader
@@ -29,6 +29,9 @@ class Readers:
         self.pose_error = ""
         # Whether each reader's first read agreed with Blender's data (`memory_check`).
         self.mesh_checked = False
+        self.positions_checked = False
+        self.positions_refused = False  # the positions are not where the reader looks, or disagreed
+        self.positions_error = ""
         self.pose_checked = False
 
     def _build(self) -> None:
@@ -80,10 +83,29 @@ class Readers:
 
 
 class CheckedMesh:
-    """`MeshMemory` whose first read in the session is checked (`memory_check.groups_differ`)."""
+    """`MeshMemory` whose first read of each kind in the session is checked
+    (`memory_check.groups_differ`, `memory_check.positions_differ`)."""
 
     def __init__(self, readers: Readers):
         self.readers = readers
+
+    def positions(self, mesh):
+        """The mesh's `(V, 3)` positions, or None: read them through the Python API."""
+        readers = self.readers
+        if readers._mesh is None or readers.positions_refused:
+            return None
+        got = readers._mesh.positions(mesh)
+        if got is None:
+            readers.positions_refused = True  # (this Blender keeps them elsewhere)
+            return None
+        if not readers.positions_checked:
+            what = memory_check.positions_differ(got, mesh)
+            if what:  # (the weights' reader stays: it has its own check)
+                readers.positions_refused = True
+                readers.positions_error = f"the memory reader disagrees with Blender's data ({what}): the Python path reads instead"
+                return None
+            readers.positions_checked = True
+        return got
 
     def deform_verts(self, mesh):
         readers = self.readers

@@ -76,6 +76,19 @@ def groups_differ(groups, mesh) -> str:
     return ""
 
 
+def positions_differ(positions, mesh) -> str:
+    """What the positions read from memory get wrong about `mesh`, on a sample of its vertices
+    (read one by one: reading the whole array through the Python API would make a mesh that
+    shares it with its copies take its own)."""
+    n = len(mesh.vertices)
+    if positions.shape != (n, 3):
+        return "the vertex count"
+    for i in _sample(n):
+        if tuple(np.float32(c) for c in mesh.vertices[i].co) != tuple(positions[i]):
+            return f"the position of vertex {i}"
+    return ""
+
+
 def _sample(n: int) -> list[int]:
     if n <= SAMPLE_VERTICES:
         return list(range(n))

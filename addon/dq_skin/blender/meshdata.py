@@ -97,7 +97,17 @@ def _read_groups_slowly(mesh) -> Groups | None:
     return Groups(offsets, np.asarray(groups, np.uint32), np.asarray(weights, np.float32))
 
 
-def _positions(mesh) -> np.ndarray:
+def read_positions(mesh, reader) -> np.ndarray:
+    """The mesh's `(V, 3)` float32 positions, from memory with `reader` where it can: Blender's
+    Python API would make a mesh that shares its positions with its copies (a crowd of
+    duplicates) take its own."""
+    if reader is not None and not mesh.is_editmode:
+        try:
+            got = reader.positions(mesh)
+        except (ValueError, TypeError):
+            got = None
+        if got is not None:
+            return got
     flat = np.empty(len(mesh.vertices) * 3, np.float32)
     if len(flat):  # an empty mesh has no position attribute at all
         mesh.attributes["position"].data.foreach_get("vector", flat)
@@ -127,7 +137,7 @@ def _read(mesh, uid: int, version: int, group_names: tuple, reader) -> MeshData:
         uid=uid,
         version=version,
         counts=counts,
-        positions=_positions(mesh),
+        positions=read_positions(mesh, reader),
         groups=read_groups(mesh, reader),
         group_names=group_names,
         keys=_keys(mesh),

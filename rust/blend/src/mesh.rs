@@ -4,13 +4,20 @@
 //! of `CustomDataLayer`s, each with a `type` and a `data` pointer. The layer of type
 //! `CD_MDEFORMVERT` (2) holds one `MDeformVert { MDeformWeight *dw; int totweight; int flag; }`
 //! per vertex, and `dw` points to `totweight` pairs `MDeformWeight { int def_nr; float weight; }`
-//! in the order Blender stores (and deforms) them.
+//! in the order Blender stores (and deforms) them. The positions are the layer of type
+//! `CD_PROP_FLOAT3` named `position`: one `float[3]` per vertex.
+//!
+//! Reading through the pointers never makes Blender copy anything: its Python API makes a mesh
+//! that shares its arrays with copies of it (duplicates) take its own copy of an array it reads.
 
 use crate::memory::{read, ReadError};
 use crate::sdna::{DnaError, Sdna};
 
 /// `eCustomDataType::CD_MDEFORMVERT`, unchanged since Blender 2.5.
 const CD_MDEFORMVERT: i32 = 2;
+/// `eCustomDataType::CD_PROP_FLOAT3`, the type of the `position` attribute since Blender 3.5.
+const CD_PROP_FLOAT3: i32 = 48;
+const POSITION: &[u8] = b"position";
 /// Sanity bounds: beyond these the memory cannot be a mesh of this layout.
 const MAX_LAYERS: i32 = 1 << 16;
 const MAX_WEIGHTS_PER_VERTEX: i32 = 1 << 16;
@@ -25,6 +32,8 @@ pub struct MeshLayout {
     layer_size: usize,
     layer_type: usize,
     layer_data: usize,
+    layer_name: usize,
+    layer_name_len: usize,
     dvert_size: usize,
     dvert_dw: usize,
     dvert_totweight: usize,
@@ -42,6 +51,10 @@ impl MeshLayout {
         if vert_data.pointer || vert_data.size != sdna.struct_size("CustomData")? {
             return Err(DnaError::Inconsistent("Mesh.vert_data is not a CustomData".into()));
         }
+        let name = sdna.field("CustomDataLayer", &["name"])?;
+        if name.pointer || name.size <= POSITION.len() {
+            return Err(DnaError::Inconsistent("CustomDataLayer.name is not a char array".into()));
+        }
         Ok(Self {
             verts_num: int("Mesh", &["verts_num", "totvert"])?,
             vert_data: vert_data.offset,
@@ -50,6 +63,8 @@ impl MeshLayout {
             layer_size: sdna.struct_size("CustomDataLayer")?,
             layer_type: int("CustomDataLayer", &["type"])?,
             layer_data: ptr("CustomDataLayer", &["data"])?,
+            layer_name: name.offset,
+            layer_name_len: name.size,
             dvert_size: sdna.struct_size("MDeformVert")?,
             dvert_dw: ptr("MDeformVert", &["dw"])?,
             dvert_totweight: int("MDeformVert", &["totweight"])?,
@@ -94,20 +109,7 @@ pub unsafe fn read_deform_verts(
         if verts < 0 || verts as usize != expected_vertices {
             return Err(ReadError::VertexCount { expected: expected_vertices, found: verts as i64 });
         }
-        let data = mesh + layout.vert_data;
-        let layers: usize = read(data + layout.layers);
-        let totlayer: i32 = read(data + layout.totlayer);
-        if !(0..MAX_LAYERS).contains(&totlayer) || (totlayer > 0 && layers == 0) {
-            return Err(ReadError::Implausible("layer count"));
-        }
-        let mut dverts = 0usize;
-        for i in 0..totlayer as usize {
-            let layer = layers + i * layout.layer_size;
-            if read::<i32>(layer + layout.layer_type) == CD_MDEFORMVERT {
-                dverts = read(layer + layout.layer_data);
-                break;
-            }
-        }
+        let dverts = layer_data(layout, mesh, |layer| read::<i32>(layer + layout.layer_type) == CD_MDEFORMVERT)?;
         if dverts == 0 {
             return Ok(None);
         }
@@ -143,6 +145,64 @@ pub unsafe fn read_deform_verts(
             out.offsets.push(out.groups.len() as u32);
         }
         Ok(Some(out))
+    }
+}
+
+/// The `data` of the mesh's first vertex layer that `matches`, or 0 if none does.
+///
+/// # Safety
+/// `mesh` is a live `Mesh` of `layout`'s Blender (see [`read_deform_verts`]); `matches` is given
+/// the address of each layer and may read inside it.
+unsafe fn layer_data(layout: &MeshLayout, mesh: usize, matches: impl Fn(usize) -> bool) -> Result<usize, ReadError> {
+    // SAFETY: offsets from the SDNA of this Blender, the mesh is live (caller), the layers are
+    // read only once their count passed the check.
+    unsafe {
+        let data = mesh + layout.vert_data;
+        let layers: usize = read(data + layout.layers);
+        let totlayer: i32 = read(data + layout.totlayer);
+        if !(0..MAX_LAYERS).contains(&totlayer) || (totlayer > 0 && layers == 0) {
+            return Err(ReadError::Implausible("layer count"));
+        }
+        for i in 0..totlayer as usize {
+            let layer = layers + i * layout.layer_size;
+            if matches(layer) {
+                return Ok(read(layer + layout.layer_data));
+            }
+        }
+        Ok(0)
+    }
+}
+
+/// Copies the vertex positions of the `Mesh` at `mesh` (`bpy.types.Mesh.as_pointer()`) into
+/// `out` (one per vertex). `Ok(false)` when the mesh keeps no `position` layer among its vertex
+/// data (a Blender that stores attributes elsewhere): the caller reads them another way.
+///
+/// # Safety
+/// As for [`read_deform_verts`]: `mesh` is a live `Mesh` of `layout`'s Blender that no other
+/// thread changes during the call.
+pub unsafe fn read_positions(layout: &MeshLayout, mesh: usize, out: &mut [[f32; 3]]) -> Result<bool, ReadError> {
+    if mesh == 0 {
+        return Err(ReadError::Null);
+    }
+    // SAFETY: as in `read_deform_verts`; the name is compared within the array the SDNA sizes,
+    // and the positions are copied only after the vertex count matched `out`.
+    unsafe {
+        let verts: i32 = read(mesh + layout.verts_num);
+        if verts < 0 || verts as usize != out.len() {
+            return Err(ReadError::VertexCount { expected: out.len(), found: verts as i64 });
+        }
+        let is_position = |layer: usize| {
+            read::<i32>(layer + layout.layer_type) == CD_PROP_FLOAT3 && {
+                let name = core::slice::from_raw_parts((layer + layout.layer_name) as *const u8, layout.layer_name_len);
+                name.starts_with(POSITION) && name[POSITION.len()] == 0
+            }
+        };
+        let data = layer_data(layout, mesh, is_position)?;
+        if data == 0 {
+            return Ok(out.is_empty());
+        }
+        core::ptr::copy_nonoverlapping(data as *const u8, out.as_mut_ptr().cast::<u8>(), out.len() * 12);
+        Ok(true)
     }
 }
 
@@ -303,6 +363,42 @@ mod tests {
             unsafe { read_deform_verts(&layout, &bad as *const _ as usize, 1) },
             Err(ReadError::Implausible("layer count"))
         );
+    }
+
+    fn named(ty: i32, name: &str, data: *const DVert) -> Layer {
+        let mut rest = [0u8; 100];
+        rest[28..28 + name.len()].copy_from_slice(name.as_bytes()); // name[68] is at byte 32
+        Layer { ty, rest, data, sharing: 0 }
+    }
+
+    #[test]
+    fn reads_the_position_layer_only() {
+        let layout = MeshLayout::new(&mesh_sdna(true)).unwrap();
+        let want = [[1.0f32, 2.0, 3.0], [-4.0, 5.5, 6.25]];
+        let decoy = [[9.0f32; 3]; 2];
+        let (mut mesh, _l, _d, _w) = fake(&[vec![], vec![]], false);
+        let layers = [
+            named(CD_PROP_FLOAT3, "positions", decoy.as_ptr().cast()),
+            named(49, "position", decoy.as_ptr().cast()),
+            named(CD_PROP_FLOAT3, "position", want.as_ptr().cast()),
+        ];
+        mesh.vdata.layers = layers.as_ptr();
+        mesh.vdata.totlayer = 3;
+        let p = &mesh as *const _ as usize;
+        let mut out = [[0.0f32; 3]; 2];
+        // SAFETY: a live mesh of this layout whose layers point at live arrays of two vertices
+        // (here and below; the wrong vertex count is refused before anything is copied).
+        assert_eq!(unsafe { read_positions(&layout, p, &mut out) }, Ok(true));
+        assert_eq!(out, want);
+        let mut three = [[0.0f32; 3]; 3];
+        // SAFETY: as above.
+        assert_eq!(
+            unsafe { read_positions(&layout, p, &mut three) },
+            Err(ReadError::VertexCount { expected: 3, found: 2 })
+        );
+        mesh.vdata.totlayer = 2; // no float3 layer named "position" left
+                                 // SAFETY: as above.
+        assert_eq!(unsafe { read_positions(&layout, &mesh as *const _ as usize, &mut out) }, Ok(false));
     }
 
     #[test]

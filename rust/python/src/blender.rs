@@ -2,7 +2,7 @@
 //! Blender's math that come before skinning (shape keys, the armature spaces). Not Blender
 //! specific in their math; the memory reader is the only code that knows Blender's layout.
 
-use dqskin_blend::{read_deform_verts, MeshLayout, Sdna};
+use dqskin_blend::{read_deform_verts, read_positions, MeshLayout, Sdna};
 use dqskin_core::shape_keys::{self, KeyBlock};
 use dqskin_core::{DeformGroups, Influences};
 use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
@@ -34,23 +34,30 @@ impl PyMeshMemory {
         })
     }
 
+    /// ``(V, 3)`` float32: the vertex positions of ``mesh`` (a ``bpy.types.Mesh``), or ``None``
+    /// if this Blender keeps them where the reader does not look. Unlike Blender's Python API,
+    /// reading does not make a mesh that shares its positions with copies take its own.
+    fn positions<'py>(&self, py: Python<'py>, mesh: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        guard(|| {
+            let (ptr, n) = mesh_pointer(py, mesh)?;
+            let out = numpy::PyArray2::<f32>::zeros(py, [n, 3], false);
+            let copied = {
+                let mut rw = out.readwrite();
+                let flat = rw.as_slice_mut()?;
+                // SAFETY: as for `deform_verts`.
+                unsafe { read_positions(&self.0, ptr, as_points_mut(flat)) }
+                    .map_err(|e| PyValueError::new_err(format!("mesh_pointer: {e}")))?
+            };
+            Ok(copied.then(|| out.into_any()))
+        })
+    }
+
     /// ``(offsets, groups, weights)`` (``uint32``, ``uint32``, ``float32``): the weights of
     /// ``mesh`` (a ``bpy.types.Mesh``) in CSR form and stored order, or ``None`` if it has no
     /// vertex-group data.
     fn deform_verts<'py>(&self, py: Python<'py>, mesh: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyTuple>>> {
         guard(|| {
-            // Only a real Blender mesh: its address comes from Blender itself, never from the caller.
-            let mesh_type = py.import("bpy").and_then(|bpy| bpy.getattr("types")?.getattr("Mesh"));
-            let is_mesh = match mesh_type {
-                Ok(t) => mesh.is_instance(&t)?,
-                Err(_) => false, // not inside Blender
-            };
-            if !is_mesh {
-                let ty = mesh.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-                return Err(PyTypeError::new_err(format!("mesh must be a bpy.types.Mesh, got {ty}")));
-            }
-            let ptr: usize = mesh.call_method0("as_pointer")?.extract()?;
-            let n: usize = mesh.getattr("vertices")?.len()?;
+            let (ptr, n) = mesh_pointer(py, mesh)?;
             // SAFETY: the extension passes `Mesh.as_pointer()` of a live mesh from a handler or
             // operator, while Blender is not evaluating (see `read_deform_verts`).
             let read = unsafe { read_deform_verts(&self.0, ptr, n) }
@@ -68,6 +75,23 @@ impl PyMeshMemory {
             }
         })
     }
+}
+
+/// The address and vertex count of `mesh`, which must be a real Blender mesh: its address comes
+/// from Blender itself, never from the caller.
+fn mesh_pointer(py: Python<'_>, mesh: &Bound<'_, PyAny>) -> PyResult<(usize, usize)> {
+    let mesh_type = py.import("bpy").and_then(|bpy| bpy.getattr("types")?.getattr("Mesh"));
+    let is_mesh = match mesh_type {
+        Ok(t) => mesh.is_instance(&t)?,
+        Err(_) => false, // not inside Blender
+    };
+    if !is_mesh {
+        let ty = mesh.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        return Err(PyTypeError::new_err(format!("mesh must be a bpy.types.Mesh, got {ty}")));
+    }
+    let ptr: usize = mesh.call_method0("as_pointer")?.extract()?;
+    let n: usize = mesh.getattr("vertices")?.len()?;
+    Ok((ptr, n))
 }
 
 /// The SDNA of `blend_file`, the bytes of a `.blend` file.

@@ -279,13 +279,19 @@ impl Influences {
 fn pack_lanes(offsets: &[u32], entries: &[Influence]) -> Result<(Vec<Slot>, Vec<u32>), SkinError> {
     let vertices = offsets.len() - 1;
     let batches = vertices.div_ceil(LANES);
-    let mut slots = Vec::new();
+    let longest = |b: usize| {
+        let (first, last) = (b * LANES, ((b + 1) * LANES).min(vertices));
+        (first..last).map(|v| offsets[v + 1] - offsets[v]).max().unwrap_or(0) as usize
+    };
+    // Counted first and allocated once: grown by pushing, the slots would keep up to twice the
+    // memory they use (a crowd keeps one set per character).
+    let mut slots = Vec::with_capacity((0..batches).map(longest).sum());
     let mut batch_starts = Vec::with_capacity(batches + 1);
     batch_starts.push(0u32);
     for b in 0..batches {
         let first = b * LANES;
         let last = (first + LANES).min(vertices);
-        let longest = (first..last).map(|v| offsets[v + 1] - offsets[v]).max().unwrap_or(0) as usize;
+        let longest = longest(b);
         let base = slots.len();
         slots.resize(base + longest, Slot { records: [0; LANES], weights: [0.0; LANES] });
         for v in first..last {

@@ -576,3 +576,41 @@ def test_positions_read_from_memory_are_blenders_and_leave_copies_sharing(dq_ski
     assert all(np.array_equal(k, got) for k in kept)
     assert by_python >= 0.9 * size, (by_python, size)  # (what the reader avoids)
     assert by_memory <= size + 1024, (by_memory, size)  # only our own array
+
+
+def test_bound_weights_are_released_and_read_again_when_needed(dq_skin):
+    """Once bound, a mesh's weights are not kept twice (the binding has them): they are read
+    again from memory when a binding must be made again, and weights a script changed without
+    Blender telling DQ Skin are the ones used then, the mesh being read again on its next use."""
+    obj = tube("Released", 40, 24, LENGTH, 0.5)
+    arm = armature_chain("ReleasedRig", 4, LENGTH)
+    chain_weights(obj, arm, LENGTH)
+    obj.parent = arm
+    armature_modifier(obj, arm)
+    arm.pose.bones["Bone1"].rotation_mode = "QUATERNION"
+    arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), 0.6)
+    ref = reference_copy(obj, False)
+    add_dq_skin(obj, "LINEAR")
+    bpy.context.scene.frame_set(2)
+    session = dq_skin.SESSION
+    reader = session.readers.mesh
+    assert reader is not None, session.readers.mesh_error
+    data = session.meshes.get(obj, reader)
+    assert data.has_groups and data.held_groups is None  # released once bound
+    first = data.groups  # read again from memory: the same weights
+    assert data.held_groups is not None and not data.changed_under
+    assert dq_skin.blender.meshdata.digest_of(first) == data.groups_digest
+    data.release_groups()
+    # A weight changed behind DQ Skin's back: read again, it is the one used, and the mesh is
+    # read again (a new version) on its next use.
+    obj.vertex_groups["Bone2"].add([5], 0.123, "REPLACE")
+    ref.vertex_groups["Bone2"].add([5], 0.123, "REPLACE")
+    got = data.groups
+    assert data.changed_under
+    a, b = int(got.offsets[5]), int(got.offsets[6])
+    assert np.float32(0.123) in got.weights[a:b]
+    assert session.meshes.peek(obj) is None
+    again = session.meshes.get(obj, reader)
+    assert again is not data and again.version > data.version and not again.changed_under
+    bpy.context.scene.frame_set(3)
+    assert relative_deviation(evaluated_positions(obj), evaluated_positions(ref)) <= REL_TOL

@@ -11,6 +11,7 @@ nothing is wrong.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,30 +42,68 @@ class KeyData:
     vertex_groups: list  # vertex group name per block ("" for none)
 
 
+def digest_of(groups: Groups | None) -> bytes:
+    """What identifies a mesh's weights (compared instead of the arrays once they are released)."""
+    h = hashlib.blake2b(digest_size=20)
+    if groups is not None:
+        for a in (groups.offsets, groups.groups, groups.weights):
+            h.update(str(len(a)).encode())
+            h.update(np.ascontiguousarray(a).data)
+    return h.digest()
+
+
 @dataclass
 class MeshData:
     uid: int
     version: int
     counts: tuple  # vertices, edges, faces, corners
     positions: np.ndarray  # (V, 3) float32
-    groups: Groups | None  # None: the mesh has no vertex-group data at all
+    held_groups: Groups | None  # the weights as read; None once released or if there are none
     group_names: tuple
     keys: KeyData | None
+    has_groups: bool = False  # the mesh has vertex-group data at all
+    groups_digest: bytes = b""
+    # Reads the weights again from Blender's memory (None: they cannot be read cheaply, so
+    # they are kept).
+    reload: object = field(default=None, repr=False)
+    # The weights read again were not those read first: the mesh is read again on its next use.
+    changed_under: bool = False
     _group_weights: dict = field(default_factory=dict, repr=False)
 
     @property
     def vertex_count(self) -> int:
         return self.counts[0]
 
+    @property
+    def groups(self) -> Groups | None:
+        """The vertex-group weights (None: the mesh has no vertex-group data at all), read again
+        if they were released. Weights changed since (a script painted them and nothing told
+        DQ Skin yet) are the ones returned, and the mesh is read again on its next use."""
+        if self.held_groups is None and self.has_groups:
+            got = self.reload() if self.reload is not None else None
+            if got is None or digest_of(got) != self.groups_digest:
+                self.changed_under = True
+            self.held_groups = got
+        return self.held_groups
+
+    def release_groups(self) -> None:
+        """Drops the weights once bound (they are read again when needed): a crowd keeps one
+        binding per character, not its mesh's weights twice."""
+        if self.reload is not None:
+            self.held_groups = None
+
     def group_weights(self, name: str) -> np.ndarray | None:
         """Per-vertex weights of a vertex group by name (None if there is no such group)."""
         if name not in self._group_weights:
             if name not in self.group_names:
                 self._group_weights[name] = None
-            elif self.groups is None:
+            elif not self.has_groups:
                 self._group_weights[name] = np.zeros(self.vertex_count, np.float32)
             else:
+                released = self.held_groups is None
                 self._group_weights[name] = self.groups.weights_of(self.group_names.index(name))
+                if released:
+                    self.release_groups()
         return self._group_weights[name]
 
 
@@ -131,29 +170,44 @@ def _keys(mesh) -> KeyData | None:
     return KeyData(key.use_relative, reference, data, relative_to, [kb.vertex_group for kb in blocks])
 
 
+def _reloader(mesh, reader, count: int):
+    """Reads `mesh`'s weights again (from memory when it can), or None where reading them again
+    would be slow (no memory reader, or the mesh is being edited): then they are kept."""
+    if reader is None or mesh.is_editmode:
+        return None
+
+    def reload() -> Groups | None:
+        try:
+            if len(mesh.vertices) != count:
+                return None
+            return read_groups(mesh, reader)
+        except ReferenceError:  # (the mesh is gone: nothing uses these weights any more)
+            return None
+
+    return reload
+
+
 def _read(mesh, uid: int, version: int, group_names: tuple, reader) -> MeshData:
     counts = (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops))
+    groups = read_groups(mesh, reader)
     return MeshData(
         uid=uid,
         version=version,
         counts=counts,
         positions=read_positions(mesh, reader),
-        groups=read_groups(mesh, reader),
+        held_groups=groups,
         group_names=group_names,
         keys=_keys(mesh),
+        has_groups=groups is not None,
+        groups_digest=digest_of(groups),
+        reload=_reloader(mesh, reader, counts[0]) if groups is not None else None,
     )
 
 
 def _same(a: MeshData, b: MeshData) -> bool:
     if a.counts != b.counts or a.group_names != b.group_names or not np.array_equal(a.positions, b.positions):
         return False
-    if (a.groups is None) != (b.groups is None):
-        return False
-    if a.groups is not None and not (
-        np.array_equal(a.groups.offsets, b.groups.offsets)
-        and np.array_equal(a.groups.groups, b.groups.groups)
-        and np.array_equal(a.groups.weights, b.groups.weights)
-    ):
+    if a.has_groups != b.has_groups or a.groups_digest != b.groups_digest:
         return False
     if (a.keys is None) != (b.keys is None):
         return False
@@ -195,7 +249,8 @@ class MeshCache:
     def peek(self, obj) -> MeshData | None:
         """The cached data of `obj`'s mesh if it is current (no read)."""
         uid = obj.data.session_uid
-        return None if uid in self._stale else self._cache.get(uid)
+        data = None if uid in self._stale else self._cache.get(uid)
+        return None if data is None or data.changed_under else data
 
     def peek_any(self, obj) -> MeshData | None:
         """The cached data of `obj`'s mesh, current or not (no read)."""
@@ -208,7 +263,7 @@ class MeshCache:
         mesh = obj.data
         uid = mesh.session_uid
         old = self._cache.get(uid)
-        if uid in self._stale:
+        if uid in self._stale or (old is not None and old.changed_under):
             self._stale.discard(uid)
             verify = True
         # Vertex group names live on the mesh since Blender 3.0 but Python reaches them through

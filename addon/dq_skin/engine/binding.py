@@ -43,6 +43,7 @@ def binding(obj, arm, arm_eval, st: ModifierState, s: Settings, data: MeshData, 
         cache.uses_bbones = bool(cache.segments.max(initial=0) > 1)
         cache.key = key
         st.output.invalidate()
+        data.release_groups()  # (bound: read again if the binding must be made again)
     st.needs_effective = s.use_envelopes or cache.uses_envelopes or cache.uses_bbones
     if s.method == dqskin.Method.CENTERS_OF_ROTATION and not st.needs_effective:
         centers_of(obj, st, data, cache.binding.influences, ctx)

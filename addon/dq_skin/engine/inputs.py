@@ -61,7 +61,7 @@ def mesh_input(obj, obj_eval, st: ModifierState, data: MeshData, depsgraph) -> t
             keys.relative_to[i],
             float(values[i]),
             bool(mutes[i]),
-            data.group_weights(keys.vertex_groups[i]) if keys.vertex_groups[i] and data.groups is not None else None,
+            data.group_weights(keys.vertex_groups[i]) if keys.vertex_groups[i] and data.has_groups else None,
         )
         for i in range(len(keys.data))
     ]

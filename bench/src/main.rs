@@ -325,7 +325,7 @@ fn precompute_rows(quick: bool, all: usize) -> Vec<PrecomputeRow> {
     for &target in sizes {
         let c = Creature::new(target).expect("creature");
         let unique: std::collections::HashSet<Vec<u32>> = (0..c.positions.len())
-            .map(|v| c.influences.of_vertex(v).iter().flat_map(|i| [i.bone, i.weight.to_bits()]).collect())
+            .map(|v| c.influences.of_vertex(v).flat_map(|i| [i.bone, i.weight.to_bits()]).collect())
             .collect();
         for threads in [1, all] {
             pool::set_num_threads(threads).expect("threads");

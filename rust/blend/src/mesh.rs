@@ -392,12 +392,11 @@ mod tests {
         assert_eq!(out, want);
         let mut three = [[0.0f32; 3]; 3];
         // SAFETY: as above.
-        assert_eq!(
-            unsafe { read_positions(&layout, p, &mut three) },
-            Err(ReadError::VertexCount { expected: 3, found: 2 })
-        );
-        mesh.vdata.totlayer = 2; // no float3 layer named "position" left
-                                 // SAFETY: as above.
+        let wrong = unsafe { read_positions(&layout, p, &mut three) };
+        assert_eq!(wrong, Err(ReadError::VertexCount { expected: 3, found: 2 }));
+        // No float3 layer named "position" left.
+        mesh.vdata.totlayer = 2;
+        // SAFETY: as above.
         assert_eq!(unsafe { read_positions(&layout, &mesh as *const _ as usize, &mut out) }, Ok(false));
     }
 

@@ -364,7 +364,7 @@ mod tests {
         let c = TwistCylinder::new(11, 8, 10.0, 1.0, 0.4).unwrap();
         let weight_of_upper = |r: usize| {
             let v = c.ring(r).start;
-            c.influences.of_vertex(v).iter().find(|i| i.bone == 1).map_or(0.0, |i| i.weight)
+            c.influences.of_vertex(v).find(|i| i.bone == 1).map_or(0.0, |i| i.weight)
         };
         assert_eq!(weight_of_upper(0), 0.0);
         assert!((weight_of_upper(5) - 0.5).abs() < 1e-6);
@@ -382,7 +382,7 @@ mod tests {
         assert!((0..n).all(|v| c.influences.of_vertex(v).len() == 4));
         // Nearly every vertex has its own weights.
         let unique: std::collections::HashSet<Vec<u32>> =
-            (0..n).map(|v| c.influences.of_vertex(v).iter().map(|i| i.weight.to_bits()).collect()).collect();
+            (0..n).map(|v| c.influences.of_vertex(v).map(|i| i.weight.to_bits()).collect()).collect();
         assert!(unique.len() > n * 8 / 10, "{} unique of {n}", unique.len());
         // Rest pose: identity deforms; parents precede children.
         assert!(c.pose(0.0, 0.0).iter().all(|m| m.abs_diff_eq(Mat4::IDENTITY, 1e-5)));

@@ -324,9 +324,7 @@ impl WeightVectors {
         let mut list: Vec<(u32, f64)> = Vec::new();
         for v in 0..influences.vertex_count() {
             list.clear();
-            list.extend(
-                influences.of_vertex(v).iter().filter(|i| i.weight > 0.0).map(|i| (i.bone, f64::from(i.weight))),
-            );
+            list.extend(influences.of_vertex(v).filter(|i| i.weight > 0.0).map(|i| (i.bone, f64::from(i.weight))));
             add_up_repeated_bones(&mut list);
             let total: f64 = list.iter().map(|e| e.1).sum();
             if total > f64::from(MIN_TOTAL_WEIGHT) {

@@ -59,9 +59,10 @@ pub struct Influence {
     pub weight: f32,
 }
 
-/// Per-vertex influences in CSR form: vertex `v` has the pairs
-/// `entries[offsets[v]..offsets[v+1]]`, **in the order given** (the order matters for dual
-/// quaternion skinning, whose sign choice follows it, as in Blender).
+/// Per-vertex influences: vertex `v` has `offsets[v+1] − offsets[v]` pairs, **in the order
+/// given** (the order matters for dual quaternion skinning, whose sign choice follows it, as in
+/// Blender). They are kept once, in the kernels' lane order (16-vertex batches, each padded to
+/// its vertex with the most pairs); [`Influences::of_vertex`] reads a vertex's back from its lane.
 ///
 /// Invariants (checked by [`Influences::from_csr`]): `offsets` starts at 0, never decreases and
 /// ends at the number of entries; every bone index is below `bone_count`; every weight is finite
@@ -69,7 +70,6 @@ pub struct Influence {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Influences {
     offsets: Vec<u32>,
-    entries: Vec<Influence>,
     bone_count: usize,
     max_per_vertex: usize,
     /// The same influences in lane order for the kernels: batch `b` (vertices `b·LANES ..`) has
@@ -136,7 +136,9 @@ impl Influences {
         let entries: Vec<Influence> =
             bones.iter().zip(weights).map(|(&bone, &weight)| Influence { bone, weight }).collect();
         let (slots, batch_starts) = pack_lanes(offsets, &entries)?;
-        Ok(Self { offsets: offsets.to_vec(), entries, bone_count, max_per_vertex, slots, batch_starts })
+        // Only the lane order is kept: a vertex's pairs are read back from its lane (a crowd
+        // keeps one set of influences per character).
+        Ok(Self { offsets: offsets.to_vec(), bone_count, max_per_vertex, slots, batch_starts })
     }
 
     /// From dense rows, as glTF stores joints and weights: vertex `v` lists the `per_vertex`
@@ -221,12 +223,12 @@ impl Influences {
     /// Total number of `(bone, weight)` pairs.
     #[inline]
     pub fn len(&self) -> usize {
-        self.entries.len()
+        self.offsets.last().map_or(0, |&n| n as usize)
     }
 
     #[inline]
     pub fn is_empty(&self) -> bool {
-        self.entries.is_empty()
+        self.len() == 0
     }
 
     /// The largest number of pairs of any vertex.
@@ -235,10 +237,14 @@ impl Influences {
         self.max_per_vertex
     }
 
-    /// The pairs of vertex `v`, in the given order.
+    /// The pairs of vertex `v`, in the given order (read from its lane of the kernels' slots).
     #[inline]
-    pub fn of_vertex(&self, v: usize) -> &[Influence] {
-        &self.entries[self.offsets[v] as usize..self.offsets[v + 1] as usize]
+    pub fn of_vertex(&self, v: usize) -> impl ExactSizeIterator<Item = Influence> + Clone + '_ {
+        let count = (self.offsets[v + 1] - self.offsets[v]) as usize;
+        let (start, lane) = (self.batch_starts[v / LANES] as usize, v % LANES);
+        self.slots[start..start + count]
+            .iter()
+            .map(move |s| Influence { bone: s.records[lane] / RECORD_UNIT as u32, weight: s.weights[lane] })
     }
 
     #[inline]
@@ -246,9 +252,9 @@ impl Influences {
         &self.offsets
     }
 
-    #[inline]
-    pub fn entries(&self) -> &[Influence] {
-        &self.entries
+    /// Every pair, vertex by vertex (a copy: see [`Influences::of_vertex`]).
+    pub fn entries(&self) -> Vec<Influence> {
+        (0..self.vertex_count()).flat_map(|v| self.of_vertex(v)).collect()
     }
 
     /// Bytes the kernels read per call for the influences (the lane-ordered slots and their

@@ -108,7 +108,7 @@ pub fn transfer_weights(
     }
     let source: Vec<Vec<Pair>> = (0..body.vertex_count())
         .map(|v| {
-            let mut pairs: Vec<Pair> = body.of_vertex(v).iter().map(|i| (i.bone, i.weight)).collect();
+            let mut pairs: Vec<Pair> = body.of_vertex(v).map(|i| (i.bone, i.weight)).collect();
             sparse::merge_repeated(&mut pairs);
             sparse::normalize(&mut pairs);
             pairs

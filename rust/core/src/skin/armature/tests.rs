@@ -106,7 +106,7 @@ fn effective_influences_use_the_pose_bones() {
     let positions = [[0.0, 1.5, 0.0], [0.0, 0.5, 0.0], [0.05, 0.5, 0.0], [0.0, 2.75, 0.0]];
     let e = pose.effective(&groups, &positions, None, true, true).unwrap();
     assert_eq!(e.bone_count(), 10);
-    let pairs = |v: usize| -> Vec<(u32, f32)> { e.of_vertex(v).iter().map(|i| (i.bone, i.weight)).collect() };
+    let pairs = |v: usize| -> Vec<(u32, f32)> { e.of_vertex(v).map(|i| (i.bone, i.weight)).collect() };
     let (index, blend) = pose.bbones()[1].unwrap().straight_segment(Vec3::new(0.0, 1.5, 0.0));
     assert_eq!((index, blend), (1, 0.5));
     assert_eq!(pairs(0), vec![(4, 0.5), (5, 0.5)]);
@@ -116,7 +116,7 @@ fn effective_influences_use_the_pose_bones() {
     assert_eq!((p3[0].0, p3[1].0), (8, 9));
     assert!((p3[1].1 - 0.5).abs() < 1e-5, "{p3:?}");
     // Without envelopes vertex 2 has nothing; the bone counts must agree.
-    assert!(pose.effective(&groups, &positions, None, true, false).unwrap().of_vertex(2).is_empty());
+    assert!(pose.effective(&groups, &positions, None, true, false).unwrap().of_vertex(2).len() == 0);
     let wrong = Influences::from_lists(&[vec![]], 4).unwrap();
     assert!(matches!(pose.effective(&wrong, &[[0.0; 3]], None, true, true), Err(SkinError::LengthMismatch { .. })));
 }

@@ -32,7 +32,7 @@ fn b_bone_influences_split_over_two_joints() {
         expanded_bone_count: 6,
     };
     let e = groups.effective(&[[0.0, 1.25, 0.0]], None, &what).unwrap();
-    let got: Vec<(u32, f32)> = e.of_vertex(0).iter().map(|i| (i.bone, i.weight)).collect();
+    let got: Vec<(u32, f32)> = e.of_vertex(0).map(|i| (i.bone, i.weight)).collect();
     assert_eq!(got, vec![(0, 0.6), (3, 0.4 * 0.75), (4, 0.4 * 0.25)]);
     assert_eq!(e.bone_count(), 6);
     let bad = [None, Some(straight(4, 3, 3.0))];
@@ -47,7 +47,7 @@ fn b_bone_influences_split_over_two_joints() {
             [None, Some(BBone { mapping: Mapping::Given { index: &index, blend: &blend }, ..straight(2, 3, 3.0) })];
         let what = crate::Effective { bbones: &mapped, ..what };
         let e = groups.effective(&[[0.0, 1.25, 0.0]], None, &what).unwrap();
-        let got: Vec<(u32, f32)> = e.of_vertex(0).iter().map(|i| (i.bone, i.weight)).collect();
+        let got: Vec<(u32, f32)> = e.of_vertex(0).map(|i| (i.bone, i.weight)).collect();
         assert_eq!(got, expected);
     }
 }

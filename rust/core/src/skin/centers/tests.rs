@@ -238,11 +238,7 @@ fn equal_weight_vectors_share_a_center_and_scaling_weights_changes_nothing() {
     // The same weights times 3, with a repeated bone split in two.
     let lists: Vec<Vec<(u32, f32)>> = (0..cyl.positions.len())
         .map(|v| {
-            cyl.influences
-                .of_vertex(v)
-                .iter()
-                .flat_map(|i| [(i.bone, 1.5 * i.weight), (i.bone, 1.5 * i.weight)])
-                .collect()
+            cyl.influences.of_vertex(v).flat_map(|i| [(i.bone, 1.5 * i.weight), (i.bone, 1.5 * i.weight)]).collect()
         })
         .collect();
     let scaled = Influences::from_lists(&lists, 2).unwrap();
@@ -718,7 +714,7 @@ fn painted(c: &Creature, at: usize, radius: f32, bone: u32, weight: f32) -> (Inf
     let mut count = 0;
     let lists: Vec<Vec<(u32, f32)>> = (0..c.influences.vertex_count())
         .map(|v| {
-            let mut list: Vec<(u32, f32)> = c.influences.of_vertex(v).iter().map(|i| (i.bone, i.weight)).collect();
+            let mut list: Vec<(u32, f32)> = c.influences.of_vertex(v).map(|i| (i.bone, i.weight)).collect();
             if Vec3::from_array(c.positions[v]).distance(centre) < radius {
                 count += 1;
                 list.push((bone, weight));

@@ -41,16 +41,7 @@ impl PyPoseMemory {
     fn read(&self, armature: &Bound<'_, PyAny>) -> PyResult<PyPoseData> {
         guard(|| {
             let py = armature.py();
-            // Only a real Blender object: its address comes from Blender itself, never from the caller.
-            let object_type = py.import("bpy").and_then(|bpy| bpy.getattr("types")?.getattr("Object"));
-            let is_object = match object_type {
-                Ok(t) => armature.is_instance(&t)?,
-                Err(_) => false, // not inside Blender
-            };
-            if !is_object {
-                let ty = armature.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-                return Err(PyTypeError::new_err(format!("armature must be a bpy.types.Object, got {ty}")));
-            }
+            crate::blender::require_bpy_type(py, armature, "Object", "armature")?;
             let kind: String = armature.getattr("type")?.extract()?;
             if kind != "ARMATURE" {
                 return Err(PyValueError::new_err(format!(

@@ -77,18 +77,24 @@ impl PyMeshMemory {
     }
 }
 
-/// The address and vertex count of `mesh`, which must be a real Blender mesh: its address comes
-/// from Blender itself, never from the caller.
-fn mesh_pointer(py: Python<'_>, mesh: &Bound<'_, PyAny>) -> PyResult<(usize, usize)> {
-    let mesh_type = py.import("bpy").and_then(|bpy| bpy.getattr("types")?.getattr("Mesh"));
-    let is_mesh = match mesh_type {
-        Ok(t) => mesh.is_instance(&t)?,
+/// Refuses `obj` (the argument `arg`) unless it is a real `bpy.types.<type_name>`: the memory
+/// readers take addresses from Blender itself, never from the caller.
+pub(crate) fn require_bpy_type(py: Python<'_>, obj: &Bound<'_, PyAny>, type_name: &str, arg: &str) -> PyResult<()> {
+    let wanted = py.import("bpy").and_then(|bpy| bpy.getattr("types")?.getattr(type_name));
+    let is_one = match wanted {
+        Ok(t) => obj.is_instance(&t)?,
         Err(_) => false, // not inside Blender
     };
-    if !is_mesh {
-        let ty = mesh.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-        return Err(PyTypeError::new_err(format!("mesh must be a bpy.types.Mesh, got {ty}")));
+    if !is_one {
+        let ty = obj.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        return Err(PyTypeError::new_err(format!("{arg} must be a bpy.types.{type_name}, got {ty}")));
     }
+    Ok(())
+}
+
+/// The address and vertex count of `mesh`, a real Blender mesh.
+fn mesh_pointer(py: Python<'_>, mesh: &Bound<'_, PyAny>) -> PyResult<(usize, usize)> {
+    require_bpy_type(py, mesh, "Mesh", "mesh")?;
     let ptr: usize = mesh.call_method0("as_pointer")?.extract()?;
     let n: usize = mesh.getattr("vertices")?.len()?;
     Ok((ptr, n))

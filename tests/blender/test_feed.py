@@ -227,6 +227,124 @@ def test_a_render_of_another_frame_shows_that_frame(dq_skin, tmp_path, route):
     assert changed(ours, theirs) < SAME_IMAGE, changed(ours, theirs)
 
 
+def is_evaluated(obj) -> bool:
+    return obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).is_evaluated
+
+
+def hide(obj, how: str, hidden: bool) -> None:
+    """Hides `obj` from the viewport's evaluation the way `how` says: the object disabled in
+    viewports, its collection disabled there, or its collection excluded from the view layer."""
+    if how == "object":
+        obj.hide_viewport = hidden
+        return
+    collection = obj.users_collection[0]
+    if how == "collection":
+        collection.hide_viewport = hidden
+    else:
+        layer = bpy.context.view_layer.layer_collection.children[collection.name]
+        layer.exclude = hidden
+
+
+@pytest.mark.parametrize("how", ["object", "collection", "excluded"])
+def test_a_hidden_character_costs_nothing_and_shows_when_shown(dq_skin, monkeypatch, route, how):
+    """Blender does not evaluate an object disabled in viewports (or in a disabled or excluded
+    collection); a DQ Skin character so hidden must not be evaluated or skinned either (the
+    feed's driver variables would pull it into the graph), while one hidden with the eye icon,
+    which Blender still evaluates, stays fed. Shown again, it shows the frame it is on."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = bpy.context.scene
+    collection = bpy.data.collections.new("Crowd")
+    scene.collection.children.link(collection)
+    hidden = obj.copy()
+    collection.objects.link(hidden)
+    eye = obj.copy()
+    scene.collection.objects.link(eye)
+    for f in (3, 4):  # (a copy joins the feed at its first full evaluation)
+        scene.frame_set(f)
+    assert fed_runs(dq_skin, hidden) > 0 and fed_runs(dq_skin, eye) > 0
+    hide(hidden, how, True)
+    eye.hide_set(True)
+    bpy.context.view_layer.update()
+    scene.frame_set(5)
+    published = Publishes(dq_skin, monkeypatch)
+    runs = fed_runs(dq_skin, hidden), fed_runs(dq_skin, eye)
+    for f in (6, 7, 8):
+        scene.frame_set(f)
+        assert not is_evaluated(hidden), f"frame {f}: the hidden character is evaluated"
+        assert_same(obj, reference, f"frame {f}")
+    assert fed_runs(dq_skin, hidden) == runs[0], "the hidden character was skinned"
+    assert fed_runs(dq_skin, eye) == runs[1] + 3, "the character hidden with the eye icon was not fed"
+    assert published.count == 0
+    # Shown again by a script, right before a frame change (no update in between).
+    hide(hidden, how, False)
+    scene.frame_set(9)
+    assert_same(hidden, reference, "shown, at the frame change")
+    for f in (10, 11):
+        scene.frame_set(f)
+        assert_same(hidden, reference, f"frame {f}")
+    assert fed_runs(dq_skin, hidden) == runs[0] + 2, "the shown character is fed again"
+    # Hidden by a script right before a frame change, shown in the interface.
+    hide(hidden, how, True)
+    scene.frame_set(12)
+    scene.frame_set(13)
+    assert not is_evaluated(hidden)
+    hide(hidden, how, False)
+    bpy.context.view_layer.update()
+    assert_same(hidden, reference, "shown in the interface")
+    assert route_of(dq_skin, hidden) == route
+
+
+def test_a_character_hidden_in_viewports_renders(dq_skin, tmp_path, route):
+    """Disabled in viewports but not in renders (a usual way to keep a heavy character out of
+    the viewport): the render shows it skinned at the rendered frame."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = setup_scene()
+    scene.camera.location = (0.0, -9.0, 2.0)
+    obj.hide_viewport = True
+    bpy.context.view_layer.update()
+    scene.frame_set(3)
+    assert not is_evaluated(obj)
+
+    def show(which):
+        obj.hide_render = which is not obj
+        reference.hide_render = which is not reference
+
+    show(obj)
+    ours = render_frame(scene, 14, tmp_path / "ours")
+    show(reference)
+    theirs = render_frame(scene, 14, tmp_path / "theirs")
+    other = render_frame(scene, 6, tmp_path / "other")
+    assert changed(theirs, other) > 10 * SAME_IMAGE, "frames 6 and 14 should look different"
+    assert changed(ours, theirs) < SAME_IMAGE, changed(ours, theirs)
+
+
+def test_a_character_in_an_excluded_collection_shows_through_its_instance(dq_skin, route):
+    """A character's collection excluded from the view layer and shown by a collection instance
+    (how linked characters are often placed): Blender evaluates it through the instance, so the
+    feed must follow it although its own collection is excluded."""
+    obj, arm, reference = fed_character(dq_skin, "LINEAR")
+    scene = bpy.context.scene
+    collection = bpy.data.collections.new("Character")
+    scene.collection.children.link(collection)
+    collection.objects.link(obj)
+    scene.collection.objects.unlink(obj)
+    bpy.context.view_layer.layer_collection.children["Character"].exclude = True
+    instance = bpy.data.objects.new("Instance", None)
+    instance.instance_type = "COLLECTION"
+    instance.instance_collection = collection
+    scene.collection.objects.link(instance)
+    bpy.context.view_layer.update()
+    for f in (5, 6):
+        scene.frame_set(f)
+        assert is_evaluated(obj)
+        assert_same(obj, reference, f"frame {f}")
+    runs = fed_runs(dq_skin, obj)
+    for k, f in enumerate((7, 8), start=1):
+        scene.frame_set(f)
+        assert_same(obj, reference, f"frame {f}")
+        assert fed_runs(dq_skin, obj) == runs + k, "the instanced character is not fed"
+
+
 def test_files_hold_nothing_of_it_and_removing_dq_skin_removes_it(dq_skin, tmp_path, route):
     obj, arm, reference = fed_character(dq_skin, "LINEAR")
     blend = tmp_path / "fed.blend"

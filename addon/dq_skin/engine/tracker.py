@@ -248,6 +248,7 @@ class Tracker:
                 dirty |= self.watch[uid]
         if structure:
             self.structure += 1
+            self.session.routes.feeds.visibility_changed()
             self.prune()
         if in_operator:
             first = not self.deferred and bool(dirty)
@@ -285,6 +286,7 @@ class Tracker:
             return
         self.ensure()
         meshes = self.session.meshes
+        feeds = self.session.routes.feeds
         updated, moved = set(), set()
         for update in depsgraph.updates:
             orig = getattr(update.id, "original", update.id)
@@ -318,6 +320,9 @@ class Tracker:
                 elif isinstance(orig, bpy.types.Armature):
                     # A script edited bones (deform flags, B-Bone segments) before changing frames.
                     self._armature_changed(orig.session_uid)
+            elif isinstance(orig, bpy.types.Collection):
+                # A script hid or showed objects or collections before changing frames.
+                feeds.visibility_changed()
         ctx = self.context(depsgraph, batch=[])
         # Objects Blender did not update in this evaluation keep their settings; those that did
         # not move keep their spaces. Those changed while an operator ran are evaluated fully.
@@ -331,9 +336,11 @@ class Tracker:
             bones, rec.bones_changed = rec.bones_changed, False
             if not forced and playback.fed_frame_stands(rec.obj, ctx, bones):
                 continue  # the feed made this frame inside Blender's evaluation
+            if not ctx.render:
+                feeds.pulled_in(uid)  # (in the graph: the feed follows it, if it thought it hidden)
             self.evaluate(rec, depsgraph, forced, ctx)
         pipeline.run_batch(self.session, ctx.batch)
-        self.session.routes.feeds.commit()
+        feeds.commit()
 
     def local_modifiers(self):
         """Every current DQ Skin modifier of the local objects tracked, with its object."""

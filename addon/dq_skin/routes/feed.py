@@ -11,6 +11,13 @@ modifier on a result object) has a driver Blender evaluates without Python that 
 batch's property, so it is evaluated after the batch: everything happens in the evaluation
 that posed the bones, and Blender never evaluates the scene a second time for it.
 
+Members Blender would not evaluate in the viewport on its own (disabled in viewports, or in
+excluded or disabled collections: `blender.visibility`) get no variable, because a variable
+pulls its target into the graph: a hidden character then costs nothing per frame, as with the
+Armature modifier. If something else evaluates it all the same (a collection instance, say),
+the handler finds it in the graph, skins it fully and lets the batch follow it
+(`pulled_in`).
+
 The frame handler stays the authority: the driver only skins a member whose last full
 evaluation still stands as far as the driver can tell (its pose, transforms and shape keys are
 read each time); the handler checks what it could not know and evaluates fully where anything
@@ -24,6 +31,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
+from ..blender import visibility
 from ..model.keys import ModKey
 from ..model.state import RouteKind
 from .base import Target
@@ -45,6 +53,10 @@ class Member:
     order: int = 0  # the modifier's index in its stack (a chain's earlier modifier first)
     previous: object = None  # the ModifierState of the DQ Skin before it, whose output reaches it
     ordered: bool = False  # the batch's variables cover it (until then the handler skins it)
+    # Blender would not evaluate its object in the viewport (disabled there, or in no enabled
+    # collection): no variable follows it, since a variable would pull it into the graph
+    hidden: bool = False
+    pulled: bool = False  # something else puts it in the viewport's graph all the same
     skinned: tuple = (0, 0)  # (frame change, depsgraph address) of its last skinning here
     runs: int = 0  # frames skinned here (tests and the benchmark read it)
 
@@ -56,6 +68,8 @@ class Batch:
     carrier: object  # the runtime Empty with the driven property
     members: dict = field(default_factory=dict)  # ModKey -> Member
     dirty: bool = True  # its variables must be built again (`Feeds.commit`)
+    unfollowed: set = field(default_factory=set)  # object uids of its hidden members, not pulled in
+    layout: tuple = ()  # its scene's `visibility.layout` when its members' visibility was read
     runs: int = 0
 
 
@@ -71,6 +85,7 @@ class Feeds:
         self._batches: dict[int, Batch] = {}  # scene uid -> batch
         self._of: dict[ModKey, Batch] = {}
         self._frame_change = 0
+        self._visibility_stale = True  # visibility may have changed: `commit` reads it again
         self._next_uid = 1
         # A render's graph may run its driver on its own thread while the viewport's runs one:
         # one batch skins at a time (the kernel releases the GIL).
@@ -94,6 +109,8 @@ class Feeds:
         ):
             known.target, known.kind, known.order, known.previous = member.target, member.kind, member.order, member.previous
             return batch
+        if known is not None:
+            member.hidden, member.pulled = known.hidden, known.pulled
         batch.members[member.key] = member
         batch.dirty = True
         self._of[member.key] = batch
@@ -131,24 +148,60 @@ class Feeds:
         batch = self._of.get(key)
         return batch.carrier if batch is not None else None
 
+    def visibility_changed(self) -> None:
+        """Objects or collections may have been hidden or shown (the next `commit` reads it)."""
+        self._visibility_stale = True
+
+    def pulled_in(self, obj_uid: int) -> None:
+        """A hidden member's object is in the viewport's graph all the same (found there by the
+        frame handler): the batch follows it from its next build."""
+        for batch in self._batches.values():
+            if obj_uid not in batch.unfollowed:
+                continue
+            batch.unfollowed.discard(obj_uid)
+            for m in batch.members.values():
+                if m.hidden and m.key.object_uid == obj_uid:
+                    m.pulled = True
+                    batch.dirty = True
+
     def commit(self) -> None:
         """Builds the variables of every batch whose members changed (once per handler call, not
-        once per member: a crowd joins at once)."""
+        once per member: a crowd joins at once), for the members Blender evaluates."""
+        stale, self._visibility_stale = self._visibility_stale, False
         for scene_uid, batch in list(self._batches.items()):
-            if not batch.dirty:
-                continue
             if not batch.members:
                 self._drop(scene_uid)
                 continue
             if not _alive(batch.carrier):
                 continue
+            scene = next((s for s in bpy.data.scenes if s.session_uid == scene_uid), None)
+            layout = visibility.layout(scene) if scene is not None else ()
+            if batch.dirty or stale or layout != batch.layout:
+                batch.layout = layout
+                self._read_visibility(batch, scene)
+            if not batch.dirty:
+                continue
             driver = batch.carrier.animation_data.drivers[0].driver
             while driver.variables:
                 driver.variables.remove(driver.variables[0])
-            order_after_inputs(driver, batch.members.values())
+            followed = [m for m in batch.members.values() if m.pulled or not m.hidden]
+            order_after_inputs(driver, followed)
             for m in batch.members.values():
-                m.ordered = True
+                m.ordered = m.pulled or not m.hidden
+            batch.unfollowed = {m.key.object_uid for m in batch.members.values() if not m.ordered}
             batch.dirty = False
+
+    def _read_visibility(self, batch: Batch, scene) -> None:
+        enabled = visibility.enabled_in_viewport(scene) if scene is not None else None
+        for m in batch.members.values():
+            try:
+                hidden = enabled is not None and not visibility.evaluated_on_its_own(m.target.obj, enabled)
+            except ReferenceError:
+                continue  # (gone: `prune` forgets it)
+            if hidden != m.hidden:
+                m.hidden = hidden
+                m.pulled = False
+                batch.dirty = True
 
     def _drop(self, scene_uid: int) -> None:
         batch = self._batches.pop(scene_uid)

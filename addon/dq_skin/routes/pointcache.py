@@ -12,6 +12,7 @@ import tempfile
 import numpy as np
 
 HEADER = b"POINTCACHE2\0"
+HEADER_SIZE = len(HEADER) + 20  # and the version, point count, start frame, sample rate, frame count
 
 
 def folder() -> str:
@@ -33,15 +34,18 @@ class PointCache:
 
     def write(self, positions: np.ndarray) -> None:
         n = len(positions)
-        if not os.path.exists(self.path):  # (a cleaner removed it: Mesh Cache reads by name)
+        fd = self.file.fileno()
+        if os.fstat(fd).st_nlink == 0:  # (a cleaner removed it: Mesh Cache reads by name)
             self.file.close()
             self.file, self.points = open(self.path, "w+b", buffering=0), -1
-        header = HEADER + struct.pack("<iiffi", 1, n, 0.0, 1.0, 1)
-        os.pwrite(self.file.fileno(), header, 0)
-        os.pwrite(self.file.fileno(), memoryview(np.ascontiguousarray(positions, np.float32)).cast("B"), len(header))
+            fd = self.file.fileno()
         if n != self.points:
-            self.file.truncate(len(header) + 12 * n)
+            header = HEADER + struct.pack("<iiffi", 1, n, 0.0, 1.0, 1)
+            os.pwrite(fd, header, 0)
+            self.file.truncate(HEADER_SIZE + 12 * n)
             self.points = n
+        # Every frame, only the positions: one write of the array's own memory.
+        os.pwrite(fd, np.ascontiguousarray(positions, np.float32).data.cast("B"), HEADER_SIZE)
 
     def close(self) -> None:
         try:

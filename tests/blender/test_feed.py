@@ -294,6 +294,33 @@ def test_a_hidden_character_costs_nothing_and_shows_when_shown(dq_skin, monkeypa
     assert route_of(dq_skin, hidden) == route
 
 
+def test_a_hidden_character_saved_and_reopened_shows_when_shown(dq_skin, tmp_path, route):
+    """Saved while disabled in viewports, reopened: not evaluated until shown, then skinned at
+    the frame it is on, and fed from then on."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    obj.hide_viewport = True
+    bpy.context.view_layer.update()
+    blend = tmp_path / "hidden.blend"
+    names = obj.name, reference.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    obj, reference = (bpy.data.objects[n] for n in names)
+    scene = bpy.context.scene
+    for f in (4, 5):
+        scene.frame_set(f)
+        assert not is_evaluated(obj)
+    obj.hide_viewport = False
+    bpy.context.view_layer.update()
+    assert_same(obj, reference, "shown")
+    scene.frame_set(6)
+    runs = fed_runs(dq_skin, obj)
+    for k, f in enumerate((7, 8), start=1):
+        scene.frame_set(f)
+        assert_same(obj, reference, f"frame {f}")
+    assert fed_runs(dq_skin, obj) == runs + 2
+    assert route_of(dq_skin, obj) == route
+
+
 def test_a_character_hidden_in_viewports_renders(dq_skin, tmp_path, route):
     """Disabled in viewports but not in renders (a usual way to keep a heavy character out of
     the viewport): the render shows it skinned at the rendered frame."""

@@ -225,9 +225,11 @@ class Floors:
     doing nothing; `floor_python_driver`, the same with a Python driver calling a function that
     does nothing (what entering Python from the evaluation costs); `floor_armature_idle`, the
     Armature modifier with vertex groups and envelopes off (Blender's own modifier visiting the
-    vertices with no bone to add)."""
+    vertices with no bone to add); `floor_carried`, the Mesh Cache of `floor_mesh_cache` followed
+    by DQ Skin's node group on its carried path (what Blender's evaluation costs the chosen route
+    for small meshes without any Python: the least a frame of it can cost)."""
 
-    KINDS = ("floor_mesh_cache", "floor_python_driver", "floor_armature_idle")
+    KINDS = ("floor_mesh_cache", "floor_python_driver", "floor_armature_idle", "floor_carried")
 
     def __init__(self, rig, body, bone_names):
         self.objects = {}
@@ -238,6 +240,7 @@ class Floors:
         with open(self.path, "wb") as f:
             f.write(b"POINTCACHE2\0" + struct.pack("<iiffi", 1, n, 0.0, 1.0, 1) + rest.tobytes())
         self.name = f"dqskin_bench_nothing_{body.session_uid}"
+        self.group = None
         bpy.app.driver_namespace[self.name] = lambda *_: 1.0
         for kind in self.KINDS:
             o = body.copy()
@@ -258,10 +261,21 @@ class Floors:
             driver = m.driver_add("factor").driver
             driver.type = "SCRIPTED"
             addon().routes.feed.order_after_bones(driver, rig, list(bone_names))
-            driver.expression = "1.0" if kind == "floor_mesh_cache" else f"{self.name}()"
+            driver.expression = f"{self.name}()" if kind == "floor_python_driver" else "1.0"
+            if kind == "floor_carried":
+                a = addon()
+                group = o.modifiers.new("DQ Skin floor", "NODES")
+                # A copy without DQ Skin's tag: the same nodes, a modifier DQ Skin leaves alone.
+                if self.group is None:
+                    self.group = a.blender.node_group.ensure_group().copy()
+                    del self.group[a.blender.nodes.GROUP_TAG]
+                group.node_group = self.group
+                a.routes.result_route.set_mode(group, a.model.state.ResultMode.CARRIED)
 
     def remove(self):
         bpy.app.driver_namespace.pop(self.name, None)
         for o in self.objects.values():
             bpy.data.objects.remove(o)
+        if self.group is not None:
+            bpy.data.node_groups.remove(self.group)
         os.unlink(self.path)

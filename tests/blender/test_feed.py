@@ -314,7 +314,7 @@ def test_a_hidden_character_saved_and_reopened_shows_when_shown(dq_skin, tmp_pat
     assert_same(obj, reference, "shown")
     scene.frame_set(6)
     runs = fed_runs(dq_skin, obj)
-    for k, f in enumerate((7, 8), start=1):
+    for f in (7, 8):
         scene.frame_set(f)
         assert_same(obj, reference, f"frame {f}")
     assert fed_runs(dq_skin, obj) == runs + 2

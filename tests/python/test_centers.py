@@ -290,3 +290,44 @@ def test_progress_reports_and_cancels():
         dqskin.centers_of_rotation(positions, triangles, influences, progress=fails)
     with pytest.raises(TypeError, match="progress must be callable"):
         dqskin.centers_of_rotation(positions, triangles, influences, progress=3)
+
+
+def test_strokes_that_follow_one_another_equal_the_full_precompute_and_compute_less():
+    """`previous` chains strokes: each update equals a full computation bit for bit, and from
+    the second stroke on it takes the per-pair sums the update before kept in its weights, so it
+    sums less than the same update from weights that kept nothing (equal weights, a new object)."""
+    positions, tris, first, _ = tube(rings=60, segments=24, bones=8)
+    dense = dense_of(first)
+    centers = dqskin.centers_of_rotation(positions, tris, first, with_mask=True)
+    weights, influences = dense, first
+    near = lambda at, r: np.linalg.norm(positions - positions[at], axis=1) < r  # noqa: E731
+    for stroke, (at, radius, bone, value) in enumerate([(700, 0.5, 2, 0.5), (700, 0.5, 2, 0.8), (760, 0.4, 3, 0.3), (700, 0.5, 2, 0.5)]):
+        painted = weights.copy()
+        painted[near(at, radius), bone] = value
+        after = dqskin.Influences.from_dense(np.tile(np.arange(8), (len(positions), 1)), painted.astype(F), 8)
+        full = dqskin.centers_of_rotation(positions, tris, after, with_mask=True)
+        work = {}
+
+        def counting(name, work=work):
+            def report(done, total):
+                work[name] = total
+
+            return report
+
+        fresh = dqskin.Influences.from_dense(np.tile(np.arange(8), (len(positions), 1)), weights.astype(F), 8)
+        plain = dqskin.centers_of_rotation(positions, tris, after, with_mask=True, previous=(fresh, centers), progress=counting("plain"))
+        got = dqskin.centers_of_rotation(positions, tris, after, with_mask=True, previous=(influences, centers), progress=counting("kept"))
+        for name, result in (("without kept sums", plain), ("with them", got)):
+            np.testing.assert_array_equal(result[0], full[0], err_msg=f"stroke {stroke} {name}")
+            np.testing.assert_array_equal(result[1], full[1], err_msg=f"stroke {stroke} {name}")
+        if stroke > 0:
+            assert work["kept"] < work["plain"], (stroke, work)
+        weights, influences, centers = painted, after, got
+
+
+def dense_of(influences) -> np.ndarray:
+    """`(V, B)` weights of `influences`."""
+    out = np.zeros((influences.vertex_count, influences.bone_count), np.float64)
+    rows = np.repeat(np.arange(influences.vertex_count), np.diff(influences.offsets.astype(np.int64)))
+    np.add.at(out, (rows, influences.bones.astype(np.int64)), influences.weights)
+    return out

@@ -229,7 +229,7 @@ pub fn effective(groups: &Influences, a: EffectiveArgs<'_, '_>) -> PyResult<PyIn
         let pose = &pose.get().0;
         return py
             .detach(|| pose.effective(groups, points, premat, use_vertex_groups, use_envelopes))
-            .map(PyInfluences)
+            .map(PyInfluences::wrap)
             .map_err(|e| PyValueError::new_err(format!("pose: {e}")));
     }
     let mut mapped: Vec<(usize, Vec<i32>, Vec<f32>)> = Vec::new();
@@ -285,7 +285,7 @@ pub fn effective(groups: &Influences, a: EffectiveArgs<'_, '_>) -> PyResult<PyIn
         expanded_bone_count: expanded,
     };
     let points = pos.as_slice()?.as_chunks::<3>().0;
-    py.detach(|| groups.effective(points, premat, &what)).map(PyInfluences).map_err(skin_error)
+    py.detach(|| groups.effective(points, premat, &what)).map(PyInfluences::wrap).map_err(skin_error)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -149,7 +149,7 @@ fn influences_from_deform_groups(
         }
         let dg = DeformGroups { offsets: o.as_slice()?, groups: g.as_slice()?, weights: w.as_slice()? };
         let py = offsets.py();
-        py.detach(|| Influences::from_deform_groups(dg, &map, bone_count)).map(PyInfluences).map_err(skin_error)
+        py.detach(|| Influences::from_deform_groups(dg, &map, bone_count)).map(PyInfluences::wrap).map_err(skin_error)
     })
 }
 

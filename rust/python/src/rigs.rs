@@ -53,7 +53,7 @@ impl PyTwistCylinder {
                 return Err(PyValueError::new_err("radius must be positive"));
             }
             let rig = TwistCylinder::new(rings, segments, length, radius, blend_zone).map_err(skin_error)?;
-            let influences = Py::new(py, PyInfluences(rig.influences.clone()))?;
+            let influences = Py::new(py, PyInfluences::wrap(rig.influences.clone()))?;
             Ok(Self { rig, influences })
         })
     }

@@ -3,7 +3,9 @@
 //! (`job.rs`).
 
 use dqskin_core::glam::Mat4;
-use dqskin_core::{Centers, Influences, SkinError};
+use std::sync::Mutex;
+
+use dqskin_core::{CenterSums, Centers, Influences, SkinError};
 use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -24,7 +26,23 @@ pub(crate) fn skin_error(e: SkinError) -> PyErr {
 /// starting at 0; bones are below ``bone_count``; weights are finite and ≥ 0 and need not sum
 /// to one. Index arrays may have any integer dtype; ``weights`` must be float32.
 #[pyclass(name = "Influences", module = "dqskin", frozen)]
-pub struct PyInfluences(pub Influences);
+pub struct PyInfluences(pub Influences, Mutex<Option<CenterSums>>);
+
+impl PyInfluences {
+    pub fn wrap(influences: Influences) -> Self {
+        Self(influences, Mutex::new(None))
+    }
+
+    /// What an update of the centers computed from these weights kept for the next one (taken:
+    /// an update replaces it).
+    fn take_center_sums(&self) -> Option<CenterSums> {
+        self.1.lock().unwrap_or_else(|p| p.into_inner()).take()
+    }
+
+    fn keep_center_sums(&self, sums: CenterSums) {
+        *self.1.lock().unwrap_or_else(|p| p.into_inner()) = Some(sums);
+    }
+}
 
 #[pymethods]
 impl PyInfluences {
@@ -41,7 +59,7 @@ impl PyInfluences {
             let bones = arrays::indices(bones, "bones")?;
             let w = arrays::readonly::<f32>(weights, "weights", &[None], &["N"])?;
             let w = w.as_slice()?;
-            Influences::from_csr(&offsets, &bones, w, bone_count).map(Self).map_err(skin_error)
+            Influences::from_csr(&offsets, &bones, w, bone_count).map(Self::wrap).map_err(skin_error)
         })
     }
 
@@ -64,7 +82,7 @@ impl PyInfluences {
                 )));
             }
             let b = arrays::index_array(bones, "bones", &[Some(v), Some(k)], &[])?;
-            Influences::from_dense(&b, w.as_slice()?, v, k, bone_count).map(Self).map_err(skin_error)
+            Influences::from_dense(&b, w.as_slice()?, v, k, bone_count).map(Self::wrap).map_err(skin_error)
         })
     }
 
@@ -341,12 +359,13 @@ fn centers_of_rotation<'py>(
         let infl = influences.cast::<PyInfluences>().map_err(|_| {
             PyTypeError::new_err("influences must be a dqskin.Influences (the weights of the same vertices)")
         })?;
-        let infl = &infl.get().0;
+        let after = infl.get();
+        let infl = &after.0;
         let v = infl.vertex_count();
         let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
         let tris = triangle_indices(triangles)?;
         let points = as_points(pos.as_slice()?);
-        let previous = match previous {
+        let mut previous = match previous {
             Some(p) if !p.is_none() => Some(previous_centers(p, points)?),
             _ => None,
         };
@@ -380,18 +399,25 @@ fn centers_of_rotation<'py>(
                 })
             };
             let mut interrupted = || Python::attach(signalled);
-            match &previous {
-                Some((influences, centers)) => {
+            match &mut previous {
+                // Strokes follow one another: each update keeps per-pair sums in the new weights'
+                // `Influences` for the next (the centers are the same bit for bit).
+                Some((influences, centers, kept)) => {
                     let previous = dqskin_core::PreviousCenters { influences, centers };
-                    dqskin_core::centers_of_rotation_update(
+                    dqskin_core::centers_of_rotation_update_keeping(
                         points,
                         &tris,
                         infl,
                         sigma,
                         previous,
+                        kept.take(),
                         &mut progress,
                         &mut interrupted,
                     )
+                    .map(|(centers, sums)| {
+                        after.keep_center_sums(sums);
+                        centers
+                    })
                 }
                 None => dqskin_core::centers_of_rotation_interruptible(
                     points,
@@ -420,14 +446,20 @@ fn centers_of_rotation<'py>(
 
 /// `previous=(influences, centers)` read: the influences and the centers (with their mask, or
 /// the mask found from the rows holding their own vertex's position).
-fn previous_centers(previous: &Bound<'_, PyAny>, points: &[[f32; 3]]) -> PyResult<(Influences, Centers)> {
+/// The `(influences, centers)` of `previous`, and what the update that made them kept (taken
+/// from that `Influences`: see `keep_center_sums`).
+fn previous_centers(
+    previous: &Bound<'_, PyAny>,
+    points: &[[f32; 3]],
+) -> PyResult<(Influences, Centers, Option<CenterSums>)> {
     let bad = || {
         PyTypeError::new_err(
             "previous must be (influences, centers): the dqskin.Influences and the array (or (array, mask)) centers_of_rotation returned for them",
         )
     };
     let (influences, centers): (Bound<'_, PyAny>, Bound<'_, PyAny>) = previous.extract().map_err(|_| bad())?;
-    let influences = influences.cast::<PyInfluences>().map_err(|_| bad())?.get().0.clone();
+    let before = influences.cast::<PyInfluences>().map_err(|_| bad())?.get();
+    let influences = before.0.clone();
     let v = points.len();
     let (array, mask) = match centers.extract::<(Bound<'_, PyAny>, Bound<'_, PyAny>)>() {
         Ok((a, m)) => (a, Some(m)),
@@ -442,7 +474,8 @@ fn previous_centers(previous: &Bound<'_, PyAny>, points: &[[f32; 3]]) -> PyResul
         }
         None => rows.iter().zip(points).map(|(c, p)| c != p).collect(),
     };
-    Ok((influences, Centers { centers: rows, has_center }))
+    let kept = before.take_center_sums();
+    Ok((influences, Centers { centers: rows, has_center }, kept))
 }
 
 pyo3::create_exception!(

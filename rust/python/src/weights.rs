@@ -158,7 +158,7 @@ fn automatic_weights<'py>(
         report.set_item("outside_bones", PyArray1::from_vec(py, result.outside_bones))?;
         report.set_item("grid", PyTuple::new(py, result.grid)?)?;
         report.set_item("solid_voxels", result.solid_voxels)?;
-        let influences = Bound::new(py, PyInfluences(result.influences))?;
+        let influences = Bound::new(py, PyInfluences::wrap(result.influences))?;
         PyTuple::new(py, [influences.into_any(), report.into_any()])
     })
 }
@@ -240,7 +240,7 @@ fn transfer_weights<'py>(
         report.set_item("from_nearest", result.from_nearest)?;
         report.set_item("max_distance", result.max_distance)?;
         report.set_item("iterations", result.iterations)?;
-        let influences = Bound::new(py, PyInfluences(result.influences))?;
+        let influences = Bound::new(py, PyInfluences::wrap(result.influences))?;
         PyTuple::new(py, [influences.into_any(), report.into_any()])
     })
 }

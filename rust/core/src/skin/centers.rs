@@ -35,6 +35,7 @@
 //! `exp`.
 
 mod cells;
+mod kept;
 mod sums;
 mod update;
 
@@ -44,6 +45,8 @@ use rayon::prelude::*;
 
 use super::isa::Simd;
 use super::{Influences, SkinError, MIN_TOTAL_WEIGHT};
+pub use kept::CenterSums;
+use kept::Outcome;
 use sums::{PairList, WIDTH};
 use update::Reach;
 
@@ -139,6 +142,58 @@ pub fn centers_of_rotation_update(
     progress: &mut dyn FnMut(usize, usize) -> bool,
     interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<Centers, SkinError> {
+    check_previous(influences, previous)?;
+    centers_counted_since(
+        Simd::detect(),
+        Some(cells::TOLERANCE),
+        positions,
+        triangles,
+        influences,
+        sigma,
+        Some(previous),
+        None,
+        false,
+        progress,
+        interrupted,
+    )
+    .map(|(c, _, _)| c)
+}
+
+/// [`centers_of_rotation_update`] for strokes that follow one another: `kept`, what the update
+/// before returned with the centers it made (`previous`), lets a vertex the change reaches
+/// compute again only the bone pairs whose lists the change altered (see `kept.rs`); the
+/// centers are the same bit for bit. Returns what to keep for the next stroke (the values of
+/// every vertex this update computed, and of the others from `kept`); sums made for another σ
+/// are not used.
+#[allow(clippy::too_many_arguments)] // the update's inputs and what the one before kept
+pub fn centers_of_rotation_update_keeping(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    previous: PreviousCenters<'_>,
+    kept: Option<CenterSums>,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+    interrupted: &mut dyn FnMut() -> bool,
+) -> Result<(Centers, CenterSums), SkinError> {
+    check_previous(influences, previous)?;
+    centers_counted_since(
+        Simd::detect(),
+        Some(cells::TOLERANCE),
+        positions,
+        triangles,
+        influences,
+        sigma,
+        Some(previous),
+        kept,
+        true,
+        progress,
+        interrupted,
+    )
+    .map(|(c, _, k)| (c, k.unwrap_or_else(|| CenterSums::new(sigma))))
+}
+
+fn check_previous(influences: &Influences, previous: PreviousCenters<'_>) -> Result<(), SkinError> {
     let n = influences.vertex_count();
     if previous.influences.vertex_count() != n {
         return Err(SkinError::LengthMismatch {
@@ -154,18 +209,7 @@ pub fn centers_of_rotation_update(
             got: previous.centers.centers.len(),
         });
     }
-    centers_counted_since(
-        Simd::detect(),
-        Some(cells::TOLERANCE),
-        positions,
-        triangles,
-        influences,
-        sigma,
-        Some(previous),
-        progress,
-        interrupted,
-    )
-    .map(|(c, _)| c)
+    Ok(())
 }
 
 /// The precompute on a given compiled copy of the inner loop, with the fast path's tolerance on
@@ -182,10 +226,25 @@ pub(super) fn centers_counted(
     progress: &mut dyn FnMut(usize, usize) -> bool,
     interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<(Centers, usize), SkinError> {
-    centers_counted_since(simd, tolerance, positions, triangles, influences, sigma, None, progress, interrupted)
+    centers_counted_since(
+        simd,
+        tolerance,
+        positions,
+        triangles,
+        influences,
+        sigma,
+        None,
+        None,
+        false,
+        progress,
+        interrupted,
+    )
+    .map(|(c, fast, _)| (c, fast))
 }
 
-/// [`centers_counted`], computing again only what a weight change since `previous` reaches.
+/// [`centers_counted`], computing again only what a weight change since `previous` reaches,
+/// taking the values of the pairs it did not change from `kept`; with `keep`, also returns what
+/// the next update can take (where the fast path is on: see `kept.rs`).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn centers_counted_since(
     simd: Simd,
@@ -195,9 +254,11 @@ pub(super) fn centers_counted_since(
     influences: &Influences,
     sigma: f32,
     previous: Option<PreviousCenters<'_>>,
+    kept: Option<CenterSums>,
+    keep: bool,
     progress: &mut dyn FnMut(usize, usize) -> bool,
     interrupted: &mut dyn FnMut() -> bool,
-) -> Result<(Centers, usize), SkinError> {
+) -> Result<(Centers, usize, Option<CenterSums>), SkinError> {
     let n = influences.vertex_count();
     if positions.len() != n {
         return Err(SkinError::LengthMismatch { what: "positions", expected: n, got: positions.len() });
@@ -215,6 +276,10 @@ pub(super) fn centers_counted_since(
     check()?;
     let classes = VertexClasses::new(&weights);
     check()?;
+    let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
+    // Per-pair values are kept and reused only with the fast path (no underflow shift).
+    let keep = keep && tolerance.is_some() && inv_sigma2 <= SHIFT_THRESHOLD;
+    let kept = kept.filter(|k| keep && k.is_for(sigma));
     // The classes to compute: every one, or those a weight change since `previous` reaches.
     let reach = previous.map(|p| Reach::new(triangles, &WeightVectors::new(p.influences), &weights));
     let todo: Vec<usize> = match &reach {
@@ -222,16 +287,46 @@ pub(super) fn centers_counted_since(
         Some(r) => (0..classes.members.len()).filter(|&c| r.reaches(&weights, classes.members[c].first)).collect(),
     };
     check()?;
+    // The kept values of each class to compute whose own weights did not change.
+    let reused: Vec<Option<&kept::ClassSums>> = match (&kept, &reach) {
+        (Some(k), Some(r)) => todo
+            .iter()
+            .map(|&c| {
+                let v = classes.members[c].first;
+                (!r.changed[v]).then(|| k.get(&kept::key_of(&weights, v), kept::pair_count(&weights, v))).flatten()
+            })
+            .collect(),
+        _ => vec![None; todo.len()],
+    };
+    let no_pairs = HashSet::new();
+    let changed = reach.as_ref().map_or(&no_pairs, |r| &r.pairs);
+    check()?;
     // After a weight change only the lists of the pairs the recomputed classes read are built
-    // (each exactly as a full build makes it, so their centers are the same bit for bit).
-    let needed = reach.is_some().then(|| pairs_of(&weights, todo.iter().map(|&c| classes.members[c].first)));
+    // (each exactly as a full build makes it, so their centers are the same bit for bit): of a
+    // class with kept values, only the pairs the change altered.
+    let needed = reach.is_some().then(|| {
+        let mut pairs = pairs_of(
+            &weights,
+            todo.iter().zip(&reused).filter(|(_, k)| k.is_none()).map(|(&c, _)| classes.members[c].first),
+        );
+        for (&c, _) in todo.iter().zip(&reused).filter(|(_, k)| k.is_some()) {
+            let a = weights.of(classes.members[c].first);
+            for (x, &(j, _)) in a.iter().enumerate() {
+                pairs.extend(a[x + 1..].iter().map(|&(k, _)| (j, k)).filter(|p| changed.contains(p)));
+            }
+        }
+        pairs
+    });
     let index =
         PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance, needed.as_ref(), &mut check)?;
-    let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
 
     // Parts of roughly equal work, so progress advances evenly and cancelling is quick.
-    let work: Vec<usize> =
-        crate::pool::run(|| todo.par_iter().map(|&c| index.work(&weights, classes.members[c].first)).collect());
+    let work: Vec<usize> = crate::pool::run(|| {
+        todo.par_iter()
+            .zip(&reused)
+            .map(|(&c, k)| index.work(&weights, classes.members[c].first, k.map(|_| changed)))
+            .collect()
+    });
     check()?;
     let total: usize = work.iter().sum();
     let part_work = (total / 100).max(1 << 16);
@@ -251,15 +346,21 @@ pub(super) fn centers_counted_since(
     if !progress(0, total) {
         return Err(SkinError::Cancelled);
     }
-    let mut class_centers: Vec<(Option<[f64; 3]>, bool)> = vec![(None, false); todo.len()];
+    let compute = |index: &PairIndex, t: usize, reuse: Option<&kept::ClassSums>| -> Outcome {
+        let v = classes.members[todo[t]].first;
+        if keep {
+            kept::center(index, simd, &weights, v, inv_sigma2, reuse, changed)
+        } else {
+            let (c, fast) = index.center(simd, &weights, v, inv_sigma2);
+            Outcome::Done(c, fast, kept::ClassSums::none())
+        }
+    };
+    let mut outcomes: Vec<Outcome> = (0..todo.len()).map(|_| Outcome::NeedsLists).collect();
     let mut done = 0;
     for part in parts.windows(2) {
         let range = part[0]..part[1];
-        let one = |(t, out): (usize, &mut (Option<[f64; 3]>, bool))| {
-            let v = classes.members[todo[t]].first;
-            *out = index.center(simd, &weights, v, inv_sigma2);
-        };
-        let slots = &mut class_centers[range.clone()];
+        let one = |(t, out): (usize, &mut Outcome)| *out = compute(&index, t, reused[t]);
+        let slots = &mut outcomes[range.clone()];
         let part_work: usize = work[range.clone()].iter().sum();
         if part_work < (1 << 14) {
             slots.iter_mut().enumerate().map(|(i, o)| (range.start + i, o)).for_each(one);
@@ -271,6 +372,20 @@ pub(super) fn centers_counted_since(
             return Err(SkinError::Cancelled);
         }
     }
+    // Classes that left the fast path where a kept pair has no exact sums: again, with every
+    // list they read (rare: the fast path's bound holds for almost every vertex).
+    let again: Vec<usize> = (0..todo.len()).filter(|&t| matches!(outcomes[t], Outcome::NeedsLists)).collect();
+    if !again.is_empty() {
+        check()?;
+        let pairs = pairs_of(&weights, again.iter().map(|&t| classes.members[todo[t]].first));
+        let index =
+            PairIndex::new(positions, triangles, &weights, f64::from(sigma), tolerance, Some(&pairs), &mut check)?;
+        let redone: Vec<Outcome> = crate::pool::run(|| again.par_iter().map(|&t| compute(&index, t, None)).collect());
+        for (&t, o) in again.iter().zip(redone) {
+            outcomes[t] = o;
+        }
+    }
+    drop(reused);
 
     let mut centers = positions.to_vec();
     let mut has_center = vec![false; n];
@@ -282,7 +397,7 @@ pub(super) fn centers_counted_since(
     for (v, class) in classes.of_vertex.iter().enumerate() {
         let Some(c) = class.map(|c| c as usize) else { continue };
         if slot[c] != usize::MAX {
-            if let Some(center) = class_centers[slot[c]].0 {
+            if let Outcome::Done(Some(center), _, _) = &outcomes[slot[c]] {
                 centers[v] = center.map(|x| x as f32);
                 has_center[v] = true;
             }
@@ -293,8 +408,29 @@ pub(super) fn centers_counted_since(
             has_center[v] = p.centers.has_center[first];
         }
     }
-    let fast = class_centers.iter().filter(|c| c.1).count();
-    Ok((Centers { centers, has_center }, fast))
+    let fast = outcomes.iter().filter(|o| matches!(o, Outcome::Done(_, true, _))).count();
+    // What the next update can take: the values of every current class, computed now or kept.
+    let next = keep.then(|| {
+        let mut kept = kept;
+        let mut next = CenterSums::new(sigma);
+        let mut outcomes: Vec<Option<Outcome>> = outcomes.into_iter().map(Some).collect();
+        for (c, member) in classes.members.iter().enumerate() {
+            let key = kept::key_of(&weights, member.first);
+            let values = if slot[c] != usize::MAX {
+                match outcomes[slot[c]].take() {
+                    Some(Outcome::Done(_, _, values)) => Some(values),
+                    _ => None,
+                }
+            } else {
+                kept.as_mut().and_then(|k| k.take(&key))
+            };
+            if let Some(values) = values {
+                next.insert(key, values);
+            }
+        }
+        next
+    });
+    Ok((Centers { centers, has_center }, fast, next))
 }
 
 /// The bone pairs `(j, k)`, `j < k`, of the weight vectors of `vertices`.
@@ -599,10 +735,15 @@ impl PairIndex {
         })
     }
 
-    /// Work of vertex `v` on the fast path (entries, a group of cells counting as [`CELL_WORK`]).
-    fn work(&self, weights: &WeightVectors, v: usize) -> usize {
-        self.pairs(weights, v)
-            .map(|(id, _, _)| {
+    /// Work of vertex `v` on the fast path (entries, a group of cells counting as [`CELL_WORK`]);
+    /// with `only`, of those of its pairs only (the others' values are kept).
+    fn work(&self, weights: &WeightVectors, v: usize, only: Option<&HashSet<(u32, u32)>>) -> usize {
+        let a = weights.of(v);
+        let pairs = (0..a.len()).flat_map(move |x| a[x + 1..].iter().map(move |&(k, _)| (a[x].0, k)));
+        pairs
+            .filter(|p| only.is_none_or(|o| o.contains(p)))
+            .filter_map(|p| self.ids.get(&p).copied())
+            .map(|id| {
                 if self.fast {
                     self.raw.list(id).p.len() + CELL_WORK * (self.cell_starts[id + 1] - self.cell_starts[id])
                 } else {

@@ -805,3 +805,112 @@ fn the_update_refuses_previous_centers_of_another_mesh() {
     );
     assert!(matches!(got, Err(SkinError::LengthMismatch { .. })), "{got:?}");
 }
+
+/// `influences` with `bone`'s weight set to `weight` on the vertices within `radius` of vertex
+/// `at` (as a brush paints a group: an existing weight replaced, else added).
+fn repainted(
+    positions: &[[f32; 3]],
+    influences: &Influences,
+    at: usize,
+    radius: f32,
+    bone: u32,
+    weight: f32,
+) -> Influences {
+    let centre = Vec3::from_array(positions[at]);
+    let lists: Vec<Vec<(u32, f32)>> = (0..influences.vertex_count())
+        .map(|v| {
+            let mut list: Vec<(u32, f32)> = influences.of_vertex(v).map(|i| (i.bone, i.weight)).collect();
+            if Vec3::from_array(positions[v]).distance(centre) < radius {
+                match list.iter_mut().find(|e| e.0 == bone) {
+                    Some(e) => e.1 = weight,
+                    None => list.push((bone, weight)),
+                }
+            }
+            list
+        })
+        .collect();
+    Influences::from_lists(&lists, influences.bone_count()).unwrap()
+}
+
+#[test]
+fn strokes_that_follow_one_another_take_the_kept_sums_and_still_equal_the_full_precompute() {
+    let c = Creature::new(20_000).unwrap();
+    let (p, t) = (&c.positions, &c.triangles);
+    let mut weights = c.influences.clone();
+    let mut centers = centers_of_rotation(p, t, &weights, DEFAULT_SIGMA).unwrap();
+    let mut kept: Option<CenterSums> = None;
+    // The same place again, beside it, elsewhere, and back to the first stroke's weights there
+    // (weight vectors that existed two strokes ago come back, after lists they read changed).
+    let strokes =
+        [(1234, 0.3, 5, 0.4), (1234, 0.3, 5, 0.7), (1300, 0.2, 5, 0.2), (9000, 0.15, 2, 0.3), (1234, 0.3, 5, 0.4)];
+    for (s, &(at, radius, bone, weight)) in strokes.iter().enumerate() {
+        let after = repainted(p, &weights, at, radius, bone, weight);
+        let full = centers_of_rotation(p, t, &after, DEFAULT_SIGMA).unwrap();
+        let previous = PreviousCenters { influences: &weights, centers: &centers };
+        let mut plain_work = 0;
+        let plain = centers_of_rotation_update(
+            p,
+            t,
+            &after,
+            DEFAULT_SIGMA,
+            previous,
+            &mut |_, n| {
+                plain_work = n;
+                true
+            },
+            &mut || false,
+        )
+        .unwrap();
+        let mut kept_work = 0;
+        let (got, next) = centers_of_rotation_update_keeping(
+            p,
+            t,
+            &after,
+            DEFAULT_SIGMA,
+            previous,
+            kept.take(),
+            &mut |_, n| {
+                kept_work = n;
+                true
+            },
+            &mut || false,
+        )
+        .unwrap();
+        assert_eq!(plain, full, "stroke {s} without kept sums");
+        assert_eq!(got, full, "stroke {s} with the kept sums");
+        assert!(!next.is_empty(), "stroke {s} kept nothing");
+        if s > 0 {
+            assert!(kept_work < plain_work, "stroke {s}: {kept_work} of work with the kept sums, {plain_work} without");
+        }
+        kept = Some(next);
+        weights = after;
+        centers = got;
+    }
+}
+
+#[test]
+fn sums_kept_for_another_sigma_are_not_taken() {
+    let c = Creature::new(5000).unwrap();
+    let (p, t) = (&c.positions, &c.triangles);
+    let first = repainted(p, &c.influences, 1000, 0.3, 3, 0.5);
+    let second = repainted(p, &first, 1000, 0.3, 3, 0.9);
+    let before = centers_of_rotation(p, t, &c.influences, 0.2).unwrap();
+    let previous = PreviousCenters { influences: &c.influences, centers: &before };
+    let (mid, kept) =
+        centers_of_rotation_update_keeping(p, t, &first, 0.2, previous, None, &mut |_, _| true, &mut || false).unwrap();
+    let mid_default = centers_of_rotation(p, t, &first, DEFAULT_SIGMA).unwrap();
+    let previous = PreviousCenters { influences: &first, centers: &mid_default };
+    let (got, _) = centers_of_rotation_update_keeping(
+        p,
+        t,
+        &second,
+        DEFAULT_SIGMA,
+        previous,
+        Some(kept),
+        &mut |_, _| true,
+        &mut || false,
+    )
+    .unwrap();
+    assert_ne!(mid, mid_default);
+    assert_eq!(got, centers_of_rotation(p, t, &second, DEFAULT_SIGMA).unwrap());
+}

@@ -347,13 +347,7 @@ pub(super) fn centers_counted_since(
         return Err(SkinError::Cancelled);
     }
     let compute = |index: &PairIndex, t: usize, reuse: Option<&kept::ClassSums>| -> Outcome {
-        let v = classes.members[todo[t]].first;
-        if keep {
-            kept::center(index, simd, &weights, v, inv_sigma2, reuse, changed)
-        } else {
-            let (c, fast) = index.center(simd, &weights, v, inv_sigma2);
-            Outcome::Done(c, fast, kept::ClassSums::none())
-        }
+        kept::center(index, simd, &weights, classes.members[todo[t]].first, inv_sigma2, reuse, changed, keep)
     };
     let mut outcomes: Vec<Outcome> = (0..todo.len()).map(|_| Outcome::NeedsLists).collect();
     let mut done = 0;
@@ -724,17 +718,6 @@ impl PairIndex {
         Ok(index)
     }
 
-    /// The bone pairs of vertex `v` with their id and weights `(aⱼ, aₖ)`.
-    fn pairs<'a>(&'a self, weights: &'a WeightVectors, v: usize) -> impl Iterator<Item = (usize, f64, f64)> + 'a {
-        let a = weights.of(v);
-        (0..a.len()).flat_map(move |x| {
-            a[x + 1..].iter().filter_map(move |&(k, ak)| {
-                let (j, aj) = a[x];
-                self.ids.get(&(j, k)).map(|&id| (id, aj, ak))
-            })
-        })
-    }
-
     /// Work of vertex `v` on the fast path (entries, a group of cells counting as [`CELL_WORK`]);
     /// with `only`, of those of its pairs only (the others' values are kept).
     fn work(&self, weights: &WeightVectors, v: usize, only: Option<&HashSet<(u32, u32)>>) -> usize {
@@ -752,68 +735,6 @@ impl PairIndex {
             })
             .sum::<usize>()
             + 1
-    }
-
-    /// The center of vertex `v`, if its denominator is positive: from the expanded cells if
-    /// their certified bound allows (see `cells.rs`; then also `true`), else from the exact sums.
-    fn center(&self, simd: Simd, weights: &WeightVectors, v: usize, inv_sigma2: f64) -> (Option<[f64; 3]>, bool) {
-        if self.fast {
-            let inv_sigma = inv_sigma2.sqrt();
-            let mut total = [0.0f64; 4];
-            let mut bound = 0.0;
-            for (id, aj, ak) in self.pairs(weights, v) {
-                let s = sums::pair_sums(simd, &self.raw.list(id), aj, ak, inv_sigma2, 0.0);
-                let (c, b) = cells::cell_sums(
-                    simd,
-                    &self.cells[self.cell_starts[id]..self.cell_starts[id + 1]],
-                    aj,
-                    ak,
-                    inv_sigma,
-                );
-                let f = 2.0 * aj * ak;
-                for k in 0..4 {
-                    total[k] += f * (s[k] + c[k]);
-                }
-                bound += f * b;
-            }
-            if total[0] > 0.0 && bound <= self.tolerance * total[0] {
-                let d = total[0];
-                let c = [total[1] / d, total[2] / d, total[3] / d];
-                if c.iter().all(|x| x.is_finite()) {
-                    return (Some(c), true);
-                }
-            }
-        }
-        (self.exact_center(simd, weights, v, inv_sigma2), false)
-    }
-
-    /// The center of vertex `v` from the exact sums over every entry.
-    fn exact_center(&self, simd: Simd, weights: &WeightVectors, v: usize, inv_sigma2: f64) -> Option<[f64; 3]> {
-        // With exponents that could underflow (tiny σ), factor out the largest exp(−u²/σ²) so it
-        // becomes 1; the factor cancels in the ratio.
-        let shift = if inv_sigma2 > SHIFT_THRESHOLD {
-            let m = self
-                .pairs(weights, v)
-                .map(|(id, aj, ak)| sums::min_cross_squared(&self.exact.list(id), aj, ak))
-                .fold(f64::INFINITY, f64::min);
-            if m.is_finite() {
-                m * inv_sigma2
-            } else {
-                0.0
-            }
-        } else {
-            0.0
-        };
-        let mut total = [0.0f64; 4];
-        for (id, aj, ak) in self.pairs(weights, v) {
-            let s = sums::pair_sums(simd, &self.exact.list(id), aj, ak, inv_sigma2, shift);
-            let f = 2.0 * aj * ak;
-            for k in 0..4 {
-                total[k] += f * s[k];
-            }
-        }
-        let d = total[0];
-        (d > 0.0).then(|| [total[1] / d, total[2] / d, total[3] / d]).filter(|c| c.iter().all(|x| x.is_finite()))
     }
 }
 

@@ -1,6 +1,6 @@
-//! What an update after a weight change keeps for the next one: each weight vector's sums per
-//! bone pair, so that a vertex the next stroke reaches computes again only the pairs whose lists
-//! that stroke changed.
+//! A vertex's center from its bone pairs' values, and what an update after a weight change
+//! keeps of those values for the next one (each weight vector's values per bone pair), so that a
+//! vertex the next stroke reaches computes again only the pairs whose lists that stroke changed.
 //!
 //! A vertex's center is a ratio of totals, each a sum over its bone pairs (in the order of its
 //! weight vector) of one value per pair. A pair's value depends only on the vertex's weights and
@@ -13,7 +13,7 @@
 use std::collections::{HashMap, HashSet};
 
 use super::super::isa::Simd;
-use super::{cells, sums, PairIndex, WeightKey, WeightVectors};
+use super::{cells, sums, PairIndex, WeightKey, WeightVectors, SHIFT_THRESHOLD};
 
 /// One pair's part of a vertex's fast-path totals: `Σ e·P` and `Σ e·P·c` (raw entries plus
 /// expanded cells) and the cells' error bound; `None` where the pair has no list.
@@ -26,13 +26,6 @@ pub(super) struct ClassSums {
     fast: Vec<FastPart>,
     /// Only where the vertex took the exact sums.
     exact: Option<Vec<ExactPart>>,
-}
-
-impl ClassSums {
-    /// Nothing kept (an update that keeps nothing).
-    pub(super) fn none() -> Self {
-        Self { fast: Vec::new(), exact: None }
-    }
 }
 
 /// The per-pair sums of the weight vectors an update computed or kept (see the module doc), for
@@ -96,9 +89,12 @@ pub(super) enum Outcome {
     NeedsLists,
 }
 
-/// The center of vertex `v` as [`PairIndex::center`] computes it (the same operations in the
-/// same order), taking the values of the pairs not in `changed` from `kept`. Only for an index
-/// with the fast path (`index.fast`), whose exact sums need no underflow shift.
+/// The center of vertex `v`, if its denominator is positive: from the expanded cells if their
+/// certified bound allows (see `cells.rs`; then also `true`), else from the exact sums over
+/// every entry, with the values of the pairs not in `changed` taken from `kept` (given only
+/// with the fast path, whose exact sums need no underflow shift). With `record`, the values
+/// come back in the outcome (else it holds none, and nothing is allocated).
+#[allow(clippy::too_many_arguments)] // a vertex of an index, and what is kept of it
 pub(super) fn center(
     index: &PairIndex,
     simd: Simd,
@@ -107,59 +103,79 @@ pub(super) fn center(
     inv_sigma2: f64,
     kept: Option<&ClassSums>,
     changed: &HashSet<(u32, u32)>,
+    record: bool,
 ) -> Outcome {
-    debug_assert!(index.fast);
+    debug_assert!(kept.is_none() || (index.fast && record));
     let a = weights.of(v);
-    let pairs: Vec<(u32, u32, f64, f64)> =
-        (0..a.len()).flat_map(|x| a[x + 1..].iter().map(move |&(k, ak)| (a[x].0, k, a[x].1, ak))).collect();
+    let pairs = || (0..a.len()).flat_map(move |x| a[x + 1..].iter().map(move |&(k, ak)| (a[x].0, k, a[x].1, ak)));
     let reuse = |j: u32, k: u32| kept.filter(|_| !changed.contains(&(j, k)));
-    let inv_sigma = inv_sigma2.sqrt();
-    let mut fast = Vec::with_capacity(pairs.len());
-    let mut total = [0.0f64; 4];
-    let mut bound = 0.0;
-    for (p, &(j, k, aj, ak)) in pairs.iter().enumerate() {
-        let part = match reuse(j, k) {
-            Some(c) => c.fast[p],
-            None => index.ids.get(&(j, k)).map(|&id| {
-                let s = sums::pair_sums(simd, &index.raw.list(id), aj, ak, inv_sigma2, 0.0);
-                let (c, b) = cells::cell_sums(
-                    simd,
-                    &index.cells[index.cell_starts[id]..index.cell_starts[id + 1]],
-                    aj,
-                    ak,
-                    inv_sigma,
-                );
-                [s[0] + c[0], s[1] + c[1], s[2] + c[2], s[3] + c[3], b]
-            }),
-        };
-        fast.push(part);
-        if let Some(x) = part {
-            let f = 2.0 * aj * ak;
-            for k in 0..4 {
-                total[k] += f * x[k];
+    let mut fast = Vec::new();
+    if index.fast {
+        let inv_sigma = inv_sigma2.sqrt();
+        let mut total = [0.0f64; 4];
+        let mut bound = 0.0;
+        for (p, (j, k, aj, ak)) in pairs().enumerate() {
+            let part = match reuse(j, k) {
+                Some(c) => c.fast[p],
+                None => index.ids.get(&(j, k)).map(|&id| {
+                    let s = sums::pair_sums(simd, &index.raw.list(id), aj, ak, inv_sigma2, 0.0);
+                    let cells = &index.cells[index.cell_starts[id]..index.cell_starts[id + 1]];
+                    let (c, b) = cells::cell_sums(simd, cells, aj, ak, inv_sigma);
+                    [s[0] + c[0], s[1] + c[1], s[2] + c[2], s[3] + c[3], b]
+                }),
+            };
+            if record {
+                fast.push(part);
             }
-            bound += f * x[4];
+            if let Some(x) = part {
+                let f = 2.0 * aj * ak;
+                for k in 0..4 {
+                    total[k] += f * x[k];
+                }
+                bound += f * x[4];
+            }
+        }
+        if total[0] > 0.0 && bound <= index.tolerance * total[0] {
+            let d = total[0];
+            let c = [total[1] / d, total[2] / d, total[3] / d];
+            if c.iter().all(|x| x.is_finite()) {
+                return Outcome::Done(Some(c), true, ClassSums { fast, exact: None });
+            }
         }
     }
-    if total[0] > 0.0 && bound <= index.tolerance * total[0] {
-        let d = total[0];
-        let c = [total[1] / d, total[2] / d, total[3] / d];
-        if c.iter().all(|x| x.is_finite()) {
-            return Outcome::Done(Some(c), true, ClassSums { fast, exact: None });
+    // With exponents that could underflow (tiny σ, no fast path), factor out the largest
+    // exp(−u²/σ²) so it becomes 1; the factor cancels in the ratio.
+    let shift = if inv_sigma2 > SHIFT_THRESHOLD {
+        let m = pairs()
+            .filter_map(|(j, k, aj, ak)| {
+                index.ids.get(&(j, k)).map(|&id| sums::min_cross_squared(&index.exact.list(id), aj, ak))
+            })
+            .fold(f64::INFINITY, f64::min);
+        if m.is_finite() {
+            m * inv_sigma2
+        } else {
+            0.0
         }
-    }
-    let mut exact = Vec::with_capacity(pairs.len());
+    } else {
+        0.0
+    };
+    let mut exact = Vec::new();
     let mut total = [0.0f64; 4];
-    for (p, &(j, k, aj, ak)) in pairs.iter().enumerate() {
-        let part = match (fast[p], reuse(j, k).and_then(|c| c.exact.as_ref())) {
-            (None, _) => None, // no list
-            (Some(_), Some(e)) => e[p],
-            (Some(_), None) => match index.ids.get(&(j, k)) {
-                Some(&id) => Some(sums::pair_sums(simd, &index.exact.list(id), aj, ak, inv_sigma2, 0.0)),
-                None => return Outcome::NeedsLists,
+    for (p, (j, k, aj, ak)) in pairs().enumerate() {
+        // (Without `record`, `fast` is empty: every pair's list is in the index, or it has none.)
+        let part = match (fast.get(p), reuse(j, k).and_then(|c| c.exact.as_ref())) {
+            (Some(None), _) => None, // no list
+            (Some(Some(_)), Some(e)) => e[p],
+            (listed, _) => match index.ids.get(&(j, k)) {
+                Some(&id) => Some(sums::pair_sums(simd, &index.exact.list(id), aj, ak, inv_sigma2, shift)),
+                // Listed, its fast value kept, its list not built: only its exact sums were missing.
+                None if listed.is_some() => return Outcome::NeedsLists,
+                None => None, // no list
             },
         };
-        exact.push(part);
+        if record {
+            exact.push(part);
+        }
         if let Some(s) = part {
             let f = 2.0 * aj * ak;
             for k in 0..4 {
@@ -169,5 +185,5 @@ pub(super) fn center(
     }
     let d = total[0];
     let c = (d > 0.0).then(|| [total[1] / d, total[2] / d, total[3] / d]).filter(|c| c.iter().all(|x| x.is_finite()));
-    Outcome::Done(c, false, ClassSums { fast, exact: Some(exact) })
+    Outcome::Done(c, false, ClassSums { fast, exact: record.then_some(exact) })
 }

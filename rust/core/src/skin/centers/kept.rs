@@ -59,6 +59,22 @@ impl CenterSums {
         self.classes.insert(key, sums);
     }
 
+    /// The bytes they hold on the heap (the values, the weight vectors as keys, the table),
+    /// about: for memory accounting.
+    pub fn heap_bytes(&self) -> usize {
+        let table = self.classes.capacity() * (size_of::<WeightKey>() + size_of::<ClassSums>() + 1);
+        let held: usize = self
+            .classes
+            .iter()
+            .map(|(key, c)| {
+                key.capacity() * size_of::<(u32, u64)>()
+                    + c.fast.capacity() * size_of::<FastPart>()
+                    + c.exact.as_ref().map_or(0, |e| e.capacity() * size_of::<ExactPart>())
+            })
+            .sum();
+        table + held
+    }
+
     /// How many weight vectors have values.
     pub fn len(&self) -> usize {
         self.classes.len()

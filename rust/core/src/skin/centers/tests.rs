@@ -879,6 +879,13 @@ fn strokes_that_follow_one_another_take_the_kept_sums_and_still_equal_the_full_p
         assert_eq!(plain, full, "stroke {s} without kept sums");
         assert_eq!(got, full, "stroke {s} with the kept sums");
         assert!(!next.is_empty(), "stroke {s} kept nothing");
+        // At least the fast path's 5 values of one pair for each weight vector kept.
+        assert!(
+            next.heap_bytes() >= next.len() * 5 * 8,
+            "stroke {s}: {} bytes for {} vectors",
+            next.heap_bytes(),
+            next.len()
+        );
         if s > 0 {
             assert!(kept_work < plain_work, "stroke {s}: {kept_work} of work with the kept sums, {plain_work} without");
         }

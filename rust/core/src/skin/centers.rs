@@ -142,21 +142,7 @@ pub fn centers_of_rotation_update(
     progress: &mut dyn FnMut(usize, usize) -> bool,
     interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<Centers, SkinError> {
-    check_previous(influences, previous)?;
-    centers_counted_since(
-        Simd::detect(),
-        Some(cells::TOLERANCE),
-        positions,
-        triangles,
-        influences,
-        sigma,
-        Some(previous),
-        None,
-        false,
-        progress,
-        interrupted,
-    )
-    .map(|(c, _, _)| c)
+    update(positions, triangles, influences, sigma, previous, None, false, progress, interrupted).map(|(c, _)| c)
 }
 
 /// [`centers_of_rotation_update`] for strokes that follow one another: `kept`, what the update
@@ -176,21 +162,40 @@ pub fn centers_of_rotation_update_keeping(
     progress: &mut dyn FnMut(usize, usize) -> bool,
     interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<(Centers, CenterSums), SkinError> {
+    update(positions, triangles, influences, sigma, previous, kept, true, progress, interrupted)
+        .map(|(c, k)| (c, k.unwrap_or_else(|| CenterSums::new(sigma))))
+}
+
+/// An update on the copy of the inner loop this CPU runs, with the fast path.
+#[allow(clippy::too_many_arguments)]
+fn update(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    previous: PreviousCenters<'_>,
+    kept: Option<CenterSums>,
+    keep: bool,
+    progress: &mut dyn FnMut(usize, usize) -> bool,
+    interrupted: &mut dyn FnMut() -> bool,
+) -> Result<(Centers, Option<CenterSums>), SkinError> {
     check_previous(influences, previous)?;
+    let simd = Simd::detect();
+    let tolerance = Some(cells::TOLERANCE);
     centers_counted_since(
-        Simd::detect(),
-        Some(cells::TOLERANCE),
+        simd,
+        tolerance,
         positions,
         triangles,
         influences,
         sigma,
         Some(previous),
         kept,
-        true,
+        keep,
         progress,
         interrupted,
     )
-    .map(|(c, _, k)| (c, k.unwrap_or_else(|| CenterSums::new(sigma))))
+    .map(|(c, _, k)| (c, k))
 }
 
 fn check_previous(influences: &Influences, previous: PreviousCenters<'_>) -> Result<(), SkinError> {

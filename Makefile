@@ -126,7 +126,7 @@ ARM_SYSROOT := /usr/aarch64-linux-gnu
 # random meshes there, and the creature's certified fast path still runs. The stroke update on
 # the creature (a full precompute twice) likewise, and the weights (voxels and solvers, no
 # per-ISA code: they run natively and under Wine) take minutes there too.
-ARM_SKIP := precompute_matches_the_naive_formula_on_the_creature after_a_stroke_the_update_equals_the_full_precompute weights::
+ARM_SKIP := precompute_matches_the_naive_formula_on_the_creature after_a_stroke_the_update_equals_the_full_precompute strokes_that_follow_one_another weights::
 test-arm: $(STAMPS)/deps
 	@if ! command -v qemu-aarch64-static >/dev/null || [ ! -e $(ARM_SYSROOT)/lib/ld-linux-aarch64.so.1 ]; then \
 	  sudo=$$([ "$$(id -u)" = 0 ] || echo sudo); \

@@ -897,7 +897,7 @@ fn strokes_that_follow_one_another_take_the_kept_sums_and_still_equal_the_full_p
 
 #[test]
 fn sums_kept_for_another_sigma_are_not_taken() {
-    let c = Creature::new(5000).unwrap();
+    let c = Creature::new(2000).unwrap();
     let (p, t) = (&c.positions, &c.triangles);
     let first = repainted(p, &c.influences, 1000, 0.3, 3, 0.5);
     let second = repainted(p, &first, 1000, 0.3, 3, 0.9);

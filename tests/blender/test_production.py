@@ -30,6 +30,7 @@ from dqtest import (
     dq_skin_mods,
     draw_panel,
     evaluated_positions,
+    fed_runs,
     get_input,
     import_character,
     is_carrier,
@@ -205,6 +206,79 @@ def test_library_overrides_one_and_two_with_different_actions_saved_and_reopened
     check_frames([(objs[0], objs[2]), (objs[1], objs[3])])
     assert status(dq_skin, objs[0]).live and status(dq_skin, objs[1]).live
     assert moved(objs[1]) > 0.1
+
+
+def _layer_of(collection, layer=None):
+    """The view layer's collection entry of `collection` (at any depth)."""
+    layer = layer or bpy.context.view_layer.layer_collection
+    for child in layer.children:
+        if child.collection == collection:
+            return child
+        found = _layer_of(collection, child)
+        if found is not None:
+            return found
+    return None
+
+
+@pytest.mark.parametrize("how", ["collection", "excluded"])
+def test_an_overridden_character_in_a_hidden_collection_costs_nothing_and_shows_when_shown(dq_skin, tmp_path, how):
+    """A linked and overridden character whose collection is disabled in viewports or excluded
+    from the view layer (a shot's characters switched off while another is worked on): not
+    evaluated and not skinned while hidden; shown again by a script right before a frame change,
+    it shows that frame and is fed; the same after saving and reopening the shot while hidden."""
+    lib = tmp_path / "char.blend"
+    character_file(lib, rig="B-Bones")
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    body, _skel = override(lib)
+    assert body.override_library is not None
+    ref = plain_twin(body)  # (in the scene's own collection: it stays shown)
+    scene = bpy.context.scene
+
+    def set_hidden(obj, hidden: bool) -> None:
+        collection = obj.users_collection[0]
+        if how == "collection":
+            collection.hide_viewport = hidden
+        else:
+            _layer_of(collection).exclude = hidden
+
+    def evaluated(obj) -> bool:
+        return obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).is_evaluated
+
+    check_frames([(body, ref)], (3, 4))
+    assert fed_runs(dq_skin, body) > 0
+    set_hidden(body, True)
+    bpy.context.view_layer.update()
+    scene.frame_set(5)
+    runs = fed_runs(dq_skin, body)
+    for f in (6, 7):
+        scene.frame_set(f)
+        assert not evaluated(body), f"frame {f}: the hidden character is evaluated"
+    assert fed_runs(dq_skin, body) == runs, "the hidden character was skinned"
+    set_hidden(body, False)
+    scene.frame_set(8)
+    assert_same(body, ref, "shown by a script at the frame change")
+    scene.frame_set(9)
+    assert_same(body, ref, "frame 9")
+    assert fed_runs(dq_skin, body) == runs + 1, "the shown character is not fed"
+    # Saved while hidden, reopened: still not evaluated, and shown in the interface it shows
+    # the frame it is on.
+    set_hidden(body, True)
+    bpy.context.view_layer.update()
+    path = tmp_path / "shot.blend"
+    names = body.name, ref.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    body, ref = (next(o for o in bpy.data.objects if o.name == n and o.library is None) for n in names)
+    assert body.override_library is not None
+    scene = bpy.context.scene
+    scene.frame_set(10)
+    assert not evaluated(body)
+    set_hidden(body, False)
+    bpy.context.view_layer.update()
+    assert_same(body, ref, "shown after reopening")
+    check_frames([(body, ref)], (11, 12))
+    assert status(dq_skin, body).live
+    assert_fed(dq_skin, body)
 
 
 def _fcurves(action):

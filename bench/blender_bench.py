@@ -14,7 +14,8 @@ Cases (as in the issues): a 3k grid, CesiumMan, 200 CesiumMen, grids of 250k and
 100k grid on 16 B-Bones of 8 segments, the Rigify character of the tests (its skinning share:
 each frame minus the rig alone's), Optimized Centers (precompute on the Rigify body and on a 52k
 mesh, the update after a brush stroke), `dq_skin_add` to the first frame, a weight change, and
-Rigify's Re-Generate Rig with DQ Skin characters on the rig.
+Rigify's Re-Generate Rig with DQ Skin characters on the rig; and the memory DQ Skin adds to 200
+characters and to a million-vertex grid, each measured in a fresh process (`endtoend.memory`).
 
 Usage: python bench/blender_bench.py [--out FILE] [--quick] [--only GROUP...]
 """
@@ -30,14 +31,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 os.environ.setdefault("BLENDER_USER_RESOURCES", str(ROOT / ".blender_user"))
 
-from endtoend import cases  # noqa: E402
+from endtoend import cases, memory  # noqa: E402
 from endtoend.timing import ADDON  # noqa: E402
 
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
 
 import addon_utils  # noqa: E402  (importable once bpy is)
 
-GROUPS = ("small", "cesium", "crowd", "grid", "later", "bbones", "rigify", "centers", "binding", "weights", "regenerate")
+GROUPS = ("small", "cesium", "crowd", "grid", "later", "bbones", "rigify", "centers", "binding", "weights", "regenerate", "memory")
 
 
 def cpu_name() -> str:
@@ -56,9 +57,13 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "target" / "bench-blender.json")
     parser.add_argument("--quick", action="store_true", help="smaller meshes, fewer rounds")
     parser.add_argument("--only", nargs="*", default=None, choices=GROUPS, metavar="GROUP", help=f"case groups: {', '.join(GROUPS)}")
+    parser.add_argument("--memory-case", choices=sorted(memory.CASES), help=argparse.SUPPRESS)  # (run by the memory group)
     args = parser.parse_args()
     if addon_utils.enable(ADDON, default_set=True) is None:
         raise SystemExit("the DQ Skin extension is not installed: run make setup")
+    if args.memory_case:
+        print(json.dumps(memory.measure(args.memory_case)), flush=True)
+        return 0
     only = set(args.only or GROUPS)
     q = args.quick
     big = [250_000] if q else [250_000, 1_000_000]
@@ -96,6 +101,9 @@ def main() -> int:
         report(cases.case_weights(250_000, q))
     if "regenerate" in only:
         report(cases.case_regenerate(q))
+    if "memory" in only:
+        for case in memory.CASES:
+            report(memory.run_fresh(case))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     info = {"blender": bpy.app.version_string, "cpu": cpu_name(), "threads": os.cpu_count(), "rows": rows}
     args.out.write_text(json.dumps(info, indent=2))

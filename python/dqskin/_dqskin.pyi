@@ -157,6 +157,10 @@ class Influences:
     @property
     def max_per_vertex(self) -> int: ...
     @property
+    def nbytes(self) -> int:
+        """Bytes these influences hold (their lane-ordered copy for the kernels, the offsets, and
+        what an Optimized Centers update kept for the next one), for memory accounting."""
+    @property
     def offsets(self) -> npt.NDArray[np.uint32]: ...
     @property
     def bones(self) -> npt.NDArray[np.uint32]: ...

@@ -322,6 +322,8 @@ def test_strokes_that_follow_one_another_equal_the_full_precompute_and_compute_l
             np.testing.assert_array_equal(result[1], full[1], err_msg=f"stroke {stroke} {name}")
         if stroke > 0:
             assert work["kept"] < work["plain"], (stroke, work)
+        # What an update keeps shows in the memory the new weights account for.
+        assert after.nbytes > fresh.nbytes >= 8 * len(fresh) + 4 * (fresh.vertex_count + 1)
         weights, influences, centers = painted, after, got
 
 

@@ -246,6 +246,10 @@ class MeshCache:
         colors, normals...), not only in what DQ Skin reads (`MeshData.version`)."""
         return self._revisions.get(mesh.session_uid, 0)
 
+    def nbytes(self) -> int:
+        """Bytes of the positions read that it holds (a copy of each mesh's)."""
+        return sum(data.positions.nbytes for data in self._cache.values())
+
     def peek(self, obj) -> MeshData | None:
         """The cached data of `obj`'s mesh if it is current (no read)."""
         uid = obj.data.session_uid

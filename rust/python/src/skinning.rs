@@ -159,6 +159,14 @@ impl PyInfluences {
         self.0.max_per_vertex()
     }
 
+    /// Bytes these influences hold (their lane-ordered copy for the kernels, the offsets, and
+    /// what an Optimized Centers update kept for the next one), for memory accounting.
+    #[getter]
+    fn nbytes(&self) -> usize {
+        let kept = self.1.lock().unwrap_or_else(|p| p.into_inner()).as_ref().map_or(0, CenterSums::heap_bytes);
+        self.0.heap_bytes() + kept
+    }
+
     /// Total number of ``(bone, weight)`` pairs.
     fn __len__(&self) -> usize {
         self.0.len()

@@ -263,6 +263,14 @@ impl Influences {
         self.slots.len() * core::mem::size_of::<Slot>() + self.batch_starts.len() * 4
     }
 
+    /// The bytes they hold on the heap (offsets, lane-ordered slots, batch starts): for memory
+    /// accounting.
+    pub fn heap_bytes(&self) -> usize {
+        self.offsets.capacity() * 4
+            + self.slots.capacity() * core::mem::size_of::<Slot>()
+            + self.batch_starts.capacity() * 4
+    }
+
     /// The lane-ordered layout the kernels read, as 32-bit words: `(batch starts, slots)`.
     /// For benchmarks that need to touch exactly the kernels' bytes.
     #[doc(hidden)]

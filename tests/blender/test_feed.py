@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import pytest
 from conftest import node_route_for_every_size
 from dqtest import (
@@ -395,6 +396,25 @@ def test_files_hold_nothing_of_it_and_removing_dq_skin_removes_it(dq_skin, tmp_p
     assert_same(obj, reference, "after DQ Skin was removed")
 
 
+def file_positions(dq_skin, path) -> np.ndarray:
+    return np.fromfile(path, np.float32, offset=dq_skin.routes.pointcache.HEADER_SIZE).reshape(-1, 3)
+
+
+def test_the_cache_file_is_the_output(dq_skin):
+    """On the Mesh Cache route the kernel writes the carrier's file itself (mapped into memory):
+    no copy of the positions stays in the process, and the file holds what the object shows."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    st = dq_skin.SESSION.state_of(obj, dq_skin_mods(obj)[0])
+    assert route_of(dq_skin, obj) == "cache"
+    runs = fed_runs(dq_skin, obj)
+    for f in (6, 7):
+        bpy.context.scene.frame_set(f)
+        assert_same(obj, reference, f"frame {f}")
+        assert np.array_equal(file_positions(dq_skin, st.output.pointcache.path), evaluated_positions(obj))
+    assert fed_runs(dq_skin, obj) == runs + 2
+    assert dq_skin.routes.pointcache.is_mapped(st.output.buffer) and st.output.pointcache.is_buffer(st.output.buffer)
+
+
 def test_a_deleted_cache_file_is_made_again(dq_skin):
     obj, arm, reference = fed_character(dq_skin, "LINEAR")
     st = dq_skin.SESSION.state_of(obj, dq_skin_mods(obj)[0])
@@ -404,3 +424,7 @@ def test_a_deleted_cache_file_is_made_again(dq_skin):
         bpy.context.scene.frame_set(f)
         assert_same(obj, reference, f"frame {f} after the file was deleted")
     assert os.path.exists(path)
+    # The kernel writes the new file from then on (not the deleted one's memory).
+    assert st.output.pointcache.is_buffer(st.output.buffer)
+    bpy.context.scene.frame_set(11)
+    assert np.array_equal(file_positions(dq_skin, path), evaluated_positions(obj))

@@ -111,7 +111,7 @@ class FedFrame:
         where = self.session.routes.result.fed_out(target, dg) if m.kind is RouteKind.NODE else out.buffer
         if where is None:
             return None
-        if where is not out.buffer:
+        if job.out is not where:
             job.out = where
         return job, key, where
 

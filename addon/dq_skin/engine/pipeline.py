@@ -258,7 +258,9 @@ def _prepare(obj, obj_eval, target: Target, s: Settings, ctx: Context, source, p
     shown, wanted = (out.route, out.kind), decisions.shown_as(route, kind)
     if decisions.already_written(key, out.written, st.status.live, shown, wanted, force):
         return None
-    if out.buffer is None or len(out.buffer) != bound.vertex_count:
+    if route is RouteKind.CACHE:
+        out.buffer = session.routes.cache.buffer(target, bound.vertex_count)
+    elif out.buffer is None or len(out.buffer) != bound.vertex_count or pointcache.is_mapped(out.buffer):
         out.buffer = np.empty((bound.vertex_count, 3), np.float32)
     influences, rest = bound.influences, bound.rest
     if st.needs_effective:

@@ -91,12 +91,8 @@ class CacheRoute:
     def prepare(self, target: Target):
         """The modifier's carrier and file (made if missing; a copied carrier gets this
         modifier's own file)."""
-        obj, mod, out = target.obj, target.mod, target.st.output
-        path = path_for(target)
-        if out.pointcache is None or out.pointcache.path != path:
-            if out.pointcache is not None:
-                out.pointcache.close()
-            out.pointcache = pointcache.PointCache(path)
+        obj, mod = target.obj, target.mod
+        path = self._file_of(target).path
         carrier = carrier_by_path(obj, path) or carrier_of(obj, mod)
         if carrier is None:
             carrier = obj.modifiers.new(NAME, "MESH_CACHE")
@@ -109,6 +105,28 @@ class CacheRoute:
             carrier.filepath = path
         show_like(carrier, mod)
         return carrier
+
+    def _file_of(self, target: Target) -> pointcache.PointCache:
+        out = target.st.output
+        path = path_for(target)
+        if out.pointcache is None or out.pointcache.path != path:
+            if out.pointcache is not None:
+                out.pointcache.close()
+            out.pointcache = pointcache.PointCache(path)
+        return out.pointcache
+
+    def buffer(self, target: Target, n: int) -> np.ndarray:
+        """Where the kernel writes the modifier's `n` positions: its file's own memory (no copy
+        of them is kept)."""
+        return self._file_of(target).buffer(n)
+
+    def _write_file(self, target: Target, positions: np.ndarray) -> None:
+        out = target.st.output
+        cache = out.pointcache
+        cache.write(positions)
+        if out.buffer is positions and pointcache.is_mapped(positions) and not cache.is_buffer(positions):
+            # The file was made again (something deleted it): the kernel writes the new one's.
+            out.buffer = cache.buffer(len(positions))
 
     def show_like_modifier(self, target: Target) -> None:
         """The carrier shows in Edit Mode and on the cage where its DQ Skin modifier does (the
@@ -123,7 +141,7 @@ class CacheRoute:
         Blender reads the file again."""
         obj, mod, st = target.obj, target.mod, target.st
         carrier = self.prepare(target)
-        st.output.pointcache.write(positions)
+        self._write_file(target, positions)
         _drive(obj, carrier, self.feeds.carrier_of(target.key))
         if (carrier.show_viewport, carrier.show_render) != tuple(deforms):
             carrier.show_viewport, carrier.show_render = deforms
@@ -152,9 +170,8 @@ class CacheRoute:
 
     def fed_done(self, target: Target, positions: np.ndarray) -> None:
         """The feed skinned `positions` inside the evaluation: the carrier reads them next."""
-        cache = target.st.output.pointcache
-        if cache is not None:
-            cache.write(positions)
+        if target.st.output.pointcache is not None:
+            self._write_file(target, positions)
 
     def pass_through(self, target: Target) -> None:
         """DQ Skin does not deform: no carrier, and the node group passes the mesh through."""

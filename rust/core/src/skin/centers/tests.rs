@@ -3,7 +3,7 @@
 
 use super::super::isa::Simd;
 use super::super::tests::skin_all;
-use super::super::{Method, Pose, SkinError, SkinOptions};
+use super::super::{Method, Pose, SkinError, SkinOptions, MIN_TOTAL_WEIGHT};
 use super::*;
 use crate::rigs::{polygon_area, Creature, TwistCylinder};
 use glam::{DMat3, DQuat, DVec3, Mat4, Quat, Vec3};

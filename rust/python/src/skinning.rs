@@ -175,7 +175,7 @@ impl PyInfluences {
     /// A copy of the offsets (``uint32``, ``V+1``).
     #[getter]
     fn offsets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u32>> {
-        PyArray1::from_slice(py, self.0.offsets())
+        PyArray1::from_vec(py, self.0.offsets())
     }
 
     /// A copy of the bone indices (``uint32``).

@@ -111,7 +111,7 @@ mod tests {
         // Group 0 -> bone 1, group 1 -> bone 0, group 2 has no bone, group 3 -> bone 2.
         let map = [Some(1), Some(0), None, Some(2)];
         let inf = Influences::from_deform_groups(dg, &map, 3).unwrap();
-        assert_eq!(inf.offsets(), &[0, 3, 3, 3]);
+        assert_eq!(inf.offsets(), [0, 3, 3, 3]);
         let pairs: Vec<(u32, f32)> = inf.entries().iter().map(|e| (e.bone, e.weight)).collect();
         assert_eq!(pairs, vec![(2, 0.5), (1, 0.25), (0, 0.0)]);
         assert_eq!(deform_group_weights(dg, 0).unwrap(), vec![0.25, 0.0, 0.0]);

@@ -6,6 +6,7 @@ use super::SkinError;
 /// Blender (at most 4096 · 2⁻²⁴ ≈ 2.4e-4 relative error), and the lane layout pads a vertex's
 /// 15 neighbours to its count (128 bytes per influence of the largest), so both stay bounded.
 pub const MAX_INFLUENCES_PER_VERTEX: usize = 4096;
+const _: () = assert!(MAX_INFLUENCES_PER_VERTEX <= u16::MAX as usize);
 
 /// Vertices the kernels process together, one per SIMD lane.
 pub(crate) const LANES: usize = 16;
@@ -69,7 +70,10 @@ pub struct Influence {
 /// and non-negative. Weights need not sum to one and may be zero.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Influences {
-    offsets: Vec<u32>,
+    /// Each vertex's number of pairs (at most [`MAX_INFLUENCES_PER_VERTEX`]: 16 bits, half the
+    /// bytes of the CSR offsets they stand for).
+    counts: Vec<u16>,
+    pairs: usize,
     bone_count: usize,
     max_per_vertex: usize,
     /// The same influences in lane order for the kernels: batch `b` (vertices `b·LANES ..`) has
@@ -138,7 +142,9 @@ impl Influences {
         let (slots, batch_starts) = pack_lanes(offsets, &entries)?;
         // Only the lane order is kept: a vertex's pairs are read back from its lane (a crowd
         // keeps one set of influences per character).
-        Ok(Self { offsets: offsets.to_vec(), bone_count, max_per_vertex, slots, batch_starts })
+        // (Each count fits 16 bits: at most MAX_INFLUENCES_PER_VERTEX, checked above.)
+        let counts = offsets.windows(2).map(|w| (w[1] - w[0]) as u16).collect();
+        Ok(Self { counts, pairs: total, bone_count, max_per_vertex, slots, batch_starts })
     }
 
     /// From dense rows, as glTF stores joints and weights: vertex `v` lists the `per_vertex`
@@ -211,7 +217,7 @@ impl Influences {
     /// Number of vertices.
     #[inline]
     pub fn vertex_count(&self) -> usize {
-        self.offsets.len() - 1
+        self.counts.len()
     }
 
     /// Number of bones the indices refer to.
@@ -223,7 +229,7 @@ impl Influences {
     /// Total number of `(bone, weight)` pairs.
     #[inline]
     pub fn len(&self) -> usize {
-        self.offsets.last().map_or(0, |&n| n as usize)
+        self.pairs
     }
 
     #[inline]
@@ -240,16 +246,23 @@ impl Influences {
     /// The pairs of vertex `v`, in the given order (read from its lane of the kernels' slots).
     #[inline]
     pub fn of_vertex(&self, v: usize) -> impl ExactSizeIterator<Item = Influence> + Clone + '_ {
-        let count = (self.offsets[v + 1] - self.offsets[v]) as usize;
+        let count = usize::from(self.counts[v]);
         let (start, lane) = (self.batch_starts[v / LANES] as usize, v % LANES);
         self.slots[start..start + count]
             .iter()
             .map(move |s| Influence { bone: s.records[lane] / RECORD_UNIT as u32, weight: s.weights[lane] })
     }
 
-    #[inline]
-    pub fn offsets(&self) -> &[u32] {
-        &self.offsets
+    /// The CSR offsets (`V+1`, a copy: only each vertex's count is kept).
+    pub fn offsets(&self) -> Vec<u32> {
+        let mut offsets = Vec::with_capacity(self.counts.len() + 1);
+        offsets.push(0u32);
+        let mut at = 0u32;
+        for &c in &self.counts {
+            at += u32::from(c);
+            offsets.push(at);
+        }
+        offsets
     }
 
     /// Every pair, vertex by vertex (a copy: see [`Influences::of_vertex`]).
@@ -263,10 +276,10 @@ impl Influences {
         self.slots.len() * core::mem::size_of::<Slot>() + self.batch_starts.len() * 4
     }
 
-    /// The bytes they hold on the heap (offsets, lane-ordered slots, batch starts): for memory
+    /// The bytes they hold on the heap (counts, lane-ordered slots, batch starts): for memory
     /// accounting.
     pub fn heap_bytes(&self) -> usize {
-        self.offsets.capacity() * 4
+        self.counts.capacity() * 2
             + self.slots.capacity() * core::mem::size_of::<Slot>()
             + self.batch_starts.capacity() * 4
     }

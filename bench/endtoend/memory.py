@@ -2,13 +2,14 @@
 first reuses their freed memory, and its resident size would hide what DQ Skin keeps).
 
 The scene is built with Blender's Armature modifier and evaluated; then DQ Skin takes the
-Armature modifier's place and plays a few frames. DQ Skin's extra memory is the growth of the
-process's resident memory (measured after a garbage collection and `malloc_trim`, so that freed
-memory does not count) plus the point-cache files it keeps in memory-backed storage (`/dev/shm`
-is memory too, though it is no process's). It is set against the payload: the bytes of the
-meshes' positions (12 per vertex) and weights (8 per vertex-group entry). What DQ Skin itself
-holds is itemized from its session: output buffers, copies of the rest positions, influences
-(lane order and offsets), point-cache files (mapped into the process or not)."""
+Armature modifier's place and plays nine frames. DQ Skin's extra memory is the growth of the
+process's resident memory, measured after a garbage collection and `malloc_trim` (so that freed
+memory does not count) after each frame, the median kept and the range reported, plus the bytes
+of the point-cache files it keeps in memory-backed storage that are not mapped into the process
+(`/dev/shm` is memory too, though it is no process's). It is set against the payload: the bytes
+of the meshes' positions (12 per vertex) and weights (8 per vertex-group entry). What DQ Skin
+itself holds is itemized from its session: output buffers, copies of the rest positions,
+influences (lane order and counts), point-cache files (mapped into the process or not)."""
 
 from __future__ import annotations
 
@@ -31,7 +32,7 @@ CASES = {
     "grid_linear": ("Grid 1,000,000 vertices, 64 bones, Linear", "LINEAR"),
     "grid_dq": ("Grid 1,000,000 vertices, 64 bones, Dual Quaternion", "DUAL_QUATERNION"),
 }
-FRAMES = (3, 9, 15)
+FRAMES = (3, 9, 15, 21, 27, 33, 39, 5, 12)
 
 
 def _libc():
@@ -112,9 +113,13 @@ def measure(case: str) -> dict:
         bpy.context.scene.frame_set(f)
     before, shared_before, files_before = resident_bytes(), resident_shared_bytes(), cache_file_bytes()
     add_dq_skin(meshes, method)
+    # What stays resident changes from frame to frame (an array of positions freed in one frame
+    # and made in the next): measured after each frame, the median is the row's figure.
+    growth = []
     for f in FRAMES:
         bpy.context.scene.frame_set(f)
-    grown = resident_bytes() - before
+        growth.append(resident_bytes() - before)
+    grown = sorted(growth)[len(growth) // 2]
     held = held_by_dq_skin()
     # The files' bytes that are not already resident in this process as a mapping.
     unmapped_files = max(0, held["cache_files"] - files_before - (resident_shared_bytes() - shared_before))
@@ -126,6 +131,7 @@ def measure(case: str) -> dict:
         "route": routes.route_of(meshes[0]),
         "payload_bytes": payload,
         "resident_growth_bytes": grown,
+        "resident_growth_range_bytes": [min(growth), max(growth)],
         "unmapped_file_bytes": unmapped_files,
         "extra_bytes": extra,
         "extra_per_payload": extra / max(payload, 1),

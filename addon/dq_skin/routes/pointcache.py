@@ -41,7 +41,7 @@ class PointCache:
         self.file = open(self.path, "w+b", buffering=0)  # kept open; closed by `close`
         self.points = -1  # the point count its header says
         self._map = None
-        self._positions: np.ndarray | None = None  # the mapped positions
+        self._positions: np.ndarray | None = None  # the file's mapping, or (not mapped) an array of ours
 
     def _ready(self, n: int) -> None:
         """The file exists at its path (made again if something deleted it: Mesh Cache reads

@@ -10,8 +10,21 @@ class MeshMemory:
     def __init__(self, blend_file: bytes) -> None: ...
     def positions(self, mesh: object) -> npt.NDArray[np.float32] | None:
         """The ``(V, 3)`` vertex positions of a ``bpy.types.Mesh`` (None where this Blender keeps them elsewhere)."""
+    def positions_in_place(self, mesh: object) -> MeshPositions | None:
+        """The positions of an original ``bpy.types.Mesh`` where Blender keeps them (None where this Blender keeps them elsewhere)."""
     def deform_verts(self, mesh: object) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], npt.NDArray[np.float32]] | None:
         """The vertex-group weights of a ``bpy.types.Mesh`` in CSR form (None without any)."""
+
+class MeshPositions:
+    """A mesh's positions where Blender keeps them: a ``SkinJob`` given one reads Blender's array on every run."""
+    @property
+    def mesh(self) -> object: ...
+    def __len__(self) -> int: ...
+    def read(self) -> npt.NDArray[np.float32]:
+        """A ``(V, 3)`` copy of the positions as they are now."""
+
+def positions_digest(positions: npt.NDArray[np.float32] | MeshPositions) -> bytes:
+    """16 bytes that change whenever the positions do (the same for an array and a handle of the same positions)."""
 
 class PoseMemory:
     """Reads armature poses from Blender's memory (the layout from ``blend_file``'s SDNA)."""

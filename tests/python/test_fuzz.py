@@ -257,6 +257,7 @@ def catalogue():
         "armature_spaces": (dqskin.armature_spaces, lambda: dict(object_world=DEF[0], armature_world=DEF[1]), []),
         "memory.MeshMemory": (dqskin.memory.MeshMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
         "memory.PoseMemory": (dqskin.memory.PoseMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
+        "memory.positions_digest": (dqskin.memory.positions_digest, lambda: dict(positions=POS), []),
     }
     return c
 

@@ -209,3 +209,24 @@ def test_an_array_reshaped_after_building_is_refused_when_run():
     p.shape = (30,)
     with pytest.raises(ValueError, match=r"jobs\[0\]: positions must have shape \(10, 3\)"):
         dqskin.skin_many([job])
+
+
+def test_positions_digest_changes_with_any_bit_and_names_bad_input():
+    """What the extension compares instead of a kept copy of a mesh's positions
+    (`dqskin.memory.MeshPositions` is only made by the memory reader, inside Blender)."""
+    digest = dqskin.memory.positions_digest
+    rng = np.random.default_rng(3)
+    p = rng.standard_normal((1000, 3)).astype(np.float32)
+    d = digest(p)
+    assert isinstance(d, bytes) and len(d) == 16 and digest(p.copy()) == d
+    for i, j in ((0, 0), (517, 1), (999, 2)):
+        q = p.copy()
+        q[i, j] = np.nextafter(q[i, j], np.float32(np.inf))
+        assert digest(q) != d
+    assert digest(p[:999].copy()) != d and digest(np.zeros((0, 3), np.float32)) != digest(np.zeros((1, 3), np.float32))
+    with pytest.raises(ValueError, match="positions"):
+        digest(np.zeros((4, 2), np.float32))
+    with pytest.raises(TypeError, match="positions"):
+        digest(p.astype(np.float64))
+    with pytest.raises(TypeError):
+        dqskin.memory.MeshPositions()

@@ -107,6 +107,25 @@ class CheckedMesh:
             readers.positions_checked = True
         return got
 
+    def positions_in_place(self, mesh):
+        """The mesh's positions where Blender keeps them (`dqskin.memory.MeshPositions`: the
+        kernel reads them without a copy), or None: read them into an array instead."""
+        readers = self.readers
+        if readers._mesh is None or readers.positions_refused:
+            return None
+        got = readers._mesh.positions_in_place(mesh)
+        if got is None:
+            readers.positions_refused = True  # (this Blender keeps them elsewhere)
+            return None
+        if not readers.positions_checked:
+            what = memory_check.positions_differ(got.read(), mesh)
+            if what:
+                readers.positions_refused = True
+                readers.positions_error = f"the memory reader disagrees with Blender's data ({what}): the Python path reads instead"
+                return None
+            readers.positions_checked = True
+        return got
+
     def deform_verts(self, mesh):
         readers = self.readers
         if readers._mesh is None:  # refused since this wrapper was handed out

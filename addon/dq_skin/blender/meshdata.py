@@ -57,7 +57,10 @@ class MeshData:
     uid: int
     version: int
     counts: tuple  # vertices, edges, faces, corners
-    positions: np.ndarray  # (V, 3) float32
+    # What the kernel reads: the mesh's positions where Blender keeps them
+    # (`dqskin.memory.MeshPositions`, no copy of ours), or a `(V, 3)` float32 copy where the
+    # memory reader cannot give them (edit mode, a Blender it does not know).
+    source: object
     held_groups: Groups | None  # the weights as read; None once released or if there are none
     group_names: tuple
     keys: KeyData | None
@@ -68,11 +71,32 @@ class MeshData:
     reload: object = field(default=None, repr=False)
     # The weights read again were not those read first: the mesh is read again on its next use.
     changed_under: bool = False
+    positions_digest: bytes = b""
+    # A copy of the positions for what needs an array (B-Bone and envelope influences, the
+    # Optimized Centers' geometry): read when first needed, dropped by `release_positions`.
+    held_positions: np.ndarray | None = field(default=None, repr=False)
     _group_weights: dict = field(default_factory=dict, repr=False)
+
+    def __post_init__(self):
+        if isinstance(self.source, np.ndarray):
+            self.held_positions = self.source
 
     @property
     def vertex_count(self) -> int:
         return self.counts[0]
+
+    @property
+    def positions(self) -> np.ndarray:
+        """The `(V, 3)` float32 positions as an array (a copy of Blender's, kept until released,
+        where the kernel reads them in place)."""
+        if self.held_positions is None:
+            self.held_positions = self.source.read()
+        return self.held_positions
+
+    def release_positions(self) -> None:
+        """Drops the copy of the positions where the kernel reads Blender's own."""
+        if not isinstance(self.source, np.ndarray):
+            self.held_positions = None
 
     @property
     def groups(self) -> Groups | None:
@@ -136,6 +160,19 @@ def _read_groups_slowly(mesh) -> Groups | None:
     return Groups(offsets, np.asarray(groups, np.uint32), np.asarray(weights, np.float32))
 
 
+def positions_source(mesh, reader):
+    """What the kernel reads of the mesh's positions: Blender's own array through a
+    `dqskin.memory.MeshPositions` where `reader` can give one, else a copy (`read_positions`)."""
+    if reader is not None and not mesh.is_editmode and len(mesh.vertices):
+        try:
+            got = reader.positions_in_place(mesh)
+        except (ValueError, TypeError):
+            got = None
+        if got is not None:
+            return got
+    return read_positions(mesh, reader)
+
+
 def read_positions(mesh, reader) -> np.ndarray:
     """The mesh's `(V, 3)` float32 positions, from memory with `reader` where it can: Blender's
     Python API would make a mesh that shares its positions with its copies (a crowd of
@@ -190,11 +227,13 @@ def _reloader(mesh, reader, count: int):
 def _read(mesh, uid: int, version: int, group_names: tuple, reader) -> MeshData:
     counts = (len(mesh.vertices), len(mesh.edges), len(mesh.polygons), len(mesh.loops))
     groups = read_groups(mesh, reader)
+    source = positions_source(mesh, reader)
     return MeshData(
         uid=uid,
         version=version,
         counts=counts,
-        positions=read_positions(mesh, reader),
+        source=source,
+        positions_digest=dqskin.memory.positions_digest(source),
         held_groups=groups,
         group_names=group_names,
         keys=_keys(mesh),
@@ -204,8 +243,13 @@ def _read(mesh, uid: int, version: int, group_names: tuple, reader) -> MeshData:
     )
 
 
+def _kept_source(data: MeshData):
+    """The mesh whose positions `data.source` reads in place, or None (it holds an array)."""
+    return None if isinstance(data.source, np.ndarray) else data.source.mesh
+
+
 def _same(a: MeshData, b: MeshData) -> bool:
-    if a.counts != b.counts or a.group_names != b.group_names or not np.array_equal(a.positions, b.positions):
+    if a.counts != b.counts or a.group_names != b.group_names or a.positions_digest != b.positions_digest:
         return False
     if a.has_groups != b.has_groups or a.groups_digest != b.groups_digest:
         return False
@@ -247,8 +291,8 @@ class MeshCache:
         return self._revisions.get(mesh.session_uid, 0)
 
     def nbytes(self) -> int:
-        """Bytes of the positions read that it holds (a copy of each mesh's)."""
-        return sum(data.positions.nbytes for data in self._cache.values())
+        """Bytes of the positions it holds (copies: none where the kernel reads Blender's)."""
+        return sum(data.held_positions.nbytes for data in self._cache.values() if data.held_positions is not None)
 
     def peek(self, obj) -> MeshData | None:
         """The cached data of `obj`'s mesh if it is current (no read)."""
@@ -280,6 +324,8 @@ class MeshCache:
         self._version += 1
         new = _read(mesh, uid, self._version, names, reader)
         if old is not None and _same(old, new):
+            if _kept_source(old) is not mesh:  # (an array, or a handle of a mesh since replaced)
+                old.source, old.held_positions = new.source, new.held_positions
             return old
         self._cache[uid] = new
         return new

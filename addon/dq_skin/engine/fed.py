@@ -126,9 +126,11 @@ class FedFrame:
             if data is None or data.version != old.source.version:
                 return None, None
             try:
-                return inputs.mesh_input(target.obj, obj_eval, st, data, self.depsgraph)
+                positions, input_key = inputs.mesh_input(target.obj, obj_eval, st, data, self.depsgraph)
             except inputs.CaptureNeeded:
                 return None, None
+            # (Influences from B-Bones and envelopes depend on where the vertices are: an array.)
+            return (inputs.as_array(positions, data) if st.needs_effective else positions), input_key
         if source is Source.CHAIN:
             previous = m.previous
             written = outputs.get(id(previous)) if previous is not None else None

@@ -33,11 +33,12 @@ class CaptureNeeded(SkinError):
     """Shape keys DQ Skin cannot mix itself: it reads what reaches it from the evaluation."""
 
 
-def mesh_input(obj, obj_eval, st: ModifierState, data: MeshData, depsgraph) -> tuple[np.ndarray, InputKey]:
-    """The mesh's coordinates with its shape keys mixed, and a key that changes with them."""
+def mesh_input(obj, obj_eval, st: ModifierState, data: MeshData, depsgraph) -> tuple[object, InputKey]:
+    """The mesh's coordinates with its shape keys mixed (without shape keys, what the kernel
+    reads of the mesh: `MeshData.source`, see `as_array`), and a key that changes with them."""
     keys = data.keys
     if keys is None:
-        return data.positions, InputKey(Source.MESH, data.version)
+        return data.source, InputKey(Source.MESH, data.version)
     if not keys.relative:
         raise CaptureNeeded("absolute shape keys")
     key_eval = obj.data.shape_keys.evaluated_get(depsgraph)
@@ -71,6 +72,12 @@ def mesh_input(obj, obj_eval, st: ModifierState, data: MeshData, depsgraph) -> t
         raise CaptureNeeded(str(e)) from None
     out.mixed_key = input_key
     return out.mixed, input_key
+
+
+def as_array(positions, data: MeshData) -> np.ndarray:
+    """`positions` from `mesh_input` and the others as an array, for what reads them besides the
+    kernel (B-Bone and envelope influences depend on where the vertices are)."""
+    return data.positions if positions is data.source else positions
 
 
 def chain_input(previous: ModifierState | None, vertex_count: int) -> tuple[np.ndarray, InputKey]:

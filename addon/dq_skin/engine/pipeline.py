@@ -267,6 +267,7 @@ def _prepare(obj, obj_eval, target: Target, s: Settings, ctx: Context, source, p
         # Envelopes and B-Bone segments depend on where the vertices are: this frame's
         # influences, over the bones followed by the B-Bones' segment joints.
         cache = st.binding
+        positions = inputs.as_array(positions, data)
         influences = pose.influences(
             bones, bound, arm_eval, positions, input_key, premat, s.use_vertex_groups, s.use_envelopes, cache.envelopes, cache.segments
         )
@@ -274,6 +275,8 @@ def _prepare(obj, obj_eval, target: Target, s: Settings, ctx: Context, source, p
         if s.method == dqskin.Method.CENTERS_OF_ROTATION:
             binding.centers_of(obj, st, data, influences, ctx)
     out.job = binding.job(st, s, positions, influences, deform, rest, premat, postmat)
+    if not st.needs_effective:
+        data.release_positions()  # (the kernel reads Blender's; the binding and centers are made)
     return Plan(
         target, s, kind, route, key, out.job, deforms, start, render=ctx.render, data=data, previous=previous, scene=_scene(obj, ctx)
     )

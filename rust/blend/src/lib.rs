@@ -31,6 +31,6 @@ mod sdna;
 mod test_dna;
 
 pub use memory::ReadError;
-pub use mesh::{read_deform_verts, read_positions, DeformVerts, MeshLayout};
+pub use mesh::{positions_in_memory, read_deform_verts, read_positions, DeformVerts, MeshLayout};
 pub use pose::{read_pose, PoseLayout, MAX_CHANNELS};
 pub use sdna::{DnaError, Field, Sdna};

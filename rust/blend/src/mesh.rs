@@ -181,15 +181,39 @@ unsafe fn layer_data(layout: &MeshLayout, mesh: usize, matches: impl Fn(usize) -
 /// As for [`read_deform_verts`]: `mesh` is a live `Mesh` of `layout`'s Blender that no other
 /// thread changes during the call.
 pub unsafe fn read_positions(layout: &MeshLayout, mesh: usize, out: &mut [[f32; 3]]) -> Result<bool, ReadError> {
+    // SAFETY: the caller's guarantee, passed on; the slice is only read during this call.
+    match unsafe { positions_in_memory(layout, mesh, out.len()) }? {
+        Some(found) => {
+            out.copy_from_slice(found);
+            Ok(true)
+        }
+        None => Ok(false),
+    }
+}
+
+/// The vertex positions of the `Mesh` at `mesh` where Blender keeps them, without a copy:
+/// `Ok(None)` when the mesh keeps no `position` layer among its vertex data (a Blender that
+/// stores attributes elsewhere).
+///
+/// # Safety
+/// As for [`read_deform_verts`], for as long as the returned slice is used (`'a`): `mesh` is a
+/// live `Mesh` of `layout`'s Blender, and nothing frees, reallocates or writes its positions
+/// meanwhile. Blender's handlers and its evaluation both hold for the time of a call made from
+/// them: an evaluation reads original meshes and writes only their evaluated copies.
+pub unsafe fn positions_in_memory<'a>(
+    layout: &MeshLayout,
+    mesh: usize,
+    expected_vertices: usize,
+) -> Result<Option<&'a [[f32; 3]]>, ReadError> {
     if mesh == 0 {
         return Err(ReadError::Null);
     }
     // SAFETY: as in `read_deform_verts`; the name is compared within the array the SDNA sizes,
-    // and the positions are copied only after the vertex count matched `out`.
+    // and the slice covers exactly the vertex count the mesh states, checked first.
     unsafe {
         let verts: i32 = read(mesh + layout.verts_num);
-        if verts < 0 || verts as usize != out.len() {
-            return Err(ReadError::VertexCount { expected: out.len(), found: verts as i64 });
+        if verts < 0 || verts as usize != expected_vertices {
+            return Err(ReadError::VertexCount { expected: expected_vertices, found: verts as i64 });
         }
         let is_position = |layer: usize| {
             read::<i32>(layer + layout.layer_type) == CD_PROP_FLOAT3 && {
@@ -199,10 +223,12 @@ pub unsafe fn read_positions(layout: &MeshLayout, mesh: usize, out: &mut [[f32; 
         };
         let data = layer_data(layout, mesh, is_position)?;
         if data == 0 {
-            return Ok(out.is_empty());
+            return Ok((expected_vertices == 0).then_some(&[][..]));
         }
-        core::ptr::copy_nonoverlapping(data as *const u8, out.as_mut_ptr().cast::<u8>(), out.len() * 12);
-        Ok(true)
+        if data % align_of::<f32>() != 0 {
+            return Err(ReadError::Implausible("position array alignment"));
+        }
+        Ok(Some(core::slice::from_raw_parts(data as *const [f32; 3], expected_vertices)))
     }
 }
 
@@ -398,6 +424,30 @@ mod tests {
         mesh.vdata.totlayer = 2;
         // SAFETY: as above.
         assert_eq!(unsafe { read_positions(&layout, &mesh as *const _ as usize, &mut out) }, Ok(false));
+    }
+
+    #[test]
+    fn the_positions_in_memory_are_blenders_own_array() {
+        let layout = MeshLayout::new(&mesh_sdna(true)).unwrap();
+        let want = [[1.0f32, 2.0, 3.0], [-4.0, 5.5, 6.25]];
+        let (mut mesh, _l, _d, _w) = fake(&[vec![], vec![]], false);
+        let layers = [named(CD_PROP_FLOAT3, "position", want.as_ptr().cast())];
+        mesh.vdata.layers = layers.as_ptr();
+        mesh.vdata.totlayer = 1;
+        let p = &mesh as *const _ as usize;
+        // SAFETY: a live mesh of this layout whose layer points at a live array of two vertices,
+        // used while both live (here and below; wrong counts are refused before the layers).
+        let found = unsafe { positions_in_memory(&layout, p, 2) }.unwrap().unwrap();
+        assert_eq!(found, &want);
+        assert!(core::ptr::eq(found.as_ptr(), want.as_ptr()), "a view, not a copy");
+        // SAFETY: as above.
+        let wrong = unsafe { positions_in_memory(&layout, p, 3) };
+        assert_eq!(wrong, Err(ReadError::VertexCount { expected: 3, found: 2 }));
+        mesh.vdata.totlayer = 0;
+        // SAFETY: as above.
+        assert_eq!(unsafe { positions_in_memory(&layout, &mesh as *const _ as usize, 2) }, Ok(None));
+        // SAFETY: null is refused before any read.
+        assert_eq!(unsafe { positions_in_memory(&layout, 0, 2) }, Err(ReadError::Null));
     }
 
     #[test]

@@ -2,7 +2,9 @@
 //! Blender's math that come before skinning (shape keys, the armature spaces). Not Blender
 //! specific in their math; the memory reader is the only code that knows Blender's layout.
 
-use dqskin_blend::{read_deform_verts, read_positions, MeshLayout, Sdna};
+use std::hash::Hasher;
+
+use dqskin_blend::{positions_in_memory, read_deform_verts, read_positions, MeshLayout, Sdna};
 use dqskin_core::shape_keys::{self, KeyBlock};
 use dqskin_core::{DeformGroups, Influences};
 use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
@@ -52,6 +54,23 @@ impl PyMeshMemory {
         })
     }
 
+    /// A :class:`MeshPositions` of ``mesh`` (an original ``bpy.types.Mesh``): its positions
+    /// where Blender keeps them, read by the kernel on every run without a copy; or ``None`` if
+    /// this Blender keeps them where the reader does not look.
+    fn positions_in_place(&self, py: Python<'_>, mesh: &Bound<'_, PyAny>) -> PyResult<Option<PyMeshPositions>> {
+        guard(|| {
+            let (ptr, n) = mesh_pointer(py, mesh)?;
+            if !in_blend_data(py, mesh, ptr)? {
+                // (An evaluated mesh is made and freed by each evaluation: not a mesh to keep.)
+                return Err(PyValueError::new_err("mesh must be an original mesh of bpy.data, not an evaluated copy"));
+            }
+            // SAFETY: as for `deform_verts`; the slice is not kept.
+            let found = unsafe { positions_in_memory(&self.0, ptr, n) }
+                .map_err(|e| PyValueError::new_err(format!("mesh_pointer: {e}")))?;
+            Ok(found.map(|_| PyMeshPositions { layout: self.0, mesh: mesh.clone().unbind(), vertices: n }))
+        })
+    }
+
     /// ``(offsets, groups, weights)`` (``uint32``, ``uint32``, ``float32``): the weights of
     /// ``mesh`` (a ``bpy.types.Mesh``) in CSR form and stored order, or ``None`` if it has no
     /// vertex-group data.
@@ -77,6 +96,118 @@ impl PyMeshMemory {
     }
 }
 
+/// A mesh's vertex positions where Blender keeps them (``MeshMemory.positions_in_place``): a
+/// :class:`dqskin.SkinJob` given one as ``positions`` reads Blender's own array when it runs,
+/// instead of a copy kept beside it. The mesh is found again on every run (``as_pointer``): a
+/// mesh removed since, or one whose vertex count changed, makes that run's entry of
+/// :func:`dqskin.skin_many` an error, never a read of freed memory.
+#[pyclass(name = "MeshPositions", module = "dqskin.memory", frozen)]
+pub struct PyMeshPositions {
+    layout: MeshLayout,
+    mesh: Py<PyAny>,
+    vertices: usize,
+}
+
+impl PyMeshPositions {
+    /// The vertex count the mesh had when this was made.
+    pub(crate) fn vertex_count(&self) -> usize {
+        self.vertices
+    }
+
+    /// The positions as they are now, for one call.
+    ///
+    /// # Safety
+    /// The caller uses the slice only while Blender frees, reallocates and writes none of this
+    /// mesh's data: during a call made from a handler, an operator or a driver of Blender's
+    /// evaluation (the evaluation writes evaluated copies only; edit mode writes the mesh when
+    /// it is left, from an operator). Python threads other than the caller's must not change
+    /// meshes meanwhile, which Blender's API forbids anyway.
+    pub(crate) unsafe fn resolve<'a>(&self, py: Python<'_>) -> PyResult<&'a [[f32; 3]]> {
+        let mesh = self.mesh.bind(py);
+        let name = || mesh.getattr("name").map(|n| n.to_string()).unwrap_or_default();
+        let ptr: usize = match mesh.call_method0("as_pointer") {
+            Ok(p) => p.extract()?,
+            Err(_) => return Err(PyValueError::new_err("positions: the mesh was removed")),
+        };
+        // SAFETY: the mesh is live (Blender invalidates the Python object of a freed ID, so
+        // `as_pointer` just succeeded on a live one), original (checked when made), and unchanged
+        // while the slice is used (caller).
+        match unsafe { positions_in_memory(&self.layout, ptr, self.vertices) } {
+            Ok(Some(found)) => Ok(found),
+            Ok(None) => Err(PyValueError::new_err(format!("positions: the mesh '{}' has no position layer", name()))),
+            Err(e) => Err(PyValueError::new_err(format!("positions: the mesh '{}': {e}", name()))),
+        }
+    }
+}
+
+#[pymethods]
+impl PyMeshPositions {
+    /// The mesh (``bpy.types.Mesh``).
+    #[getter]
+    fn mesh(&self, py: Python<'_>) -> Py<PyAny> {
+        self.mesh.clone_ref(py)
+    }
+
+    /// The vertex count the mesh had when this was made (its positions must keep it).
+    fn __len__(&self) -> usize {
+        self.vertices
+    }
+
+    /// A ``(V, 3)`` float32 copy of the positions as they are now.
+    fn read<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        guard(|| {
+            // SAFETY: used only within this call, made from Python while Blender waits on it.
+            let found = unsafe { self.resolve(py) }?;
+            let out = numpy::PyArray2::<f32>::zeros(py, [found.len(), 3], false);
+            out.readwrite().as_slice_mut()?.copy_from_slice(found.as_flattened());
+            Ok(out.into_any())
+        })
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        let name = self.mesh.bind(py).getattr("name").map(|n| n.to_string()).unwrap_or_else(|_| "<removed>".into());
+        format!("MeshPositions(mesh={name:?}, vertices={})", self.vertices)
+    }
+}
+
+/// 16 bytes that change whenever ``positions`` do (``(V, 3)`` float32, or a
+/// :class:`dqskin.memory.MeshPositions`, read as it is now): compared instead of a copy kept to
+/// compare with. The same positions give the same bytes either way.
+#[pyfunction]
+fn positions_digest<'py>(py: Python<'py>, positions: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyBytes>> {
+    guard(|| {
+        let digest = if let Ok(handle) = positions.cast::<PyMeshPositions>() {
+            // SAFETY: used only within this call, made from Python while Blender waits on it.
+            let found = unsafe { handle.get().resolve(py) }?;
+            digest_of(found.as_flattened())
+        } else {
+            let a = arrays::readonly::<f32>(positions, "positions", &[None, Some(3)], &["V"])?;
+            digest_of(a.as_slice()?)
+        };
+        Ok(PyBytes::new(py, &digest))
+    })
+}
+
+/// Two SipHash-1-3 sums with different keys over the values' bits and their count.
+fn digest_of(values: &[f32]) -> [u8; 16] {
+    let mut out = [0u8; 16];
+    let mut bytes = [0u8; 4096];
+    for (key, part) in out.chunks_exact_mut(8).enumerate() {
+        let mut h = std::hash::DefaultHasher::new();
+        h.write_u64(key as u64);
+        h.write_usize(values.len());
+        for chunk in values.chunks(bytes.len() / 4) {
+            let used = &mut bytes[..chunk.len() * 4];
+            for (b, v) in used.chunks_exact_mut(4).zip(chunk) {
+                b.copy_from_slice(&v.to_bits().to_le_bytes());
+            }
+            h.write(used);
+        }
+        part.copy_from_slice(&h.finish().to_le_bytes());
+    }
+    out
+}
+
 /// Refuses `obj` (the argument `arg`) unless it is a real `bpy.types.<type_name>`: the memory
 /// readers take addresses from Blender itself, never from the caller.
 pub(crate) fn require_bpy_type(py: Python<'_>, obj: &Bound<'_, PyAny>, type_name: &str, arg: &str) -> PyResult<()> {
@@ -90,6 +221,15 @@ pub(crate) fn require_bpy_type(py: Python<'_>, obj: &Bound<'_, PyAny>, type_name
         return Err(PyTypeError::new_err(format!("{arg} must be a bpy.types.{type_name}, got {ty}")));
     }
     Ok(())
+}
+
+/// Whether `mesh` (at `ptr`) is the mesh of `bpy.data.meshes` of its name and library.
+fn in_blend_data(py: Python<'_>, mesh: &Bound<'_, PyAny>, ptr: usize) -> PyResult<bool> {
+    let name = mesh.getattr("name")?;
+    let library = mesh.getattr("library")?;
+    let path = if library.is_none() { library } else { library.getattr("filepath")? };
+    let found = py.import("bpy")?.getattr("data")?.getattr("meshes")?.call_method1("get", ((name, path),))?;
+    Ok(!found.is_none() && found.call_method0("as_pointer")?.extract::<usize>()? == ptr)
 }
 
 /// The address and vertex count of `mesh`, a real Blender mesh.
@@ -276,6 +416,8 @@ fn as_points_mut(flat: &mut [f32]) -> &mut [[f32; 3]] {
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyMeshMemory>()?;
+    m.add_class::<PyMeshPositions>()?;
+    m.add_function(wrap_pyfunction!(positions_digest, m)?)?;
     m.add_function(wrap_pyfunction!(influences_from_deform_groups, m)?)?;
     m.add_function(wrap_pyfunction!(deform_group_weights, m)?)?;
     m.add_function(wrap_pyfunction!(shape_key_mix, m)?)?;

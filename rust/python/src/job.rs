@@ -10,6 +10,7 @@ use pyo3::types::PySequence;
 
 use crate::args;
 use crate::arrays::{self, Shape};
+use crate::blender::PyMeshPositions;
 use crate::guard;
 use crate::method::PyMethod;
 use crate::skinning::{as_points, as_points_mut, matrices, skin_error, space, PyInfluences};
@@ -35,7 +36,7 @@ struct Args<'py> {
 struct Borrowed<'py> {
     method: PyMethod,
     influences: Bound<'py, PyInfluences>,
-    positions: PyReadonlyArrayDyn<'py, f32>,
+    positions: Points<'py>,
     deform: Vec<Mat4>,
     rest: Option<Vec<Mat4>>,
     premat: Option<Mat4>,
@@ -45,6 +46,31 @@ struct Borrowed<'py> {
     blend_factor: f32,
     centers: Option<PyReadonlyArrayDyn<'py, f32>>,
     out: PyReadwriteArrayDyn<'py, f32>,
+}
+
+/// The positions a run reads: an array, or a mesh's own in Blender's memory
+/// (`dqskin.memory.MeshPositions`), found for this run (or why they could not be).
+enum Points<'py> {
+    Array(PyReadonlyArrayDyn<'py, f32>),
+    InBlender(Result<&'py [[f32; 3]], String>),
+}
+
+/// `positions` (an array or a `MeshPositions`) for a run over `v` vertices.
+fn points<'py>(obj: &Bound<'py, PyAny>, v: usize) -> PyResult<Points<'py>> {
+    let Ok(handle) = obj.cast::<PyMeshPositions>() else {
+        return Ok(Points::Array(per_vertex(obj, "positions", &[Some(v), Some(3)], v)?));
+    };
+    let handle = handle.get();
+    if handle.vertex_count() != v {
+        return Err(PyValueError::new_err(format!(
+            "positions: a mesh of {} vertices (influences has {v} vertices)",
+            handle.vertex_count()
+        )));
+    }
+    // SAFETY: the slice lives in a `Borrowed`, which lives only for the call that made it (a
+    // `skin`, `skin_many` or `SkinJob` call made from Python while Blender waits on it).
+    let found = unsafe { handle.resolve(obj.py()) };
+    Ok(Points::InBlender(found.map_err(|e| e.value(obj.py()).to_string())))
 }
 
 fn given<'py>(obj: Option<&Bound<'py, PyAny>>) -> Option<Bound<'py, PyAny>> {
@@ -134,7 +160,7 @@ impl<'py> Args<'py> {
         let infl = &self.influences.get().0;
         let (v, b) = (infl.vertex_count(), infl.bone_count());
         let method = self.method;
-        let positions = per_vertex(&self.positions, "positions", &[Some(v), Some(3)], v)?;
+        let positions = points(&self.positions, v)?;
         let deform = per_bone(&self.deform, "deform", b)?;
         let rest = self.rest.as_ref().map(|r| per_bone(r, "rest", b)).transpose()?;
         if method != PyMethod::Linear && rest.is_none() {
@@ -187,17 +213,40 @@ impl<'py> Args<'py> {
     }
 }
 
+/// Whether `out`'s bytes overlap `points`' (numpy refuses an `out` that overlaps an input array;
+/// Blender's memory is checked here).
+fn overlaps(points: &[[f32; 3]], out: &PyReadwriteArrayDyn<'_, f32>) -> bool {
+    let Ok(o) = out.as_slice() else { return false }; // (not contiguous: refused when borrowed)
+    let (a, o) = (points.as_flattened().as_ptr_range(), o.as_ptr_range());
+    a.start < o.end && o.start < a.end
+}
+
 fn slice<'a>(a: &'a Option<PyReadonlyArrayDyn<'_, f32>>) -> PyResult<Option<&'a [f32]>> {
     Ok(a.as_ref().map(|a| a.as_slice()).transpose()?)
 }
 
 impl Borrowed<'_> {
-    /// The core's job over the borrowed arrays.
+    /// Why this run cannot read its positions (a mesh gone or changed since the job was made),
+    /// or None.
+    fn missing(&self) -> Option<String> {
+        match &self.positions {
+            Points::InBlender(Err(e)) => Some(e.clone()),
+            Points::InBlender(Ok(p)) if overlaps(p, &self.out) => Some("out overlaps the positions".into()),
+            _ => None,
+        }
+    }
+
+    /// The core's job over the borrowed arrays (`missing()` is None).
     fn job(&mut self) -> PyResult<ManyJob<'_>> {
         let centers = slice(&self.centers)?.map(as_points);
+        let positions = match &self.positions {
+            Points::Array(a) => as_points(a.as_slice()?),
+            Points::InBlender(Ok(p)) => p,
+            Points::InBlender(Err(e)) => return Err(PyValueError::new_err(e.clone())),
+        };
         Ok(ManyJob {
             method: self.method.core(slice(&self.blend)?, self.blend_factor, centers),
-            positions: as_points(self.positions.as_slice()?),
+            positions,
             influences: &self.influences.get().0,
             deform: &self.deform,
             rest: self.rest.as_deref(),
@@ -261,6 +310,9 @@ fn skin<'py>(
             centers,
         )?;
         let mut borrowed = args.borrow()?;
+        if let Some(e) = borrowed.missing() {
+            return Err(PyValueError::new_err(e));
+        }
         let mut job = borrowed.job()?;
         let result = positions.py().detach(|| dqskin_core::skin_many(std::slice::from_mut(&mut job)));
         result.into_iter().next().unwrap_or(Ok(())).map_err(skin_error)?;
@@ -376,7 +428,9 @@ impl SkinJob {
                 out,
                 centers,
             )?;
-            args.borrow()?;
+            if let Some(e) = args.borrow()?.missing() {
+                return Err(PyValueError::new_err(e));
+            }
             Ok(Self::keep(args))
         })
     }
@@ -386,7 +440,7 @@ impl SkinJob {
         self.method
     }
 
-    /// ``(V, 3)`` float32 positions (settable).
+    /// ``(V, 3)`` float32 positions, or a ``dqskin.memory.MeshPositions`` (settable).
     #[getter]
     fn positions(&self, py: Python<'_>) -> Py<PyAny> {
         self.positions.clone_ref(py)
@@ -396,7 +450,9 @@ impl SkinJob {
     fn set_positions(&mut self, py: Python<'_>, value: Bound<'_, PyAny>) -> PyResult<()> {
         guard(|| {
             let (v, _) = self.counts(py);
-            per_vertex(&value, "positions", &[Some(v), Some(3)], v)?;
+            if let Points::InBlender(Err(e)) = points(&value, v)? {
+                return Err(PyValueError::new_err(e));
+            }
             self.positions = value.unbind();
             Ok(())
         })
@@ -530,9 +586,20 @@ fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, PyAny>) -> PyResult<Vec<Opt
             let args = job.borrow().args(py);
             borrowed.push(args.borrow().map_err(|e| naming_the_job(py, i, e))?);
         }
-        let mut many = borrowed.iter_mut().map(Borrowed::job).collect::<PyResult<Vec<_>>>()?;
+        // A job whose mesh is gone or changed since it was made fails alone, as a kernel error would.
+        let mut entries: Vec<Option<String>> = borrowed.iter().map(Borrowed::missing).collect();
+        let runs: Vec<usize> = (0..count).filter(|&i| entries[i].is_none()).collect();
+        let mut many = borrowed
+            .iter_mut()
+            .zip(&entries)
+            .filter(|(_, e)| e.is_none())
+            .map(|(b, _)| b.job())
+            .collect::<PyResult<Vec<_>>>()?;
         let results = py.detach(|| dqskin_core::skin_many(&mut many));
-        Ok(results.into_iter().map(|r| r.err().map(|e| e.to_string())).collect())
+        for (i, r) in runs.into_iter().zip(results) {
+            entries[i] = r.err().map(|e| e.to_string());
+        }
+        Ok(entries)
     })
 }
 

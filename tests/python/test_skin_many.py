@@ -4,6 +4,7 @@ would skin it; jobs checked when built and when their per-frame inputs are repla
 from __future__ import annotations
 
 import dqskin
+import dqskin.memory
 import numpy as np
 import pytest
 

@@ -264,8 +264,9 @@ class SkinJob:
     deform: F32Array
     premat: ArrayLike | None
     postmat: ArrayLike | None
-    out: F32Array
-    """Where the result is written: a writable, C-contiguous ``(V, 3)`` float32 array."""
+    out: F32Array | None
+    """Where the result is written: a writable, C-contiguous ``(V, 3)`` float32 array (None between
+    runs keeps no array; a job without one is refused when it runs)."""
     @property
     def method(self) -> Method: ...
     @property

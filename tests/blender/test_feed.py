@@ -428,3 +428,45 @@ def test_a_deleted_cache_file_is_made_again(dq_skin):
     assert st.output.pointcache.is_buffer(st.output.buffer)
     bpy.context.scene.frame_set(11)
     assert np.array_equal(file_positions(dq_skin, path), evaluated_positions(obj))
+
+
+@pytest.mark.parametrize("method", ["DUAL_QUATERNION", "CENTERS_OF_ROTATION"])
+def test_the_result_route_keeps_no_buffer_between_fed_frames(dq_skin, monkeypatch, method):
+    """On the result-object route the feed writes each frame into the result Blender evaluates:
+    DQ Skin keeps no output array of its own between full evaluations (12 bytes a vertex), and
+    what needs the last frame shown still gets it: Edit Mode shows it, Apply as Shape Key
+    stores the frame's positions, the frames after equal the Armature modifier's."""
+    from dqtest import animated_tube
+
+    node_route_for_every_size(dq_skin, monkeypatch)
+    obj, _arm, _ = animated_tube()
+    reference = reference_copy(obj, True)
+    add_dq_skin(obj, method)
+    dq_skin_mods(obj)[0].show_in_editmode = True  # (Edit Mode shows the pose)
+    select_only(obj)
+    bpy.context.scene.frame_set(3)
+    assert route_of(dq_skin, obj) == "node", status(dq_skin, obj).message
+    st = dq_skin.SESSION.state_of(obj, dq_skin_mods(obj)[0])
+    runs = fed_runs(dq_skin, obj)
+    for k, f in enumerate((5, 9), start=1):
+        bpy.context.scene.frame_set(f)
+        assert fed_runs(dq_skin, obj) == runs + k
+        assert st.output.buffer is None and st.output.job.out is None, "a buffer kept between fed frames"
+        if method == "DUAL_QUATERNION":
+            assert_same(obj, reference, f"frame {f}")
+    shown = evaluated_positions(obj)
+    assert st.output.buffer is None
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.context.view_layer.update()
+    assert deviation(evaluated_positions(obj), shown) <= 1e-6, "Edit Mode shows the last frame"
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bpy.context.scene.frame_set(12)
+    if method == "DUAL_QUATERNION":
+        assert_same(obj, reference, "frame 12, after Edit Mode")
+    shown = evaluated_positions(obj)
+    mod = dq_skin_mods(obj)[0]
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.object.dq_skin_apply_as_shape_key(modifier=mod.name, keep_modifier=True) == {"FINISHED"}
+    stored = np.empty(len(obj.data.vertices) * 3, np.float32)
+    obj.data.shape_keys.key_blocks[-1].data.foreach_get("co", stored)
+    assert deviation(stored.reshape(-1, 3), shown) <= 1e-6

@@ -93,7 +93,7 @@ def test_the_per_frame_inputs_can_be_replaced_on_a_kept_job():
         ("out", np.zeros((7, 3), F), ValueError, ["out", "(10, 3)"]),
         ("out", np.zeros((10, 3)), TypeError, ["out", "float32"]),
         ("out", np.zeros((10, 3), F)[::-1], ValueError, ["out", "contiguous"]),
-        ("out", None, TypeError, ["out"]),
+        ("out", "buffer", TypeError, ["out"]),
     ],
 )
 def test_a_refused_replacement_names_the_argument_and_leaves_the_job(attribute, value, error, words):
@@ -137,6 +137,21 @@ def test_out_can_be_replaced_by_a_view_of_other_memory():
     with pytest.raises(ValueError, match="out"):
         job.out = p  # writing over an input is refused when it runs, or here
         dqskin.skin_many([job])
+
+
+def test_a_job_can_keep_no_out_between_runs():
+    """`out = None` drops the job's array (a caller that writes elsewhere each run keeps no
+    buffer); run so, the job is refused naming it, and another `out` makes it run again."""
+    rng = np.random.default_rng(5)
+    p, inf, d, r = mesh(rng, 20, 2)
+    job = dqskin.SkinJob(p, inf, d, r)
+    job.out = None
+    assert job.out is None
+    with pytest.raises(ValueError, match=r"jobs\[0\]: out is not set"):
+        dqskin.skin_many([job])
+    job.out = np.empty((20, 3), F)
+    assert dqskin.skin_many([job]) == [None]
+    np.testing.assert_array_equal(job.out, dqskin.skin(p, inf, d, r))
 
 
 def test_a_failing_job_reports_its_error_and_leaves_its_out_alone():

@@ -50,9 +50,10 @@ def binding(obj, arm, arm_eval, st: ModifierState, s: Settings, data: MeshData, 
     return cache.binding
 
 
-def job(st: ModifierState, s: Settings, positions, influences, deform, rest, premat, postmat) -> dqskin.SkinJob:
-    """The `dqskin.SkinJob` of one modifier: its settings, kept data and output (checked here:
-    a bad input, a bone scaled to NaN say, is this modifier's error, shown on its panel)."""
+def job(st: ModifierState, s: Settings, positions, influences, deform, rest, premat, postmat, out=None) -> dqskin.SkinJob:
+    """The `dqskin.SkinJob` of one modifier: its settings, kept data and output (`out`, else
+    the modifier's buffer; checked here: a bad input, a bone scaled to NaN say, is this
+    modifier's error, shown on its panel)."""
     method = s.method
     # The Blend Amount is a vertex group, or one value for every vertex (scaled by the factor).
     factor = s.blend_factor if s.blend_group else s.blend_factor * s.blend_amount
@@ -68,7 +69,7 @@ def job(st: ModifierState, s: Settings, positions, influences, deform, rest, pre
             mask=st.binding.binding.mask,
             blend=st.binding.blend if method == dqskin.Method.BLEND else None,
             blend_factor=factor,
-            out=st.output.buffer,
+            out=st.output.buffer if out is None else out,
             centers=st.binding.centers if method == dqskin.Method.CENTERS_OF_ROTATION else None,
         )
     except (TypeError, ValueError) as e:

@@ -47,6 +47,10 @@ class FedFrame:
             errors = dqskin.skin_many([job for _m, job, _key, _out in ready])
             for (m, job, key, out), error in zip(ready, errors):
                 st = m.target.st
+                if error is None and m.kind is RouteKind.NODE and m.alone:
+                    # The result Blender evaluates holds this frame: no buffer of ours is kept
+                    # until the next full evaluation (12 bytes a vertex; `pipeline` makes one).
+                    st.output.buffer = None
                 if out is not st.output.buffer:
                     job.out = st.output.buffer  # (the view of Blender's memory is not kept)
                 if error is not None:
@@ -99,18 +103,18 @@ class FedFrame:
         key = FrameKey(old.settings, input_key, pose_key, premat.tobytes(), old.result, old.mesh_version)
         if key == old:
             return None  # already this (what the carrier reads holds it)
+        where = self.session.routes.result.fed_out(target, dg) if m.kind is RouteKind.NODE else out.buffer
+        if where is None:
+            return None
         if influences is not job.influences:
             if s.method == dqskin.Method.CENTERS_OF_ROTATION:
                 return None  # other influences need their own centers: the full evaluation computes them
-            job = out.job = binding.job(st, s, positions, influences, deform, rest, premat, postmat)
+            job = out.job = binding.job(st, s, positions, influences, deform, rest, premat, postmat, out=where)
         else:
             if job.positions is not positions:
                 job.positions = positions
             job.deform = deform
             job.premat, job.postmat = premat, postmat
-        where = self.session.routes.result.fed_out(target, dg) if m.kind is RouteKind.NODE else out.buffer
-        if where is None:
-            return None
         if job.out is not where:
             job.out = where
         return job, key, where

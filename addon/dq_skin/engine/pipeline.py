@@ -136,14 +136,15 @@ def _in_edit_mode(ctx: Context, target: Target, s: Settings, deforms) -> bool:
     leaving Edit Mode)."""
     st = target.st
     out = st.output
-    if not st.status.live or out.buffer is None or len(out.buffer) != len(target.obj.data.vertices):
+    n = len(target.obj.data.vertices)
+    if st.status.live and out.route is RouteKind.NODE:
+        # The feed wrote the last frames into the result's evaluated mesh (it keeps no buffer).
+        fed = ctx.session.routes.result.fed_out(target, ctx.depsgraph)
+        if fed is not None and len(fed) == n:
+            out.buffer = fed.copy()
+    if not st.status.live or out.buffer is None or len(out.buffer) != n:
         raise SkinError("The mesh is in Edit Mode (DQ Skin deforms it again in Object Mode)")
     if out.route is not RouteKind.CACHE:
-        if out.route is RouteKind.NODE:
-            # The feed wrote the last frames into the result's evaluated mesh, not the buffer.
-            fed = ctx.session.routes.result.fed_out(target, ctx.depsgraph)
-            if fed is not None:
-                out.buffer[:] = fed
         ctx.session.routes.publish(
             target, RouteKind.CACHE, out.buffer, out.kind, None, deforms, _member(target, s, RouteKind.CACHE, None), _scene(target.obj, ctx)
         )
@@ -314,6 +315,7 @@ def _member(target: Target, s: Settings, route: RouteKind, previous) -> Member:
         obj.data.shape_keys,
         list(obj.modifiers).index(target.mod),
         previous,
+        alone=len(dq_skin_modifiers(obj)) == 1,
     )
 
 

@@ -52,6 +52,7 @@ class Member:
     shape_keys: object = None  # the mesh's Key, whose values come each frame
     order: int = 0  # the modifier's index in its stack (a chain's earlier modifier first)
     previous: object = None  # the ModifierState of the DQ Skin before it, whose output reaches it
+    alone: bool = True  # no DQ Skin after it reads its output (it keeps no buffer between frames)
     ordered: bool = False  # the batch's variables cover it (until then the handler skins it)
     # Blender would not evaluate its object in the viewport (disabled there, or in no enabled
     # collection): no variable follows it, since a variable would pull it into the graph

@@ -99,9 +99,9 @@ class ResultRoute:
 
     def fed_out(self, target: Target, depsgraph) -> np.ndarray | None:
         """Where the feed's kernel writes this frame: the result mesh `depsgraph` evaluates."""
-        result = target.st.output.result
-        view = results.evaluated_positions(result, depsgraph) if result is not None else None
-        return view if view is not None and len(view) == len(target.st.output.buffer) else None
+        result, bound = target.st.output.result, target.st.binding.binding
+        view = results.evaluated_positions(result, depsgraph) if result is not None and bound is not None else None
+        return view if view is not None and len(view) == bound.vertex_count else None
 
     def pass_through(self, target: Target) -> None:
         set_mode(target.mod, ResultMode.OFF)

@@ -190,6 +190,11 @@ impl<'py> Args<'py> {
             (Some(_), false) => return Err(PyValueError::new_err("centers is only used with method='centers_of_rotation'")),
             (None, false) => None,
         };
+        if self.out.is_none() {
+            return Err(PyValueError::new_err(
+                "out is not set: give the job the (V, 3) float32 array to write (job.out = ...) before it runs",
+            ));
+        }
         let out = sized_by_influences(
             &self.out,
             v,
@@ -535,7 +540,8 @@ impl SkinJob {
     }
 
     /// The ``(V, 3)`` float32 array the result is written to (settable: a writable,
-    /// C-contiguous array of the same shape, such as a view of memory the caller owns).
+    /// C-contiguous array of the same shape, such as a view of memory the caller owns; or None
+    /// between runs, so that the job keeps no array: set it again before the job runs).
     #[getter]
     fn out(&self, py: Python<'_>) -> Py<PyAny> {
         self.out.clone_ref(py)
@@ -544,6 +550,10 @@ impl SkinJob {
     #[setter]
     fn set_out(&mut self, py: Python<'_>, value: Bound<'_, PyAny>) -> PyResult<()> {
         guard(|| {
+            if value.is_none() {
+                self.out = value.unbind();
+                return Ok(());
+            }
             let (v, _) = self.counts(py);
             let checked = arrays::readwrite::<f32>(&value, "out", &[Some(v), Some(3)], &["V"]).map(drop);
             sized_by_influences(&value, v, "vertices", checked)?;

@@ -4,6 +4,7 @@
 - `states`: each DQ Skin modifier's state (`model.state`);
 - `tracker`: the DQ Skin objects and what they depend on (`engine.tracker`);
 - `meshes`: what was read of each mesh (`blender.meshdata`);
+- `influences`: the influences bindings share (`engine.binding.SharedInfluences`);
 - `readers`: the readers of Blender's memory (`blender.memory`);
 - `scan`: what simulates on what (`blender.consumers`);
 - `routes`: how positions reach Blender, with the feed (`routes`);
@@ -21,6 +22,7 @@ from __future__ import annotations
 from .blender.consumers import Scan
 from .blender.memory import Readers
 from .blender.meshdata import MeshCache
+from .engine.binding import SharedInfluences
 from .engine.centers import Centers
 from .engine.context import mod_key
 from .engine.fed import skin_members
@@ -39,6 +41,7 @@ class Session:
         self.exports = Exports()
         self.states = States()
         self.meshes = MeshCache()
+        self.influences = SharedInfluences()
         self.readers = Readers()
         self.scan = Scan()
         self.centers = Centers(interrupted=self.signals.requested)
@@ -58,6 +61,7 @@ class Session:
         self.states.clear()
         self.routes.feeds.close()
         self.meshes.forget()
+        self.influences.forget()
         self.scan.version = -1
 
     def close(self) -> None:

@@ -129,6 +129,46 @@ def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method, ri
     assert len({output_of(o, dq_skin_mods(o)[0]) for o, _ in pairs}) == len(pairs)
 
 
+@pytest.mark.parametrize("method", METHODS)
+def test_a_crowd_of_copies_shares_one_influences_until_one_is_painted(dq_skin, method):
+    """Copies of a character (each with its own copy of the mesh, as Shift+D makes them) on
+    their own armatures: their bindings share one `Influences` (the same weights on bones
+    mapped the same way); painting one copy gives it its own, the others keep theirs, and every
+    frame equals the Armature modifier's."""
+    obj, arm, _ = animated_tube()
+    add_dq_skin(obj, method)
+    pairs = [(obj, twin(obj))]
+    for i in range(1, 4):
+        a = arm.copy()
+        a.data = arm.data
+        a.animation_data_clear()
+        bpy.context.scene.collection.objects.link(a)
+        animate(a, seed=0.2 * i)
+        a.location.x = 2.5 * i
+        o = obj.copy()
+        o.data = obj.data.copy()  # (its own mesh)
+        bpy.context.scene.collection.objects.link(o)
+        o.parent = a
+        mod = dq_skin_mods(o)[0]
+        dq_skin.blender.nodes.put(mod, "Armature", a)
+        o.modifiers[dq_skin.blender.nodes.get_companion(mod)["name"]].object = a
+        pairs.append((o, twin(o)))
+
+    def influences():
+        return [dq_skin.SESSION.state_of(o, dq_skin_mods(o)[0]).binding.binding.influences for o, _ in pairs]
+
+    check_frames(pairs)
+    first = influences()
+    assert all(i is first[0] for i in first), "copies with the same weights bind to one Influences"
+    painted = pairs[2][0]
+    painted.vertex_groups[0].add(list(range(0, len(painted.data.vertices), 3)), 0.25, "REPLACE")
+    painted.data.update()
+    check_frames(pairs)
+    after = influences()
+    assert after[2] is not first[0] and all(after[k] is first[0] for k in (0, 1, 3))
+    assert not np.array_equal(after[2].weights, first[0].weights)
+
+
 # -- files: append, link, override, without the add-on ------------------------------------------
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import dqskin
-from .meshdata import MeshData
+from .meshdata import MeshData, digest_of
 
 
 @dataclass
@@ -39,11 +39,12 @@ class Binding:
     """The binding signature of the last pose from memory whose bones matched these."""
 
 
-def bind(data: MeshData, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True) -> Binding:
+def bind(data: MeshData, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True, shared=None) -> Binding:
     """Influences of a mesh's vertex groups (`data`) on `armature`'s deforming bones. The bone
     indices run over every deforming pose bone in Blender's order (what envelopes need too);
     zero weights are kept, since a vertex with any group mapped to a bone never uses envelopes.
-    `data`: the mesh's `meshdata.MeshData`."""
+    `data`: the mesh's `meshdata.MeshData`. `shared(key, make)`: the influences of that key if
+    another binding made them (the same weights on bones mapped the same way), else `make()`'s."""
     deform = np.empty(len(armature.data.bones), bool)
     armature.data.bones.foreach_get("use_deform", deform)
     # data.bones and pose.bones share their order.
@@ -61,10 +62,18 @@ def bind(data: MeshData, armature, mask_group: str = "", invert_mask: bool = Fal
             group_to_bone[g] = ours.get(name, -1)
     n = data.vertex_count
     groups = data.groups
-    if groups is None:
-        influences = dqskin.Influences(np.zeros(n + 1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float32), len(bone_names))
+
+    def make():
+        if groups is None:
+            return dqskin.Influences(np.zeros(n + 1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float32), len(bone_names))
+        return dqskin.influences_from_deform_groups(groups.offsets, groups.groups, groups.weights, group_to_bone, len(bone_names))
+
+    if shared is None:
+        influences = make()
     else:
-        influences = dqskin.influences_from_deform_groups(groups.offsets, groups.groups, groups.weights, group_to_bone, len(bone_names))
+        # (Weights read again that differ from those first read have their own digest.)
+        digest = digest_of(groups) if data.changed_under else data.groups_digest
+        influences = shared((digest, n, group_to_bone.tobytes(), len(bone_names)), make)
     # Outside the mask group a vertex's weight in it is 0. Blender applies the mask only to
     # meshes that have vertex weights at all.
     mask = None

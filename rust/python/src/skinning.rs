@@ -25,7 +25,7 @@ pub(crate) fn skin_error(e: SkinError) -> PyErr {
 /// this order, as Blender does with a vertex's stored groups). ``offsets`` has ``V+1`` entries
 /// starting at 0; bones are below ``bone_count``; weights are finite and ≥ 0 and need not sum
 /// to one. Index arrays may have any integer dtype; ``weights`` must be float32.
-#[pyclass(name = "Influences", module = "dqskin", frozen)]
+#[pyclass(name = "Influences", module = "dqskin", frozen, weakref)]
 pub struct PyInfluences(pub Influences, Mutex<Option<CenterSums>>);
 
 impl PyInfluences {

@@ -167,7 +167,7 @@ pub fn centers_of_rotation_update_keeping(
     interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<(Centers, CenterSums), SkinError> {
     update(positions, triangles, influences, sigma, previous, kept, true, progress, interrupted)
-        .map(|(c, k)| (c, k.unwrap_or_else(|| CenterSums::new(sigma))))
+        .map(|(c, k)| (c, k.unwrap_or_else(|| CenterSums::new(sigma, kept::geometry_of(positions, triangles)))))
 }
 
 /// An update on the copy of the inner loop this CPU runs, with the fast path.
@@ -288,7 +288,8 @@ pub(super) fn centers_counted_since(
     let inv_sigma2 = 1.0 / (f64::from(sigma) * f64::from(sigma));
     // Per-pair values are kept and reused only with the fast path (no underflow shift).
     let keep = keep && tolerance.is_some() && inv_sigma2 <= SHIFT_THRESHOLD;
-    let kept = kept.filter(|k| keep && k.is_for(sigma));
+    let geometry = if keep { kept::geometry_of(positions, triangles) } else { 0 };
+    let kept = kept.filter(|k| keep && k.is_for(sigma, geometry));
     // The classes to compute: every one, or those a weight change since `previous` reaches.
     let reach = previous.map(|p| Reach::new(triangles, &WeightVectors::new(p.influences), &weights));
     let todo: Vec<usize> = match &reach {
@@ -415,7 +416,7 @@ pub(super) fn centers_counted_since(
     // What the next update can take: the values of every current class, computed now or kept.
     let next = keep.then(|| {
         let mut kept = kept;
-        let mut next = CenterSums::new(sigma);
+        let mut next = CenterSums::new(sigma, geometry);
         let mut outcomes: Vec<Option<Outcome>> = outcomes.into_iter().map(Some).collect();
         for (c, member) in classes.members.iter().enumerate() {
             let key = kept::key_of(&weights, member.first);

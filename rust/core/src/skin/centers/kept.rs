@@ -11,9 +11,29 @@
 //! changed, with values no longer true.
 
 use std::collections::{HashMap, HashSet};
+use std::hash::Hasher;
 
 use super::super::isa::Simd;
 use super::{cells, sums, PairIndex, WeightKey, WeightVectors, SHIFT_THRESHOLD};
+
+/// A fingerprint of `positions` and `triangles` (SipHash over their bits and counts): kept sums
+/// hold only for the geometry they were computed on.
+pub(super) fn geometry_of(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> u64 {
+    let mut h = std::hash::DefaultHasher::new();
+    h.write_usize(positions.len());
+    for p in positions {
+        for c in p {
+            h.write_u32(c.to_bits());
+        }
+    }
+    h.write_usize(triangles.len());
+    for t in triangles {
+        for &i in t {
+            h.write_u32(i);
+        }
+    }
+    h.finish()
+}
 
 /// One pair's part of a vertex's fast-path totals: `Σ e·P` and `Σ e·P·c` (raw entries plus
 /// expanded cells) and the cells' error bound; `None` where the pair has no list.
@@ -33,17 +53,21 @@ pub(super) struct ClassSums {
 #[derive(Default)]
 pub struct CenterSums {
     sigma_bits: u32,
+    /// [`geometry_of`] the positions and triangles they were computed on.
+    geometry: u64,
     classes: HashMap<WeightKey, ClassSums>,
 }
 
 impl CenterSums {
-    pub(super) fn new(sigma: f32) -> Self {
-        Self { sigma_bits: sigma.to_bits(), classes: HashMap::new() }
+    pub(super) fn new(sigma: f32, geometry: u64) -> Self {
+        Self { sigma_bits: sigma.to_bits(), geometry, classes: HashMap::new() }
     }
 
-    /// Whether these sums were computed with `sigma`.
-    pub(super) fn is_for(&self, sigma: f32) -> bool {
-        self.sigma_bits == sigma.to_bits()
+    /// Whether these sums were computed with `sigma` on the geometry `geometry` (see
+    /// [`geometry_of`]): a pair's value depends on both, so sums of another mesh that has the
+    /// same weights (a copy with moved vertices, say) are not taken.
+    pub(super) fn is_for(&self, sigma: f32, geometry: u64) -> bool {
+        self.sigma_bits == sigma.to_bits() && self.geometry == geometry
     }
 
     /// The values of the weight vector `key`, if kept and of its number of pairs.

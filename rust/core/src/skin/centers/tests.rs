@@ -921,3 +921,36 @@ fn sums_kept_for_another_sigma_are_not_taken() {
     assert_ne!(mid, mid_default);
     assert_eq!(got, centers_of_rotation(p, t, &second, DEFAULT_SIGMA).unwrap());
 }
+
+#[test]
+fn sums_kept_for_another_geometry_are_not_taken() {
+    // Two meshes with the same weights, one with moved vertices: what an update of the first
+    // kept must not be taken by an update of the second (the values depend on the positions).
+    let c = Creature::new(2000).unwrap();
+    let t = &c.triangles;
+    let a = &c.positions;
+    let b: Vec<[f32; 3]> = a.iter().map(|p| [p[0] * 1.1, p[1], p[2] + 0.05 * p[0]]).collect();
+    let first = repainted(a, &c.influences, 1000, 0.3, 3, 0.5);
+    let second = repainted(a, &first, 1000, 0.3, 3, 0.9);
+    let on_a = centers_of_rotation(a, t, &c.influences, DEFAULT_SIGMA).unwrap();
+    let previous = PreviousCenters { influences: &c.influences, centers: &on_a };
+    let (_, kept) =
+        centers_of_rotation_update_keeping(a, t, &first, DEFAULT_SIGMA, previous, None, &mut |_, _| true, &mut || {
+            false
+        })
+        .unwrap();
+    let mid_b = centers_of_rotation(&b, t, &first, DEFAULT_SIGMA).unwrap();
+    let previous = PreviousCenters { influences: &first, centers: &mid_b };
+    let (got, _) = centers_of_rotation_update_keeping(
+        &b,
+        t,
+        &second,
+        DEFAULT_SIGMA,
+        previous,
+        Some(kept),
+        &mut |_, _| true,
+        &mut || false,
+    )
+    .unwrap();
+    assert_eq!(got, centers_of_rotation(&b, t, &second, DEFAULT_SIGMA).unwrap());
+}

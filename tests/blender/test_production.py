@@ -101,6 +101,26 @@ def test_copy_modifiers_to_selected(dq_skin):
     assert output_of(other, dq_skin_mods(other)[0]) != output_of(obj, dq_skin_mods(obj)[0])
 
 
+def _crowd_member(dq_skin, obj, arm, i: int, own_mesh: bool = False):
+    """A copy of `obj` (sharing its mesh, or with a copy of its own) on its own copy of `arm`,
+    animated differently and set beside it; DQ Skin and its companion follow the new armature."""
+    a = arm.copy()
+    a.data = arm.data
+    a.animation_data_clear()
+    bpy.context.scene.collection.objects.link(a)
+    animate(a, seed=0.2 * i)
+    a.location.x = 2.5 * i
+    o = obj.copy()
+    if own_mesh:
+        o.data = obj.data.copy()
+    bpy.context.scene.collection.objects.link(o)
+    o.parent = a
+    mod = dq_skin_mods(o)[0]
+    dq_skin.blender.nodes.put(mod, "Armature", a)
+    o.modifiers[dq_skin.blender.nodes.get_companion(mod)["name"]].object = a
+    return o
+
+
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method, rig):
@@ -111,18 +131,7 @@ def test_crowd_of_linked_duplicates_with_their_own_armatures(dq_skin, method, ri
         assert_fed(dq_skin, obj)
     pairs = [(obj, twin(obj))]
     for i in range(1, 5):
-        a = arm.copy()
-        a.data = arm.data
-        a.animation_data_clear()
-        bpy.context.scene.collection.objects.link(a)
-        animate(a, seed=0.2 * i)
-        a.location.x = 2.5 * i
-        o = obj.copy()  # shares the mesh
-        bpy.context.scene.collection.objects.link(o)
-        o.parent = a
-        mod = dq_skin_mods(o)[0]
-        dq_skin.blender.nodes.put(mod, "Armature", a)
-        o.modifiers[dq_skin.blender.nodes.get_companion(mod)["name"]].object = a
+        o = _crowd_member(dq_skin, obj, arm, i)
         assert o.data is obj.data
         pairs.append((o, twin(o)))
     check_frames(pairs)
@@ -139,19 +148,8 @@ def test_a_crowd_of_copies_shares_one_influences_until_one_is_painted(dq_skin, m
     add_dq_skin(obj, method)
     pairs = [(obj, twin(obj))]
     for i in range(1, 4):
-        a = arm.copy()
-        a.data = arm.data
-        a.animation_data_clear()
-        bpy.context.scene.collection.objects.link(a)
-        animate(a, seed=0.2 * i)
-        a.location.x = 2.5 * i
-        o = obj.copy()
-        o.data = obj.data.copy()  # (its own mesh)
-        bpy.context.scene.collection.objects.link(o)
-        o.parent = a
-        mod = dq_skin_mods(o)[0]
-        dq_skin.blender.nodes.put(mod, "Armature", a)
-        o.modifiers[dq_skin.blender.nodes.get_companion(mod)["name"]].object = a
+        o = _crowd_member(dq_skin, obj, arm, i, own_mesh=True)
+        assert o.data is not obj.data
         pairs.append((o, twin(o)))
 
     def influences():

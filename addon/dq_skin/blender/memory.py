@@ -91,35 +91,27 @@ class CheckedMesh:
 
     def positions(self, mesh):
         """The mesh's `(V, 3)` positions, or None: read them through the Python API."""
-        readers = self.readers
-        if readers._mesh is None or readers.positions_refused:
-            return None
-        got = readers._mesh.positions(mesh)
-        if got is None:
-            readers.positions_refused = True  # (this Blender keeps them elsewhere)
-            return None
-        if not readers.positions_checked:
-            what = memory_check.positions_differ(got, mesh)
-            if what:  # (the weights' reader stays: it has its own check)
-                readers.positions_refused = True
-                readers.positions_error = f"the memory reader disagrees with Blender's data ({what}): the Python path reads instead"
-                return None
-            readers.positions_checked = True
-        return got
+        return self._positions(mesh, lambda reader: reader.positions(mesh), lambda got: got)
 
     def positions_in_place(self, mesh):
         """The mesh's positions where Blender keeps them (`dqskin.memory.MeshPositions`: the
         kernel reads them without a copy), or None: read them into an array instead."""
+        return self._positions(mesh, lambda reader: reader.positions_in_place(mesh), lambda got: got.read())
+
+    def _positions(self, mesh, read, as_array):
+        """`read(reader)`, the first time in the session checked (`as_array(got)`) against
+        Blender's data; None (the Python path reads) where the positions are not where the
+        reader looks or the check failed."""
         readers = self.readers
         if readers._mesh is None or readers.positions_refused:
             return None
-        got = readers._mesh.positions_in_place(mesh)
+        got = read(readers._mesh)
         if got is None:
             readers.positions_refused = True  # (this Blender keeps them elsewhere)
             return None
         if not readers.positions_checked:
-            what = memory_check.positions_differ(got.read(), mesh)
-            if what:
+            what = memory_check.positions_differ(as_array(got), mesh)
+            if what:  # (the weights' reader stays: it has its own check)
                 readers.positions_refused = True
                 readers.positions_error = f"the memory reader disagrees with Blender's data ({what}): the Python path reads instead"
                 return None

@@ -1,5 +1,5 @@
 //! The batch kernels written once for every SIMD instruction set that implements [`VectorOps`]
-//! (AVX2+FMA in `avx2.rs`, NEON in `neon.rs`): everything skinning does to a full batch of
+//! (AVX2+FMA in `avx2.rs`, AVX-512 in `avx512.rs`, NEON in `neon.rs`): everything skinning does to a full batch of
 //! [`LANES`] vertices, as `LANES / WIDTH` parts of one vector each, skinned one part after the
 //! other so that a part's sums stay in registers. The arithmetic is the portable copy's in
 //! `portable.rs`; what is summed per influence is arranged for throughput:
@@ -120,11 +120,9 @@ pub(super) struct BatchJob<'a> {
     pub pivot: &'a [PivotBone],
     pub pivot_dual: &'a [PivotDualBone],
     pub cor: &'a [CorBone],
-    /// These two are read by the AVX-512 kernels only (the others have `SCALED`).
+    /// Read by the hand-written AVX-512 centers only.
     #[cfg(target_arch = "x86_64")]
     pub cor_rigid: &'a [CorRigidBone],
-    #[cfg(target_arch = "x86_64")]
-    pub scaled: bool,
     pub premat: Option<&'a Affine3A>,
     pub postmat: Option<&'a Affine3A>,
     pub blend_factor: f32,

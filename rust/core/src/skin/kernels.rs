@@ -5,9 +5,10 @@
 //! Vertices are processed [`LANES`] at a time from the lane-ordered influence slots: every lane
 //! is an independent vertex, so the serial chain of DQS's running-sum sign choice runs in all
 //! lanes at once. Compiled copies for AVX2+FMA and for AVX-512 (x86-64) and for NEON (aarch64)
-//! run their SIMD kernels (`batch.rs` for AVX2 and NEON, `avx512.rs`) on every batch, the last
-//! partial one padded; the baseline copy runs the portable kernels (`portable.rs`). Which copy
-//! runs by default is measured (`calibration.rs`); what the CPU has is detected in `isa.rs`.
+//! run the SIMD kernels of `batch.rs` (and two hand-written AVX-512 ones, `avx512/kept.rs`) on
+//! every batch, the last partial one padded; the baseline copy runs the portable kernels
+//! (`portable.rs`). Which copy runs by default is measured (`calibration.rs`); what the CPU has
+//! is detected in `isa.rs`.
 
 use glam::Affine3A;
 use rayon::prelude::*;
@@ -110,8 +111,6 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
         cor: &pose.cor,
         #[cfg(target_arch = "x86_64")]
         cor_rigid: &pose.cor_rigid,
-        #[cfg(target_arch = "x86_64")]
-        scaled: SCALED,
         premat: premat.as_ref(),
         postmat: postmat.as_ref(),
         blend_factor: job.blend_factor,
@@ -249,33 +248,31 @@ unsafe fn full_batch<const ISA: u8, const KIND: u8, const SCALED: bool>(
     scratch: &mut Scratch,
 ) {
     let BatchInputs { positions, strength, blend_amount, centers, slots } = inputs;
+    // The hand-written AVX-512 kernels where they measure faster than the one body
+    // (docs/performance.md); every other method runs the one body of `batch.rs`.
+    #[cfg(target_arch = "x86_64")]
+    if ISA == ISA_AVX512 && KIND == LINEAR {
+        // SAFETY: the caller's contract.
+        return unsafe { super::avx512::linear_batch(simd_job, positions, out, slots, strength) };
+    }
+    #[cfg(target_arch = "x86_64")]
+    if let (ISA_AVX512, CENTERS, false, Some(centers)) = (ISA, KIND, SCALED, centers) {
+        // SAFETY: the caller's contract.
+        return unsafe { super::avx512::centers_rigid_batch(simd_job, positions, centers, out, slots, strength) };
+    }
+    let batch = FullBatch { positions, out, slots, strength, blend_amount, centers };
     match ISA {
-        // (`Simd::chunk` gives DQS with scaled bones to the AVX2 copy.)
+        // SAFETY: the caller's contract.
         #[cfg(target_arch = "x86_64")]
-        ISA_AVX512 => {
-            if let (CENTERS, Some(centers)) = (KIND, centers) {
-                // SAFETY: the caller's contract.
-                unsafe { super::avx512::batch_centers::<SCALED>(simd_job, positions, centers, out, slots, strength) };
-            } else {
-                // SAFETY: the caller's contract.
-                unsafe { super::avx512::batch::<KIND>(simd_job, positions, out, slots, strength, blend_amount) };
-            }
-        }
-        _ => {
-            let batch = FullBatch { positions, out, slots, strength, blend_amount, centers };
-            match ISA {
-                // SAFETY: the caller's contract.
-                #[cfg(target_arch = "x86_64")]
-                ISA_AVX2 => unsafe {
-                    skin_batch::<_, KIND, SCALED, 2>(super::avx2::Avx2::new(), simd_job, batch, scratch)
-                },
-                // SAFETY: the caller's contract.
-                #[cfg(target_arch = "aarch64")]
-                ISA_NEON => unsafe {
-                    skin_batch::<_, KIND, SCALED, 4>(super::neon::Neon::new(), simd_job, batch, scratch)
-                },
-                _ => unreachable!("no SIMD kernels for copy {ISA}"),
-            }
-        }
+        ISA_AVX2 => unsafe { skin_batch::<_, KIND, SCALED, 2>(super::avx2::Avx2::new(), simd_job, batch, scratch) },
+        // SAFETY: the caller's contract.
+        #[cfg(target_arch = "x86_64")]
+        ISA_AVX512 => unsafe {
+            skin_batch::<_, KIND, SCALED, 1>(super::avx512::Avx512::new(), simd_job, batch, scratch)
+        },
+        // SAFETY: the caller's contract.
+        #[cfg(target_arch = "aarch64")]
+        ISA_NEON => unsafe { skin_batch::<_, KIND, SCALED, 4>(super::neon::Neon::new(), simd_job, batch, scratch) },
+        _ => unreachable!("no SIMD kernels for copy {ISA}"),
     }
 }

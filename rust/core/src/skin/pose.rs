@@ -79,10 +79,8 @@ impl PivotDualBone {
 /// center, as LBS would), its scale/shear part `S = Rᵀ·M₃` (exactly the identity for bones that
 /// do not take the scale path) and its rotation (the one DQS uses). Laid out for the kernels'
 /// loads: floats 0–7 the matrix rows 0 and 1, 8–11 the rotation (x, y, z, w), 12–15 matrix row
-/// 2, 16–23 `s00 s01 s02 s10 s11 s12 s20 s21`, 24 `s22`, then zeros. The AVX2 and NEON copies
-/// sum the rows without the rotation (floats 0–7 and 12–27: three pairs of rows); the AVX-512
-/// copy transposes floats 0–23 as three 8-float windows (the rotation in the second, early for
-/// the sign chain) and loads `s22` alone (by scalar loads, off the sign chain).
+/// 2, 16–23 `s00 s01 s02 s10 s11 s12 s20 s21`, 24 `s22`, then zeros. The kernels sum the rows
+/// without the rotation (floats 0–7 and 12–27: three pairs of rows).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct CorBone {

@@ -1,0 +1,294 @@
+//! The hand-written AVX-512 kernels kept where they measured faster than the one body of
+//! `batch.rs` (docs/performance.md): LBS, whose sixteen lanes each sum a whole 16-float record
+//! per influence, and centers of rotation for poses without scale, which read one table of
+//! rotations and half translations (`CorRigidBone`) where the one body reads two. Arithmetic as
+//! in `portable.rs`.
+
+use core::arch::x86_64::*;
+
+use super::super::batch::BatchJob;
+use super::super::influences::{Slot, LANES};
+use super::super::pose::LinearBone;
+use super::{join, load_points, scalar_record, store_points, transpose_blocks, transpose_lanes};
+
+/// Transposes eight rows `[record l | record l + 8]` (8 floats each) into eight 16-lane
+/// component vectors.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn transpose(r: [__m512; 8]) -> [__m512; 8] {
+    let [u0, u1, u2, u3] = transpose_blocks([r[0], r[1], r[2], r[3]]);
+    let [u4, u5, u6, u7] = transpose_blocks([r[4], r[5], r[6], r[7]]);
+    // 128-bit blocks: low components from blocks 0 and 2, high ones from blocks 1 and 3.
+    let lo = _mm512_setr_epi32(0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27);
+    let hi = _mm512_setr_epi32(4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14, 15, 28, 29, 30, 31);
+    [
+        _mm512_permutex2var_ps(u0, lo, u4),
+        _mm512_permutex2var_ps(u1, lo, u5),
+        _mm512_permutex2var_ps(u2, lo, u6),
+        _mm512_permutex2var_ps(u3, lo, u7),
+        _mm512_permutex2var_ps(u0, hi, u4),
+        _mm512_permutex2var_ps(u1, hi, u5),
+        _mm512_permutex2var_ps(u2, hi, u6),
+        _mm512_permutex2var_ps(u3, hi, u7),
+    ]
+}
+
+/// `w·b + v × b` for the quaternion sums `(v, w)` (see `turn` in `batch.rs`).
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn turn([x, y, z, w]: &[__m512; 4], b: [__m512; 3]) -> [__m512; 3] {
+    let (x, y, z, w) = (*x, *y, *z, *w);
+    [
+        _mm512_fnmadd_ps(z, b[1], _mm512_fmadd_ps(y, b[2], _mm512_mul_ps(w, b[0]))),
+        _mm512_fnmadd_ps(x, b[2], _mm512_fmadd_ps(z, b[0], _mm512_mul_ps(w, b[1]))),
+        _mm512_fnmadd_ps(y, b[0], _mm512_fmadd_ps(x, b[1], _mm512_mul_ps(w, b[2]))),
+    ]
+}
+
+/// `|q|²` of quaternion sums `(x, y, z, w)`, in the other copies' order.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn length_squared([x, y, z, w]: &[__m512; 4]) -> __m512 {
+    _mm512_fmadd_ps(*z, *z, _mm512_fmadd_ps(*y, *y, _mm512_fmadd_ps(*x, *x, _mm512_mul_ps(*w, *w))))
+}
+
+/// `a·b` of quaternions per lane, in two independent halves: the sign choice that waits on it is
+/// the serial chain, so keep it short.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn dot4(a: &[__m512], b: &[__m512]) -> __m512 {
+    _mm512_add_ps(
+        _mm512_fmadd_ps(a[1], b[1], _mm512_mul_ps(a[0], b[0])),
+        _mm512_fmadd_ps(a[3], b[3], _mm512_mul_ps(a[2], b[2])),
+    )
+}
+
+/// `w`, negated in the lanes where `dot < 0`: a quaternion's sign chosen against the running sum.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn signed_weight(dot: __m512, w: __m512) -> __m512 {
+    let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
+    _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w)
+}
+
+/// A 3×4 affine transform with each entry broadcast to all lanes.
+struct Affine {
+    m: [[__m512; 4]; 3],
+}
+
+impl Affine {
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn new(a: &glam::Affine3A) -> Self {
+        let c = [a.matrix3.x_axis, a.matrix3.y_axis, a.matrix3.z_axis, a.translation];
+        Affine { m: core::array::from_fn(|r| core::array::from_fn(|k| _mm512_set1_ps(c[k][r]))) }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn apply(&self, p: [__m512; 3]) -> [__m512; 3] {
+        core::array::from_fn(|r| {
+            let m = &self.m[r];
+            _mm512_fmadd_ps(m[0], p[0], _mm512_fmadd_ps(m[1], p[1], _mm512_fmadd_ps(m[2], p[2], m[3])))
+        })
+    }
+}
+
+/// LBS sums in registers: the weighted rows `Σ wᵢ·Mᵢ` (row-major 3×4) and the total weight.
+///
+/// Summed per lane: each influence adds its weight (a broadcast load) times its bone's whole
+/// 16-float record (one load, folded into the FMA) to its lane's accumulator, and the sixteen
+/// accumulators are transposed once per batch. Transposing every slot's records instead cost
+/// 48 shuffles and 16 inserts per slot, which bounded LBS on the vector ports. One FMA per float,
+/// in slot order.
+///
+/// # Safety
+/// As [`rigid_sums`], for `linear`.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], __m512) {
+    const { assert!(core::mem::size_of::<LinearBone>() == 64) };
+    let mut lanes = [_mm512_setzero_ps(); LANES];
+    let mut contrib = _mm512_setzero_ps();
+    for slot in slots {
+        for (l, lane) in lanes.iter_mut().enumerate() {
+            // SAFETY: indices are in range (validated); a LinearBone is 16 floats (rows,
+            // zero padding).
+            let record = unsafe { _mm512_loadu_ps(scalar_record(linear, &slot.records, l)) };
+            *lane = _mm512_fmadd_ps(record, _mm512_set1_ps(slot.weights[l]), *lane);
+        }
+        // SAFETY: a slot has 16 weights.
+        contrib = _mm512_add_ps(contrib, unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) });
+    }
+    let rows = transpose_lanes(&lanes);
+    (core::array::from_fn(|k| rows[k]), contrib)
+}
+
+/// LBS on one full batch of 16 vertices, in registers: load, `premat`, the weighted rows
+/// ([`linear_sums`]), strength, `postmat`, mask, store. The same arithmetic as the portable copy
+/// (`portable.rs`).
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index
+/// `job.linear`.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(in crate::skin) unsafe fn linear_batch(
+    job: &BatchJob<'_>,
+    positions: &[[f32; 3]; LANES],
+    out: &mut [[f32; 3]; LANES],
+    slots: &[Slot],
+    strength: Option<&[f32; LANES]>,
+) {
+    // SAFETY: 16 points (and below: every array loaded or stored has exactly 16 lanes).
+    let o = unsafe { load_points(positions) };
+    let p = match job.premat {
+        Some(m) => Affine::new(m).apply(o),
+        None => o,
+    };
+    let a = match strength {
+        // SAFETY: the mask has 16 lanes.
+        Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
+        None => _mm512_set1_ps(1.0),
+    };
+    // SAFETY: as this function's own contract.
+    let (acc, contrib) = unsafe { linear_sums(slots, job.linear) };
+    let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::super::MIN_TOTAL_WEIGHT));
+    let f = _mm512_maskz_div_ps(valid, a, contrib);
+    // co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)
+    let axis = |r: usize| {
+        let m = &acc[4 * r..4 * r + 4];
+        let moved = _mm512_fmadd_ps(m[0], p[0], _mm512_fmadd_ps(m[1], p[1], _mm512_fmadd_ps(m[2], p[2], m[3])));
+        _mm512_fmadd_ps(_mm512_fnmadd_ps(p[r], contrib, moved), f, p[r])
+    };
+    let moved = [axis(0), axis(1), axis(2)];
+    // SAFETY: as this function's own contract.
+    unsafe { write_batch(job, moved, a, o, out) }
+}
+
+/// `½·(R·p + t − p)` for the unit quaternions `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v ×
+/// a + h)` with `a = v × p` (see `rotation_offset` in `portable.rs`).
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
+    let a = [
+        _mm512_fmsub_ps(q[1], p[2], _mm512_mul_ps(q[2], p[1])),
+        _mm512_fmsub_ps(q[2], p[0], _mm512_mul_ps(q[0], p[2])),
+        _mm512_fmsub_ps(q[0], p[1], _mm512_mul_ps(q[1], p[0])),
+    ];
+    let b = [
+        _mm512_fmsub_ps(q[1], a[2], _mm512_fmsub_ps(q[2], a[1], h[0])),
+        _mm512_fmsub_ps(q[2], a[0], _mm512_fmsub_ps(q[0], a[2], h[1])),
+        _mm512_fmsub_ps(q[0], a[1], _mm512_fmsub_ps(q[1], a[0], h[2])),
+    ];
+    core::array::from_fn(|k| _mm512_fmadd_ps(q[3], a[k], b[k]))
+}
+
+/// [`load_columns`] with the indices read as scalars (see [`scalar_record`]).
+///
+/// # Safety
+/// As [`load_columns`].
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn load_columns_scalar<T>(table: &[T], records: &[u32; LANES], offset: usize) -> [__m512; 8] {
+    // SAFETY: the caller guarantees the records and the offset are in range.
+    let row = |l: usize| unsafe { _mm256_loadu_ps(scalar_record(table, records, l).add(offset)) };
+    transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
+}
+
+/// The end of every batch: `postmat`, the lanes with strength `a = 0` left bit-identical to the
+/// originals `o` (no space round trip), store.
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA.
+#[inline]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn write_batch(job: &BatchJob<'_>, moved: [__m512; 3], a: __m512, o: [__m512; 3], out: &mut [[f32; 3]; LANES]) {
+    let mut r = match job.postmat {
+        Some(m) => Affine::new(m).apply(moved),
+        None => moved,
+    };
+    let untouched = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(a, _mm512_setzero_ps());
+    for k in 0..3 {
+        r[k] = _mm512_mask_mov_ps(r[k], untouched, o[k]);
+    }
+    // SAFETY: the CPU has AVX-512F (this function's contract).
+    unsafe { store_points(r, out) };
+}
+
+/// Everything skinning with centers of rotation does to one full batch of 16 vertices, in
+/// registers, for poses without scale: load the points and their centers, `premat` on both, the
+/// sums (where each bone puts the center, from one table of rotations and half translations,
+/// and the sign-aligned rotations), the rotation of the offset, strength, `postmat`, mask,
+/// store. The same arithmetic as the portable copy (`portable.rs`).
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index
+/// `cor_rigid`.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(in crate::skin) unsafe fn centers_rigid_batch(
+    job: &BatchJob<'_>,
+    positions: &[[f32; 3]; LANES],
+    centers: &[[f32; 3]; LANES],
+    out: &mut [[f32; 3]; LANES],
+    slots: &[Slot],
+    strength: Option<&[f32; LANES]>,
+) {
+    // SAFETY: 16 points; 16 centers.
+    let (o, c) = unsafe { (load_points(positions), load_points(centers)) };
+    let (p, c) = match job.premat {
+        Some(m) => {
+            let m = Affine::new(m);
+            (m.apply(o), m.apply(c))
+        }
+        None => (o, c),
+    };
+    let d: [__m512; 3] = core::array::from_fn(|k| _mm512_sub_ps(p[k], c[k]));
+    let mut anchor = [_mm512_setzero_ps(); 3];
+    let mut real = [_mm512_setzero_ps(); 4];
+    let mut contrib = _mm512_setzero_ps();
+    for slot in slots {
+        // SAFETY: a slot has 16 weights.
+        let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
+        // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the rotation,
+        // half the translation and a zero.
+        let r = unsafe { load_columns_scalar(job.cor_rigid, &slot.records, 0) };
+        let moved = rotation_offset(&r[0..4], &r[4..7], &c);
+        let w2 = _mm512_add_ps(w, w);
+        for k in 0..3 {
+            anchor[k] = _mm512_fmadd_ps(w2, moved[k], anchor[k]);
+        }
+        let q = [r[0], r[1], r[2], r[3]];
+        // Rigid poses are bound by throughput: the sign chain as it is.
+        let ws = signed_weight(dot4(&q, &real), w);
+        for k in 0..4 {
+            real[k] = _mm512_fmadd_ps(q[k], ws, real[k]);
+        }
+        contrib = _mm512_add_ps(contrib, w);
+    }
+    let zero = _mm512_setzero_ps();
+    let a = match strength {
+        // SAFETY: the mask has 16 lanes.
+        Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
+        None => _mm512_set1_ps(1.0),
+    };
+    // The rotation through `u` (see `rotation_terms` in `batch.rs`), then the strength, as the
+    // portable `finish_centers` (`portable.rs`).
+    let [x, y, z, _] = real;
+    let fma = |a, b, c| _mm512_fmadd_ps(a, b, c);
+    let fnma = |a, b, c| _mm512_fnmadd_ps(a, b, c);
+    let mul = |a, b| _mm512_mul_ps(a, b);
+    let b = [fnma(z, d[1], mul(y, d[2])), fnma(x, d[2], mul(z, d[0])), fnma(y, d[0], mul(x, d[1]))];
+    let u = turn(&real, b);
+    let len2 = length_squared(&real);
+    let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::super::MIN_TOTAL_WEIGHT))
+        & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
+    // One division serves both factors: a/contrib = inv·|q|², 2a/|q|² = 2·inv·contrib.
+    let inv = _mm512_maskz_div_ps(valid, a, mul(len2, contrib));
+    let fa = mul(inv, len2);
+    let inv2 = _mm512_add_ps(inv, inv);
+    let fr = mul(inv2, contrib);
+    // The anchor is Σ wᵢ·(Mᵢ·c − c).
+    let moved: [__m512; 3] = core::array::from_fn(|k| fma(anchor[k], fa, fma(u[k], fr, p[k])));
+    // SAFETY: as this function's own contract.
+    unsafe { write_batch(job, moved, a, o, out) }
+}

@@ -1,8 +1,9 @@
-//! The batch kernels written once for every SIMD instruction set that implements [`VectorOps`]
-//! (AVX2+FMA in `avx2.rs`, AVX-512 in `avx512.rs`, NEON in `neon.rs`): everything skinning does to a full batch of
-//! [`LANES`] vertices, as `LANES / WIDTH` parts of one vector each, skinned one part after the
-//! other so that a part's sums stay in registers. The arithmetic is the portable copy's in
-//! `portable.rs`; what is summed per influence is arranged for throughput:
+//! The batch kernels written once for every instruction set that implements [`VectorOps`]
+//! (the baseline in `baseline.rs`, AVX2+FMA in `avx2.rs`, AVX-512 in `avx512.rs`, NEON in
+//! `neon.rs`): everything skinning does to a full batch of [`LANES`] vertices, as
+//! `LANES / WIDTH` parts of one vector each, skinned one part after the other so that a part's
+//! sums stay in registers. The arithmetic is Blender's as the module states it (`skin/mod.rs`);
+//! what is summed per influence is arranged for throughput:
 //!
 //! 1. **Signs.** The quaternion sum whose running value picks each influence's sign (DQS, Blend,
 //!    centers of rotation) is a serial chain per vertex, from transposed rotations. Rigid DQS

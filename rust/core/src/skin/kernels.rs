@@ -17,7 +17,6 @@ use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{Slot, LANES};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
-use super::portable;
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
 /// A multiple of [`LANES`], so tasks start on batch boundaries.
@@ -121,67 +120,63 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
         let n = out.len();
         let slots = job.influences().batch(first / LANES);
         prefetch_ahead(job, first, slots);
-        if ISA != ISA_BASELINE {
-            if n == LANES {
-                fn full<T>(a: &[T], first: usize) -> &[T; LANES] {
-                    a[first..first + LANES].try_into().expect("a full batch")
-                }
-                let inputs = BatchInputs {
-                    positions: full(job.positions, first),
-                    strength: job.mask.map(|a| full(a, first)),
-                    blend_amount: job.blend_amount.map(|a| full(a, first)),
-                    centers: job.centers.map(|c| full(c, first)),
-                    slots,
-                };
-                // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction
-                // sets were detected; the job's influences and pose fit together (`Job::new`), so
-                // every bone index of the batch's slots indexes every table the method reads.
-                unsafe {
-                    full_batch::<ISA, KIND, SCALED>(
-                        &simd_job,
-                        inputs,
-                        out.try_into().expect("a full batch"),
-                        &mut scratch,
-                    )
-                };
-            } else {
-                // The last, partial batch goes through the same SIMD body, padded (the padding
-                // lanes' slots have weight 0 and their results are dropped): a vertex's result
-                // does not depend on where it is in the mesh, so vertices split at one place
-                // (UV seams, sharp edges) stay together, as they do under Blender's modifier.
-                let pad = |a: Option<&[f32]>| {
-                    a.map(|a| {
-                        let mut p = [0.0f32; LANES];
-                        p[..n].copy_from_slice(&a[first..first + n]);
-                        p
-                    })
-                };
-                let pad_points = |a: &[[f32; 3]]| {
-                    let mut p = [[0.0f32; 3]; LANES];
-                    p[..n].copy_from_slice(&a[first..first + n]);
-                    p
-                };
-                let positions = pad_points(job.positions);
-                let (strength, blend_amount) = (pad(job.mask), pad(job.blend_amount));
-                let centers = job.centers.map(pad_points);
-                let inputs = BatchInputs {
-                    positions: &positions,
-                    strength: strength.as_ref(),
-                    blend_amount: blend_amount.as_ref(),
-                    centers: centers.as_ref(),
-                    slots,
-                };
-                let mut padded = [[0.0f32; 3]; LANES];
-                // SAFETY: as for a full batch; the padding lanes' bone indices are 0, which
-                // indexes every table (a pose has at least one bone).
-                unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, inputs, &mut padded, &mut scratch) };
-                out.copy_from_slice(&padded[..n]);
-            }
+        if ISA == ISA_BASELINE && KIND == LINEAR {
+            // The baseline's hand-written LBS, where it measures faster than the one body.
+            // SAFETY: the job's influences and pose fit together (`Job::new`), so every bone
+            // index of the batch's slots indexes the pose's `linear` table.
+            unsafe { super::baseline::linear_batch(job, premat.as_ref(), postmat.as_ref(), first, slots, out) };
             continue;
         }
-        // SAFETY: the job's influences and pose fit together (`Job::new`), so every bone index
-        // of the batch's slots indexes every table the method reads.
-        unsafe { portable::batch::<KIND, SCALED>(job, premat.as_ref(), postmat.as_ref(), first, slots, out) };
+        if n == LANES {
+            fn full<T>(a: &[T], first: usize) -> &[T; LANES] {
+                a[first..first + LANES].try_into().expect("a full batch")
+            }
+            let inputs = BatchInputs {
+                positions: full(job.positions, first),
+                strength: job.mask.map(|a| full(a, first)),
+                blend_amount: job.blend_amount.map(|a| full(a, first)),
+                centers: job.centers.map(|c| full(c, first)),
+                slots,
+            };
+            // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction
+            // sets were detected; the job's influences and pose fit together (`Job::new`), so
+            // every bone index of the batch's slots indexes every table the method reads.
+            unsafe {
+                full_batch::<ISA, KIND, SCALED>(&simd_job, inputs, out.try_into().expect("a full batch"), &mut scratch)
+            };
+        } else {
+            // The last, partial batch goes through the same SIMD body, padded (the padding
+            // lanes' slots have weight 0 and their results are dropped): a vertex's result
+            // does not depend on where it is in the mesh, so vertices split at one place
+            // (UV seams, sharp edges) stay together, as they do under Blender's modifier.
+            let pad = |a: Option<&[f32]>| {
+                a.map(|a| {
+                    let mut p = [0.0f32; LANES];
+                    p[..n].copy_from_slice(&a[first..first + n]);
+                    p
+                })
+            };
+            let pad_points = |a: &[[f32; 3]]| {
+                let mut p = [[0.0f32; 3]; LANES];
+                p[..n].copy_from_slice(&a[first..first + n]);
+                p
+            };
+            let positions = pad_points(job.positions);
+            let (strength, blend_amount) = (pad(job.mask), pad(job.blend_amount));
+            let centers = job.centers.map(pad_points);
+            let inputs = BatchInputs {
+                positions: &positions,
+                strength: strength.as_ref(),
+                blend_amount: blend_amount.as_ref(),
+                centers: centers.as_ref(),
+                slots,
+            };
+            let mut padded = [[0.0f32; 3]; LANES];
+            // SAFETY: as for a full batch; the padding lanes' bone indices are 0, which
+            // indexes every table (a pose has at least one bone).
+            unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, inputs, &mut padded, &mut scratch) };
+            out.copy_from_slice(&padded[..n]);
+        }
     }
 }
 
@@ -262,6 +257,10 @@ unsafe fn full_batch<const ISA: u8, const KIND: u8, const SCALED: bool>(
     }
     let batch = FullBatch { positions, out, slots, strength, blend_amount, centers };
     match ISA {
+        // SAFETY: the caller's contract.
+        ISA_BASELINE => unsafe {
+            skin_batch::<_, KIND, SCALED, 4>(super::baseline::Baseline, simd_job, batch, scratch)
+        },
         // SAFETY: the caller's contract.
         #[cfg(target_arch = "x86_64")]
         ISA_AVX2 => unsafe { skin_batch::<_, KIND, SCALED, 2>(super::avx2::Avx2::new(), simd_job, batch, scratch) },

@@ -23,6 +23,7 @@ mod armature;
 mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod baseline;
 mod batch;
 mod bbone;
 mod calibration;
@@ -35,7 +36,6 @@ mod job;
 mod kernels;
 #[cfg(target_arch = "aarch64")]
 mod neon;
-mod portable;
 mod pose;
 
 pub use armature::{ArmaturePose, BBoneCache, PoseChannel};

@@ -96,32 +96,10 @@ pub(crate) struct CorBone {
     pub padding: [f32; 7],
 }
 
-impl CorBone {
-    /// Row `r` of the deform matrix.
-    #[inline(always)]
-    pub fn matrix_row(&self, r: usize) -> Vec4 {
-        if r < 2 {
-            self.rows01[r]
-        } else {
-            self.row2
-        }
-    }
-
-    /// Row `r` of the scale/shear part `S`.
-    #[inline(always)]
-    pub fn stretch_row(&self, r: usize) -> [f32; 3] {
-        match r {
-            0 => [self.stretch[0], self.stretch[1], self.stretch[2]],
-            1 => [self.stretch[3], self.stretch[4], self.stretch[5]],
-            _ => [self.stretch[6], self.stretch[7], self.s22],
-        }
-    }
-}
-
 /// A rigid bone for skinning with centers of rotation: its rotation (x, y, z, w) and half its
 /// translation (x, y, z, 0). 8 floats, so SIMD code loads a lane's record in one window; the
 /// kernels rotate the center by `real` rather than read a 3×3 matrix, and add `t/2` inside the
-/// rotation's `½·(R·c − c)` (see `rotation_offset` in `portable.rs`).
+/// rotation's `½·(R·c − c)` (see `rotation_offset` in `avx512/kept.rs`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(32))]
 pub(crate) struct CorRigidBone {

@@ -2,7 +2,7 @@
 //! `batch.rs` (docs/performance.md): LBS, whose sixteen lanes each sum a whole 16-float record
 //! per influence, and centers of rotation for poses without scale, which read one table of
 //! rotations and half translations (`CorRigidBone`) where the one body reads two. Arithmetic as
-//! in `portable.rs`.
+//! in `batch.rs`.
 
 use core::arch::x86_64::*;
 
@@ -125,8 +125,8 @@ unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], _
 }
 
 /// LBS on one full batch of 16 vertices, in registers: load, `premat`, the weighted rows
-/// ([`linear_sums`]), strength, `postmat`, mask, store. The same arithmetic as the portable copy
-/// (`portable.rs`).
+/// ([`linear_sums`]), strength, `postmat`, mask, store. The same arithmetic as the one body
+/// (`batch.rs`).
 ///
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index
@@ -166,7 +166,7 @@ pub(in crate::skin) unsafe fn linear_batch(
 }
 
 /// `½·(R·p + t − p)` for the unit quaternions `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v ×
-/// a + h)` with `a = v × p` (see `rotation_offset` in `portable.rs`).
+/// a + h)` with `a = v × p`: the bone's move of `p` from its rotation and half translation.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
 fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
@@ -219,7 +219,7 @@ unsafe fn write_batch(job: &BatchJob<'_>, moved: [__m512; 3], a: __m512, o: [__m
 /// registers, for poses without scale: load the points and their centers, `premat` on both, the
 /// sums (where each bone puts the center, from one table of rotations and half translations,
 /// and the sign-aligned rotations), the rotation of the offset, strength, `postmat`, mask,
-/// store. The same arithmetic as the portable copy (`portable.rs`).
+/// store. The same arithmetic as the one body (`batch.rs`).
 ///
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index
@@ -271,8 +271,8 @@ pub(in crate::skin) unsafe fn centers_rigid_batch(
         Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
         None => _mm512_set1_ps(1.0),
     };
-    // The rotation through `u` (see `rotation_terms` in `batch.rs`), then the strength, as the
-    // portable `finish_centers` (`portable.rs`).
+    // The rotation through `u` (see `rotation_terms` in `batch.rs`), then the strength, as
+    // `centers_rigid` there.
     let [x, y, z, _] = real;
     let fma = |a, b, c| _mm512_fmadd_ps(a, b, c);
     let fnma = |a, b, c| _mm512_fnmadd_ps(a, b, c);

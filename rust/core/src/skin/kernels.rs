@@ -180,18 +180,18 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
     }
 }
 
-/// How many batches ahead [`prefetch_ahead`] asks for (4–16 measured the same; 2 and 32 less).
+/// How many batches ahead [`prefetch_ahead`] asks for (measured: docs/performance-history.md).
 const PREFETCH_AHEAD: usize = 8;
 
 /// Asks the CPU to bring the inputs of the batch [`PREFETCH_AHEAD`] batches after the one at
 /// vertex `first` (whose slots are `slots`) into the cache before the kernels read them. The
 /// kernels do much work per byte, and the hardware prefetchers alone did not keep their streams
-/// ahead: on meshes larger than the caches (16M vertices, 4 influences, one thread, Intel) LBS
-/// went from 71 % to 90–96 % of the bandwidth reference and rigid DQS from 61 % to 71–72 %; on
-/// meshes that fit the caches it measured the same. The addresses are this batch's moved by the
-/// same distance (batches mostly have as many slots as their neighbours; each batch asks from
-/// its own start, so together they cover every line): no lookup, no bounds check. A hint:
-/// nothing is read, and an address past an array's end asks for nothing harmful.
+/// ahead on meshes larger than the caches (measured in docs/performance-history.md, "Kernels at
+/// the memory limit"); on meshes that fit the caches it measured the same. The addresses are
+/// this batch's moved by the same distance (batches mostly have as many slots as their
+/// neighbours; each batch asks from its own start, so together they cover every line): no
+/// lookup, no bounds check. A hint: nothing is read, and an address past an array's end asks
+/// for nothing harmful.
 #[inline(always)]
 fn prefetch_ahead(job: &Job<'_>, first: usize, slots: &[Slot]) {
     let lines = |p: *const u8, bytes: usize| {

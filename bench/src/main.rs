@@ -113,8 +113,7 @@ fn once(f: &mut dyn FnMut()) -> f64 {
 fn bandwidth_reference(s: &Scene, out: &mut [[f32; 3]], with_centers: bool) {
     const CHUNK: usize = 4096;
     const LANES: usize = 16;
-    let (starts, words) = s.influences.kernel_words();
-    let words_per_slot = 2 * LANES;
+    let (starts, words, words_per_slot) = s.influences.kernel_words();
     let sink = pool::run(|| {
         out.par_chunks_mut(CHUNK)
             .enumerate()

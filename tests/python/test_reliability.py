@@ -124,11 +124,11 @@ def test_one_vertex_with_ten_million_influences_is_refused():
 
 
 def test_bone_counts_beyond_the_kernels_addressing_are_refused():
-    # The kernels address a bone's records by its index times 16 in 32 bits.
-    assert dqskin.MAX_BONES == 2**28
+    # The kernels keep each influence's bone index in 16 bits.
+    assert dqskin.MAX_BONES == 2**16
     one = (np.array([0, 1]), np.array([dqskin.MAX_BONES - 1], np.uint32), np.ones(1, np.float32))
     assert dqskin.Influences(*one, dqskin.MAX_BONES).bone_count == dqskin.MAX_BONES
-    with pytest.raises(ValueError, match=r"bone_count is 268435457; at most 268435456 bones"):
+    with pytest.raises(ValueError, match=r"bone_count is 65537; at most 65536 bones"):
         dqskin.Influences(*one, dqskin.MAX_BONES + 1)
 
 

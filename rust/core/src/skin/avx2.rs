@@ -123,15 +123,14 @@ impl VectorOps for Avx2 {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], records: &[u32], offset: usize) -> [__m256; 4] {
-        debug_assert!(records.len() >= 8 && offset + 4 <= core::mem::size_of::<T>() / 4);
+    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [__m256; 4] {
+        debug_assert!(bones.len() >= 8 && offset + 4 <= core::mem::size_of::<T>() / 4);
         // The four floats of the records of lanes `l` (low half) and `l + 4` (high half).
         let pair = |l: usize| {
             // SAFETY: the caller guarantees the records and the offset are in range; AVX as in
             // `instructions!`.
             unsafe {
-                let (lo, hi) =
-                    (lane_record(table, records[l]).add(offset), lane_record(table, records[l + 4]).add(offset));
+                let (lo, hi) = (lane_record(table, bones[l]).add(offset), lane_record(table, bones[l + 4]).add(offset));
                 _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(_mm_loadu_ps(lo)), _mm_loadu_ps(hi))
             }
         };
@@ -227,7 +226,7 @@ impl VectorOps for Avx2 {
                             let lane = lane0 + first + k + 4 * half;
                             // SAFETY: the caller's contract: the lane's bone indexes `table`; the
                             // pairs of rows lie inside its record (asserted above).
-                            let record = lane_record(table, slot.records[lane]);
+                            let record = lane_record(table, slot.bones[lane]);
                             let w = _mm256_broadcast_ss(&weights[lane]);
                             for (j, reg) in regs.iter_mut().enumerate().take(per_lane) {
                                 *reg = _mm256_fmadd_ps(_mm256_loadu_ps(record.add(offsets[2 * j])), w, *reg);

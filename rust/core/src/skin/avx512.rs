@@ -128,11 +128,11 @@ unsafe fn store_points([x, y, z]: [__m512; 3], out: &mut [[f32; 3]; LANES]) {
 /// entry waits in a register (or a spill slot) for its turn.
 ///
 /// # Safety
-/// `records[l]` must name a record of `table` (see [`lane_record`]).
+/// `bones[l]` must name a record of `table` (see [`lane_record`]).
 #[inline(always)]
-unsafe fn scalar_record<T>(table: &[T], records: &[u32; LANES], l: usize) -> *const f32 {
-    // SAFETY: a valid reference to an initialized u32.
-    let r = unsafe { core::ptr::read_volatile(&records[l]) };
+unsafe fn scalar_record<T>(table: &[T], bones: &[u16; LANES], l: usize) -> *const f32 {
+    // SAFETY: a valid reference to an initialized u16.
+    let r = unsafe { core::ptr::read_volatile(&bones[l]) };
     // SAFETY: the caller's contract.
     unsafe { lane_record(table, r) }
 }
@@ -238,10 +238,10 @@ impl super::batch::VectorOps for Avx512 {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], records: &[u32], offset: usize) -> [__m512; 4] {
-        debug_assert!(records.len() >= 16 && offset + 4 <= core::mem::size_of::<T>() / 4);
+    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [__m512; 4] {
+        debug_assert!(bones.len() >= 16 && offset + 4 <= core::mem::size_of::<T>() / 4);
         // SAFETY: the caller's contract; AVX-512F as in `instructions512!`.
-        unsafe { columns4(table, records, offset) }
+        unsafe { columns4(table, bones, offset) }
     }
 
     #[inline(always)]
@@ -321,7 +321,7 @@ unsafe fn lane_sums<T>(
         for (l, lane) in lanes.iter_mut().enumerate() {
             // SAFETY: the caller's contract.
             let rows = unsafe {
-                let record = scalar_record(table, &slot.records, l);
+                let record = scalar_record(table, &slot.bones, l);
                 match second {
                     Some(second) if second == first + 8 => _mm512_loadu_ps(record.add(first)),
                     Some(second) => join(_mm256_loadu_ps(record.add(first)), _mm256_loadu_ps(record.add(second))),
@@ -363,17 +363,17 @@ fn transpose_lanes(r: &[__m512; LANES]) -> [__m512; 16] {
 /// block), so that the in-block transposes leave the lanes in order.
 ///
 /// # Safety
-/// `records` has sixteen entries, each naming a record of `table`; `offset + 4` floats lie inside
+/// `bones` has sixteen entries, each indexing `table`; `offset + 4` floats lie inside
 /// a record.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn columns4<T>(table: &[T], records: &[u32], offset: usize) -> [__m512; 4] {
-    let records: &[u32; LANES] = records[..LANES].try_into().expect("sixteen lanes");
+unsafe fn columns4<T>(table: &[T], bones: &[u16], offset: usize) -> [__m512; 4] {
+    let bones: &[u16; LANES] = bones[..LANES].try_into().expect("sixteen lanes");
     let mut rows = [_mm512_setzero_ps(); 4];
     for (k, row) in rows.iter_mut().enumerate() {
         // SAFETY: the caller's contract.
         unsafe {
-            let at = |l: usize| scalar_record(table, records, l).add(offset);
+            let at = |l: usize| scalar_record(table, bones, l).add(offset);
             let v = _mm512_castps128_ps512(_mm_loadu_ps(at(k)));
             let v = _mm512_insertf32x4::<1>(v, _mm_loadu_ps(at(k + 4)));
             let v = _mm512_insertf32x4::<2>(v, _mm_loadu_ps(at(k + 8)));

@@ -114,10 +114,10 @@ impl VectorOps for Baseline {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], records: &[u32], offset: usize) -> [F4; 4] {
-        debug_assert!(records.len() >= 4 && offset + 4 <= core::mem::size_of::<T>() / 4);
+    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [F4; 4] {
+        debug_assert!(bones.len() >= 4 && offset + 4 <= core::mem::size_of::<T>() / 4);
         // SAFETY: the caller guarantees the records and the offset are in range.
-        let rows: [*const f32; 4] = [0, 1, 2, 3].map(|l| unsafe { lane_record(table, records[l]).add(offset) });
+        let rows: [*const f32; 4] = [0, 1, 2, 3].map(|l| unsafe { lane_record(table, bones[l]).add(offset) });
         // SAFETY: as above.
         [0, 1, 2, 3].map(|c| each(|l| unsafe { *rows[l].add(c) }))
     }
@@ -157,7 +157,7 @@ impl VectorOps for Baseline {
                 let w = signed.map_or(&slot.weights, |w| &w[s])[lane];
                 // SAFETY: the caller's contract: the lane's bone indexes `table` and the rows
                 // lie inside its record.
-                let record = unsafe { lane_record(table, slot.records[lane]) };
+                let record = unsafe { lane_record(table, slot.bones[lane]) };
                 for (sum, &offset) in sums.iter_mut().zip(&offsets) {
                     // SAFETY: as above.
                     let values = unsafe { *record.add(offset).cast::<[f32; 4]>() };

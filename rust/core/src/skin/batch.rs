@@ -66,16 +66,16 @@ pub(super) trait VectorOps: Copy {
     /// operations where a select may take three).
     fn neg_where(self, m: Self::Mask, a: Self::F) -> Self::F;
 
-    /// Four floats from float `offset` of each lane's bone record (`records[l]`, a slot's entries:
+    /// Four floats from float `offset` of each lane's bone record (`bones[l]`, a slot's entries:
     /// see [`lane_record`]), transposed: vector `k` holds float `offset + k` of every lane's
     /// record.
     ///
     /// # Safety
-    /// `records` has at least `WIDTH` entries, each of which names a record of `table`; `T` is
+    /// `bones` has at least `WIDTH` entries, each of which indexes `table`; `T` is
     /// made of f32 (`repr(C)`) and `offset + 4` floats lie inside it.
     ///
     /// [`lane_record`]: super::influences::lane_record
-    unsafe fn load_columns4<T>(self, table: &[T], records: &[u32], offset: usize) -> [Self::F; 4];
+    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [Self::F; 4];
 
     /// `WIDTH` points `x y z x y z …` split into coordinate vectors.
     fn load_points(self, points: &[[f32; 3]]) -> [Self::F; 3];
@@ -348,7 +348,7 @@ unsafe fn sign_pass<V: VectorOps, T>(
     let (mut real, mut contrib) = ([zero; 4], zero);
     for (k, slot) in slots.iter().enumerate() {
         // SAFETY: the caller's contract.
-        let q = unsafe { v.load_columns4(table, &slot.records[lane0..], offset) };
+        let q = unsafe { v.load_columns4(table, &slot.bones[lane0..], offset) };
         let w = v.load(&slot.weights[lane0..]);
         let ws = if k == 0 { w } else { signed_weight(v, &q, &real, w) };
         for c in 0..4 {
@@ -373,9 +373,9 @@ unsafe fn rigid_sums<V: VectorOps>(v: V, slots: &[Slot], dq: &[DqBone], lane0: u
     let zero = v.splat(0.0);
     let (mut real, mut dual, mut contrib) = ([zero; 4], [zero; 4], zero);
     for (k, slot) in slots.iter().enumerate() {
-        let records = &slot.records[lane0..];
+        let bones = &slot.bones[lane0..];
         // SAFETY: the caller's contract; the rotation and the dual part are four floats each.
-        let (q, d) = unsafe { (v.load_columns4(dq, records, DQ_REAL), v.load_columns4(dq, records, DQ_DUAL)) };
+        let (q, d) = unsafe { (v.load_columns4(dq, bones, DQ_REAL), v.load_columns4(dq, bones, DQ_DUAL)) };
         let w = v.load(&slot.weights[lane0..]);
         let ws = if k == 0 { w } else { signed_weight(v, &q, &real, w) };
         for c in 0..4 {

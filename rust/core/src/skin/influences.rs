@@ -4,52 +4,39 @@ use super::SkinError;
 
 /// The most influences one vertex may have. Sums of weights run in single precision as in
 /// Blender (at most 4096 · 2⁻²⁴ ≈ 2.4e-4 relative error), and the lane layout pads a vertex's
-/// 15 neighbours to its count (128 bytes per influence of the largest), so both stay bounded.
+/// 15 neighbours to its count (96 bytes per influence of the largest), so both stay bounded.
 pub const MAX_INFLUENCES_PER_VERTEX: usize = 4096;
 const _: () = assert!(MAX_INFLUENCES_PER_VERTEX <= u16::MAX as usize);
 
 /// Vertices the kernels process together, one per SIMD lane.
 pub(crate) const LANES: usize = 16;
-const _: () = assert!(core::mem::size_of::<Slot>() == LANES * 8);
+const _: () = assert!(core::mem::size_of::<Slot>() == LANES * 6);
 
-/// The `k`-th influence of each of [`LANES`] consecutive vertices: two 64-byte cache lines.
-/// Vertices with fewer than `k + 1` influences have bone 0 with weight 0 there, which adds
-/// nothing to any sum.
+/// The `k`-th influence of each of [`LANES`] consecutive vertices: 96 bytes (a bone index of 16
+/// bits and a weight of 32 per lane; the kernels read them and little else, so every byte less
+/// here is time and memory). Vertices with fewer than `k + 1` influences have bone 0 with weight
+/// 0 there, which adds nothing to any sum.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[repr(C, align(64))]
+#[repr(C, align(32))]
 pub(crate) struct Slot {
-    /// Each lane's bone index times [`RECORD_UNIT`] (read them with [`lane_record`]).
-    pub records: [u32; LANES],
+    /// Each lane's bone index (its record in a pose table: [`lane_record`]).
+    pub bones: [u16; LANES],
     pub weights: [f32; LANES],
 }
 
-/// The slots hold each lane's bone as `bone · RECORD_UNIT`: in a table of records of
-/// `RECORD_UNIT · s` bytes (`s` = 1, 2, 4 or 8: every table of the pose) that times `s` is the
-/// record's byte offset, a scale that x86-64 addressing applies for free. So the kernels load a
-/// lane's record with one instruction, with no shift per lane and influence (one in six of the
-/// AVX2 copy's instructions in the sign pass of DQS).
-pub(crate) const RECORD_UNIT: usize = 16;
+/// The most bones influences can refer to: a slot holds a bone index in 16 bits.
+pub const MAX_BONES: usize = u16::MAX as usize + 1;
 
-/// The most bones influences can refer to: a bone's scaled index (see [`RECORD_UNIT`]) must fit
-/// in 32 bits.
-pub const MAX_BONES: usize = (u32::MAX as usize + 1) / RECORD_UNIT;
-
-/// The first float of the record of `table` that a slot's entry `scaled` (a bone index times
-/// [`RECORD_UNIT`]) names.
+/// The first float of the record of `table` that a slot's entry `bone` names.
 ///
 /// # Safety
-/// `scaled / RECORD_UNIT` indexes `table` (true of every slot entry of influences whose bone
-/// count is the table's length: validated when they were built).
+/// `bone` indexes `table` (true of every slot entry of influences whose bone count is the
+/// table's length: validated when they were built).
 #[inline(always)]
-pub(crate) unsafe fn lane_record<T>(table: &[T], scaled: u32) -> *const f32 {
-    const {
-        let scale = core::mem::size_of::<T>() / RECORD_UNIT;
-        assert!(core::mem::size_of::<T>().is_multiple_of(RECORD_UNIT) && scale.is_power_of_two() && scale <= 8);
-    };
-    debug_assert!((scaled as usize / RECORD_UNIT) < table.len() && (scaled as usize).is_multiple_of(RECORD_UNIT));
-    let scale = core::mem::size_of::<T>() / RECORD_UNIT;
+pub(crate) unsafe fn lane_record<T>(table: &[T], bone: u16) -> *const f32 {
+    debug_assert!(usize::from(bone) < table.len());
     // SAFETY: the caller's contract: the record lies inside `table`.
-    unsafe { table.as_ptr().cast::<u8>().add(scaled as usize * scale).cast() }
+    unsafe { table.as_ptr().add(usize::from(bone)).cast() }
 }
 
 /// One `(bone, weight)` pair.
@@ -250,7 +237,7 @@ impl Influences {
         let (start, lane) = (self.batch_starts[v / LANES] as usize, v % LANES);
         self.slots[start..start + count]
             .iter()
-            .map(move |s| Influence { bone: s.records[lane] / RECORD_UNIT as u32, weight: s.weights[lane] })
+            .map(move |s| Influence { bone: u32::from(s.bones[lane]), weight: s.weights[lane] })
     }
 
     /// The CSR offsets (`V+1`, a copy: only each vertex's count is kept).
@@ -284,15 +271,16 @@ impl Influences {
             + self.batch_starts.capacity() * 4
     }
 
-    /// The lane-ordered layout the kernels read, as 32-bit words: `(batch starts, slots)`.
+    /// The lane-ordered layout the kernels read, as 32-bit words: `(batch starts, slots, words
+    /// per slot)`.
     /// For benchmarks that need to touch exactly the kernels' bytes.
     #[doc(hidden)]
-    pub fn kernel_words(&self) -> (&[u32], &[u32]) {
+    pub fn kernel_words(&self) -> (&[u32], &[u32], usize) {
         let words = core::mem::size_of::<Slot>() / 4;
-        // SAFETY: `Slot` is `repr(C)` with only u32 and f32 fields and no padding
-        // (LANES·8 bytes, a multiple of its 64-byte alignment), so it is a sequence of words.
+        // SAFETY: `Slot` is `repr(C)` with only u16 and f32 fields and no padding (LANES·6
+        // bytes, a multiple of its 32-byte alignment), so it is a sequence of 32-bit words.
         let slots = unsafe { core::slice::from_raw_parts(self.slots.as_ptr() as *const u32, self.slots.len() * words) };
-        (&self.batch_starts, slots)
+        (&self.batch_starts, slots, words)
     }
 
     /// The slots of batch `b` (vertices `b·LANES .. (b+1)·LANES`).
@@ -320,13 +308,13 @@ fn pack_lanes(offsets: &[u32], entries: &[Influence]) -> Result<(Vec<Slot>, Vec<
         let last = (first + LANES).min(vertices);
         let longest = longest(b);
         let base = slots.len();
-        slots.resize(base + longest, Slot { records: [0; LANES], weights: [0.0; LANES] });
+        slots.resize(base + longest, Slot { bones: [0; LANES], weights: [0.0; LANES] });
         for v in first..last {
             let lane = v - first;
             let list = &entries[offsets[v] as usize..offsets[v + 1] as usize];
             for (k, e) in list.iter().enumerate() {
-                // Below MAX_BONES · RECORD_UNIT = 2³² (validated).
-                slots[base + k].records[lane] = e.bone * RECORD_UNIT as u32;
+                // Below MAX_BONES = 2¹⁶ (validated).
+                slots[base + k].bones[lane] = e.bone as u16;
                 slots[base + k].weights[lane] = e.weight;
             }
         }

@@ -97,12 +97,12 @@ impl VectorOps for Neon {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], records: &[u32], offset: usize) -> [F; 4] {
-        debug_assert!(records.len() >= 4 && offset + 4 <= core::mem::size_of::<T>() / 4);
+    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [F; 4] {
+        debug_assert!(bones.len() >= 4 && offset + 4 <= core::mem::size_of::<T>() / 4);
         let row = |l: usize| {
             // SAFETY: the caller guarantees the record and the offset are in range; NEON as in
             // `instructions!`.
-            unsafe { vld1q_f32(lane_record(table, records[l]).add(offset)) }
+            unsafe { vld1q_f32(lane_record(table, bones[l]).add(offset)) }
         };
         transpose4(self, [row(0), row(1), row(2), row(3)])
     }
@@ -141,11 +141,11 @@ impl VectorOps for Neon {
         let mut acc = [[zero; ROWS]; 4];
         for (s, slot) in slots.iter().enumerate() {
             let w = self.load(&signed.map_or(&slot.weights, |w| &w[s])[lane0..]);
-            let records = &slot.records[lane0..lane0 + 4];
+            let bones = &slot.bones[lane0..lane0 + 4];
             let row = |l: usize, r: usize| {
                 // SAFETY: the caller's contract: the lane's bone indexes `table` and the window
                 // lies inside its record; NEON as in `instructions!`.
-                unsafe { vld1q_f32(lane_record(table, records[l]).add(offsets[r])) }
+                unsafe { vld1q_f32(lane_record(table, bones[l]).add(offsets[r])) }
             };
             for r in 0..ROWS {
                 // SAFETY: NEON as in `instructions!`.

@@ -114,7 +114,7 @@ unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], _
         for (l, lane) in lanes.iter_mut().enumerate() {
             // SAFETY: indices are in range (validated); a LinearBone is 16 floats (rows,
             // zero padding).
-            let record = unsafe { _mm512_loadu_ps(scalar_record(linear, &slot.records, l)) };
+            let record = unsafe { _mm512_loadu_ps(scalar_record(linear, &slot.bones, l)) };
             *lane = _mm512_fmadd_ps(record, _mm512_set1_ps(slot.weights[l]), *lane);
         }
         // SAFETY: a slot has 16 weights.
@@ -189,9 +189,9 @@ fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
 /// As [`load_columns`].
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn load_columns_scalar<T>(table: &[T], records: &[u32; LANES], offset: usize) -> [__m512; 8] {
+unsafe fn load_columns_scalar<T>(table: &[T], bones: &[u16; LANES], offset: usize) -> [__m512; 8] {
     // SAFETY: the caller guarantees the records and the offset are in range.
-    let row = |l: usize| unsafe { _mm256_loadu_ps(scalar_record(table, records, l).add(offset)) };
+    let row = |l: usize| unsafe { _mm256_loadu_ps(scalar_record(table, bones, l).add(offset)) };
     transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
 }
 
@@ -251,7 +251,7 @@ pub(in crate::skin) unsafe fn centers_rigid_batch(
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
         // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the rotation,
         // half the translation and a zero.
-        let r = unsafe { load_columns_scalar(job.cor_rigid, &slot.records, 0) };
+        let r = unsafe { load_columns_scalar(job.cor_rigid, &slot.bones, 0) };
         let moved = rotation_offset(&r[0..4], &r[4..7], &c);
         let w2 = _mm512_add_ps(w, w);
         for k in 0..3 {

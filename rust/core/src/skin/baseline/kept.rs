@@ -102,20 +102,18 @@ fn store_points(p: &Points, out: &mut [[f32; 3]]) {
     }
 }
 
-/// Bone data for one lane of a slot (its entry `scaled`, see [`RECORD_UNIT`]), without a bounds
-/// check (the kernel's innermost loads).
+/// Bone data for one lane of a slot (its entry `bone`), without a bounds check (the kernel's
+/// innermost loads).
 ///
 /// # Safety
-/// `scaled / RECORD_UNIT < table.len()`. For a slot of a [`Job`]'s influences and a table of its
-/// pose this holds: bone indices were validated against the bone count when the influences were
-/// built, `Job::new` checked that the pose has that many bones (and the rest tables the method
-/// reads), and padding lanes use bone 0, which exists whenever there is a slot at all.
-///
-/// [`RECORD_UNIT`]: super::super::influences::RECORD_UNIT
+/// `bone < table.len()`. For a slot of a [`Job`]'s influences and a table of its pose this
+/// holds: bone indices were validated against the bone count when the influences were built,
+/// `Job::new` checked that the pose has that many bones (and the rest tables the method reads),
+/// and padding lanes use bone 0, which exists whenever there is a slot at all.
 #[inline(always)]
-unsafe fn bone<T>(table: &[T], scaled: u32) -> &T {
+unsafe fn bone<T>(table: &[T], bone: u16) -> &T {
     // SAFETY: the caller's contract; the record is a whole, aligned `T` of `table`.
-    unsafe { &*lane_record(table, scaled).cast::<T>() }
+    unsafe { &*lane_record(table, bone).cast::<T>() }
 }
 
 /// LBS: `co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)`; `co` where `contrib ≤ 0.0001`.
@@ -132,7 +130,7 @@ unsafe fn linear(co: &Points, slots: &[Slot], linear: &[LinearBone], strength: &
         let mut contrib = 0.0f32;
         for slot in slots {
             // SAFETY: the caller's contract.
-            let m = unsafe { bone(linear, slot.records[l]) };
+            let m = unsafe { bone(linear, slot.bones[l]) };
             let w = slot.weights[l];
             let ws = Vec4::splat(w);
             for (a, row) in acc.iter_mut().zip(&m.matrix.rows) {

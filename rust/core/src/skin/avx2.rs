@@ -9,7 +9,7 @@
 
 use core::arch::x86_64::*;
 
-use super::batch::VectorOps;
+use super::batch::{assert_row_pairs, VectorOps};
 use super::influences::{lane_record, Slot, LANES};
 
 /// Proof that the CPU has AVX2 and FMA.
@@ -191,16 +191,7 @@ impl VectorOps for Avx2 {
         offsets: [usize; ROWS],
     ) -> [[__m256; 4]; ROWS] {
         const { assert!(ROWS <= 8) };
-        let stride = core::mem::size_of::<T>() / 4;
-        // Rows are loaded in adjacent pairs; an odd last row with the four floats after it
-        // (ignored), which must lie in the record too. Known at compile time.
-        for j in 0..ROWS.div_ceil(2) {
-            assert!(
-                2 * j + 1 >= ROWS || offsets[2 * j + 1] == offsets[2 * j] + 4,
-                "the window's rows come in adjacent pairs"
-            );
-            assert!(offsets[2 * j] + 8 <= stride, "the window's pairs of rows lie inside the record");
-        }
+        assert_row_pairs::<T, ROWS>(&offsets);
         debug_assert!(signed.is_none_or(|s| s.len() == slots.len()));
         // Lanes `l` and `l + 4` share the registers of a row after the sums, so the lanes are
         // summed in pairs (l, l + 4), as many pairs at a time as eight accumulators hold, and

@@ -8,6 +8,7 @@
 
 use core::arch::x86_64::*;
 
+use super::batch::{assert_row_pairs, VectorOps};
 use super::influences::{lane_record, Slot, LANES};
 
 mod kept;
@@ -164,7 +165,7 @@ macro_rules! instructions512 {
     )*};
 }
 
-impl super::batch::VectorOps for Avx512 {
+impl VectorOps for Avx512 {
     const WIDTH: usize = 16;
     type F = __m512;
     type Mask = __mmask16;
@@ -273,14 +274,7 @@ impl super::batch::VectorOps for Avx512 {
     ) -> [[__m512; 4]; ROWS] {
         const { assert!(ROWS <= 8) };
         debug_assert_eq!(lane0, 0, "one part per batch");
-        let stride = core::mem::size_of::<T>() / 4;
-        for j in 0..ROWS.div_ceil(2) {
-            assert!(
-                2 * j + 1 >= ROWS || offsets[2 * j + 1] == offsets[2 * j] + 4,
-                "the window's rows come in adjacent pairs"
-            );
-            assert!(offsets[2 * j] + 8 <= stride, "the window's pairs of rows lie inside the record");
-        }
+        assert_row_pairs::<T, ROWS>(&offsets);
         debug_assert!(signed.is_none_or(|s| s.len() == slots.len()));
         let mut sums = [[_mm512_setzero_ps(); 4]; ROWS];
         for g in 0..ROWS.div_ceil(4) {

@@ -102,6 +102,23 @@ pub(super) trait VectorOps: Copy {
     ) -> [[Self::F; 4]; ROWS];
 }
 
+/// Checks a window's rows for the copies that load them in adjacent pairs (eight floats at a
+/// time): each pair adjacent, and each pair's eight floats inside a record of `T` (an odd last
+/// row with the four floats after it, ignored). The offsets are known at compile time, so the
+/// checks fold away.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(super) fn assert_row_pairs<T, const ROWS: usize>(offsets: &[usize; ROWS]) {
+    let stride = core::mem::size_of::<T>() / 4;
+    for j in 0..ROWS.div_ceil(2) {
+        assert!(
+            2 * j + 1 >= ROWS || offsets[2 * j + 1] == offsets[2 * j] + 4,
+            "the window's rows come in adjacent pairs"
+        );
+        assert!(offsets[2 * j] + 8 <= stride, "the window's pairs of rows lie inside the record");
+    }
+}
+
 /// Row offsets `first, first + 4, …`: a contiguous window of `ROWS` rows for
 /// [`VectorOps::window_sums`].
 const fn window<const ROWS: usize>(first: usize) -> [usize; ROWS] {

@@ -4,11 +4,11 @@
 //!
 //! Vertices are processed [`LANES`] at a time from the lane-ordered influence slots: every lane
 //! is an independent vertex, so the serial chain of DQS's running-sum sign choice runs in all
-//! lanes at once. Compiled copies for AVX2+FMA and for AVX-512 (x86-64) and for NEON (aarch64)
-//! run the SIMD kernels of `batch.rs` (and two hand-written AVX-512 ones, `avx512/kept.rs`) on
-//! every batch, the last partial one padded; the baseline copy runs the portable kernels
-//! (`portable.rs`). Which copy runs by default is measured (`calibration.rs`); what the CPU has
-//! is detected in `isa.rs`.
+//! lanes at once. Every copy (the baseline, AVX2+FMA and AVX-512 on x86-64, NEON on aarch64)
+//! runs the one arithmetic body of `batch.rs` on every batch, the last partial one padded,
+//! except where a hand-written kernel measured faster (`baseline/kept.rs`, `avx512/kept.rs`).
+//! Which copy runs by default is measured (`calibration.rs`); what the CPU has is detected in
+//! `isa.rs`.
 
 use glam::Affine3A;
 use rayon::prelude::*;
@@ -233,7 +233,7 @@ struct BatchInputs<'a> {
 /// One full batch with the SIMD kernels of the copy `ISA`.
 ///
 /// # Safety
-/// The CPU has the instruction sets of `ISA` (not the baseline); every bone index of the batch's
+/// The CPU has the instruction sets of `ISA`; every bone index of the batch's
 /// slots indexes every table of `simd_job` that the method reads.
 #[inline(always)]
 unsafe fn full_batch<const ISA: u8, const KIND: u8, const SCALED: bool>(

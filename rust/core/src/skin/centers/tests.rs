@@ -903,21 +903,10 @@ fn sums_kept_for_another_sigma_are_not_taken() {
     let second = repainted(p, &first, 1000, 0.3, 3, 0.9);
     let before = centers_of_rotation(p, t, &c.influences, 0.2).unwrap();
     let previous = PreviousCenters { influences: &c.influences, centers: &before };
-    let (mid, kept) =
-        centers_of_rotation_update_keeping(p, t, &first, 0.2, previous, None, &mut |_, _| true, &mut || false).unwrap();
+    let (mid, kept) = update_keeping(p, t, &first, 0.2, previous, None);
     let mid_default = centers_of_rotation(p, t, &first, DEFAULT_SIGMA).unwrap();
     let previous = PreviousCenters { influences: &first, centers: &mid_default };
-    let (got, _) = centers_of_rotation_update_keeping(
-        p,
-        t,
-        &second,
-        DEFAULT_SIGMA,
-        previous,
-        Some(kept),
-        &mut |_, _| true,
-        &mut || false,
-    )
-    .unwrap();
+    let (got, _) = update_keeping(p, t, &second, DEFAULT_SIGMA, previous, Some(kept));
     assert_ne!(mid, mid_default);
     assert_eq!(got, centers_of_rotation(p, t, &second, DEFAULT_SIGMA).unwrap());
 }
@@ -934,23 +923,31 @@ fn sums_kept_for_another_geometry_are_not_taken() {
     let second = repainted(a, &first, 1000, 0.3, 3, 0.9);
     let on_a = centers_of_rotation(a, t, &c.influences, DEFAULT_SIGMA).unwrap();
     let previous = PreviousCenters { influences: &c.influences, centers: &on_a };
-    let (_, kept) =
-        centers_of_rotation_update_keeping(a, t, &first, DEFAULT_SIGMA, previous, None, &mut |_, _| true, &mut || {
-            false
-        })
-        .unwrap();
+    let (_, kept) = update_keeping(a, t, &first, DEFAULT_SIGMA, previous, None);
     let mid_b = centers_of_rotation(&b, t, &first, DEFAULT_SIGMA).unwrap();
     let previous = PreviousCenters { influences: &first, centers: &mid_b };
-    let (got, _) = centers_of_rotation_update_keeping(
-        &b,
-        t,
-        &second,
-        DEFAULT_SIGMA,
+    let (got, _) = update_keeping(&b, t, &second, DEFAULT_SIGMA, previous, Some(kept));
+    assert_eq!(got, centers_of_rotation(&b, t, &second, DEFAULT_SIGMA).unwrap());
+}
+
+/// An update that keeps its sums (and takes `kept`), with no progress report or cancelling.
+fn update_keeping(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    previous: PreviousCenters<'_>,
+    kept: Option<CenterSums>,
+) -> (Centers, CenterSums) {
+    centers_of_rotation_update_keeping(
+        positions,
+        triangles,
+        influences,
+        sigma,
         previous,
-        Some(kept),
+        kept,
         &mut |_, _| true,
         &mut || false,
     )
-    .unwrap();
-    assert_eq!(got, centers_of_rotation(&b, t, &second, DEFAULT_SIGMA).unwrap());
+    .unwrap()
 }

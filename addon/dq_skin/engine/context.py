@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from ..blender import compat, nodes
 from ..blender.meshdata import MeshData
@@ -46,9 +47,15 @@ class Context:
             readers = self.session.readers
             self.reads = PoseReads(readers.pose, readers.pose_error)
 
-    @property
+    @cached_property
     def render(self) -> bool:
         return self.depsgraph.mode == "RENDER"
+
+    @cached_property
+    def fed_stamp(self) -> tuple:
+        """What a member the feed skinned in this frame change's evaluation of this depsgraph
+        carries (`Feeds.stamp`)."""
+        return self.session.routes.feeds.stamp(self.depsgraph)
 
     def state(self, obj, mod) -> ModifierState:
         return self.session.states.get(mod_key(obj, mod))

@@ -30,7 +30,7 @@ def fed_frame_stands(obj, ctx: Context, bones_changed: bool = False) -> bool:
     states = []
     for mod in mods:
         key = mod_key(obj, mod)
-        if not mod.show_viewport or not feeds.skinned_now(key, ctx.depsgraph):
+        if not mod.show_viewport or not feeds.skinned_with(key, ctx.fed_stamp):
             return False
         st = session.states.find(key)
         states.append(st)

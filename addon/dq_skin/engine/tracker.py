@@ -288,11 +288,15 @@ class Tracker:
         meshes = self.session.meshes
         feeds = self.session.routes.feeds
         updated, moved = set(), set()
+        # (Each `bpy.types` attribute is a lookup by name: once per call, not once per update.)
+        types = bpy.types
+        Object, Mesh, Armature, Collection = types.Object, types.Mesh, types.Armature, types.Collection
         for update in depsgraph.updates:
-            orig = getattr(update.id, "original", update.id)
+            id_ = update.id
+            orig = getattr(id_, "original", id_)
             if orig is None:
                 continue
-            if isinstance(orig, bpy.types.Object):
+            if isinstance(orig, Object):
                 uid = orig.session_uid
                 if update.is_updated_geometry:
                     updated.add(uid)
@@ -311,16 +315,16 @@ class Tracker:
                     self.refresh(rec)
                     moved.add(uid)
             elif orig.session_uid in self.watch:
-                if isinstance(orig, bpy.types.Mesh) and update.is_updated_geometry:
+                if isinstance(orig, Mesh) and update.is_updated_geometry:
                     # A script edited the mesh before changing frames (animated shape keys also
                     # flag it; then comparing costs a read, but nothing is recomputed).
                     key = orig.shape_keys
                     if key is None or key.animation_data is None:
                         meshes.mark_stale(orig.session_uid)
-                elif isinstance(orig, bpy.types.Armature):
+                elif isinstance(orig, Armature):
                     # A script edited bones (deform flags, B-Bone segments) before changing frames.
                     self._armature_changed(orig.session_uid)
-            elif isinstance(orig, bpy.types.Collection):
+            elif isinstance(orig, Collection):
                 # A script hid or showed objects or collections before changing frames.
                 feeds.visibility_changed()
         ctx = self.context(depsgraph, batch=[])

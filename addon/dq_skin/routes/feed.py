@@ -235,10 +235,19 @@ class Feeds:
         """A frame change starts (`frame_change_pre`)."""
         self._frame_change += 1
 
+    def stamp(self, depsgraph) -> tuple:
+        """What a member skinned in this frame change's evaluation of `depsgraph` carries."""
+        return (self._frame_change, depsgraph.as_pointer())
+
     def skinned_now(self, key: ModKey, depsgraph) -> bool:
         """Whether the batch skinned this member in this frame change's evaluation of `depsgraph`."""
-        m = self.member(key)
-        return m is not None and m.skinned == (self._frame_change, depsgraph.as_pointer())
+        return self.skinned_with(key, self.stamp(depsgraph))
+
+    def skinned_with(self, key: ModKey, stamp: tuple) -> bool:
+        """`skinned_now` with the evaluation's `stamp` (one per handler call, many members)."""
+        batch = self._of.get(key)
+        m = batch.members.get(key) if batch is not None else None
+        return m is not None and m.skinned == stamp
 
     def runs(self, key: ModKey) -> int:
         m = self.member(key)
@@ -253,7 +262,7 @@ class Feeds:
             if batch is not None and depsgraph is not None and self.skin is not None and not self._busy():
                 with self._lock:
                     members = [m for m in batch.members.values() if m.ordered]
-                    stamp = (self._frame_change, depsgraph.as_pointer())
+                    stamp = self.stamp(depsgraph)
                     for m in self.skin(members, depsgraph):
                         m.skinned = stamp
                         m.runs += 1

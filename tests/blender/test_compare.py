@@ -40,7 +40,8 @@ def test_builtin_rigs_comparison_report_and_render(dq_skin, tmp_path):
     # The deviation view: at the last frame, each variant coloured by its distance from Armature
     # Linear on one scale, whose top is the largest distance in the report's terms.
     bpy.context.scene.frame_set(compare.FRAMES[1])
-    before = {o.name: o.hide_render for o in bpy.data.objects}
+    # (The add-on's runtime objects, in no scene and never saved, are not the user's scene.)
+    before = {o.name: o.hide_render for o in bpy.data.objects if not o.is_runtime_data}
     meshes, materials = len(bpy.data.meshes), len(bpy.data.curves)
     path = tmp_path / "deviation.png"
     scale = compare.render_deviation(bpy.context, bpy.context.scene, rows, path, width=320, samples=1)
@@ -58,7 +59,7 @@ def test_builtin_rigs_comparison_report_and_render(dq_skin, tmp_path):
     yellow = (r > 0.6) & (g > 0.6) & (b < 0.5 * g)
     assert purple.sum() > 500 and yellow.sum() > 5, (purple.sum(), yellow.sum())
     # The scene is left as it was: no still copies or legend, nothing left hidden.
-    assert {o.name: o.hide_render for o in bpy.data.objects} == before
+    assert {o.name: o.hide_render for o in bpy.data.objects if not o.is_runtime_data} == before
     assert (len(bpy.data.meshes), len(bpy.data.curves)) == (meshes, materials)
 
 

@@ -289,7 +289,8 @@ def test_a_hidden_character_costs_nothing_and_shows_when_shown(dq_skin, monkeypa
     for f in (10, 11):
         scene.frame_set(f)
         assert_same(hidden, reference, f"frame {f}")
-    assert fed_runs(dq_skin, hidden) == runs[0] + 2, "the shown character is fed again"
+    # (Its own batch of the feed skins it from the frame change it shows at.)
+    assert fed_runs(dq_skin, hidden) == runs[0] + 3, "the shown character is fed again"
     # Hidden by a script right before a frame change, shown in the interface.
     hide(hidden, how, True)
     scene.frame_set(12)
@@ -339,6 +340,35 @@ def test_a_character_hidden_in_viewports_renders(dq_skin, tmp_path, route):
     scene.frame_set(3)
     assert not is_evaluated(obj)
     assert_renders_as(obj, reference, scene, tmp_path)
+
+
+def test_a_character_hidden_in_viewports_is_fed_inside_a_render(dq_skin, tmp_path, route):
+    """Disabled in viewports and rendered: the render's graph skins it inside its first
+    evaluation (what a simulation stepping there, or anything else reading it there, sees),
+    through a batch of the feed that only its own carriers pull into a graph, so the viewport's
+    graph still never evaluates it."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = setup_scene()
+    obj.hide_viewport = True
+    bpy.context.view_layer.update()
+    for f in (3, 4):
+        scene.frame_set(f)
+        assert not is_evaluated(obj)
+    runs = fed_runs(dq_skin, obj)
+    scene.frame_start, scene.frame_end = 5, 7
+    scene.render.filepath = str(tmp_path / "hidden_####")
+    bpy.ops.render.render(animation=True)
+    assert fed_runs(dq_skin, obj) >= runs + 3, "a render's graph does not feed the hidden character"
+    for f in (8, 9):
+        scene.frame_set(f)
+        assert not is_evaluated(obj), "the viewport's graph evaluates the hidden character"
+    obj.hide_viewport = False
+    bpy.context.view_layer.update()
+    runs = fed_runs(dq_skin, obj)
+    for f in (10, 11):
+        scene.frame_set(f)
+        assert_same(obj, reference, f"shown again, frame {f}")
+    assert fed_runs(dq_skin, obj) == runs + 2, "shown again, it is not fed"
 
 
 def test_a_character_in_an_excluded_collection_shows_through_its_instance(dq_skin, route):

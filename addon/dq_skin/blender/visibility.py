@@ -4,8 +4,8 @@ collections that are neither excluded nor disabled in viewports (the monitor ico
 object itself is disabled; objects hidden with the eye icon are still evaluated (so that they
 show at once), and so is an object whose viewport visibility is animated or driven. This is
 Blender's rule for the bases of a viewport's graph (`need_pull_base_into_graph`). What else pulls
-an object in (a collection instance, a node's Object Info, a driver) is not read here: the feed
-finds those in the graph (`Feeds.pulled_in`)."""
+an object in (a collection instance, a node's Object Info, a driver) is not read here: such an
+object's own batch of the feed, which its carriers pull in with it, skins it there."""
 
 from __future__ import annotations
 

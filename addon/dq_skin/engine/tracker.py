@@ -340,8 +340,6 @@ class Tracker:
             bones, rec.bones_changed = rec.bones_changed, False
             if not forced and playback.fed_frame_stands(rec.obj, ctx, bones):
                 continue  # the feed made this frame inside Blender's evaluation
-            if not ctx.render:
-                feeds.pulled_in(uid)  # (in the graph: the feed follows it, if it thought it hidden)
             self.evaluate(rec, depsgraph, forced, ctx)
         pipeline.run_batch(self.session, ctx.batch)
         feeds.commit()

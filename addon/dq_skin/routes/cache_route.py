@@ -158,6 +158,12 @@ class CacheRoute:
         carrier.show_viewport, carrier.show_render = deforms
         set_mode(target.mod, ResultMode.CARRIED)
 
+    def redrive(self, target: Target) -> None:
+        """The carrier reads the batch that feeds the modifier now."""
+        carrier = carrier_of(target.obj, target.mod)
+        if carrier is not None:
+            _drive(target.obj, carrier, self.feeds.carrier_of(target.key))
+
     def remove_carrier(self, target: Target) -> None:
         """The carrier out of the stack (its file stays)."""
         obj = target.obj

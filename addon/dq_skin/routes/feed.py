@@ -12,11 +12,12 @@ batch's property, so it is evaluated after the batch: everything happens in the 
 that posed the bones, and Blender never evaluates the scene a second time for it.
 
 Members Blender would not evaluate in the viewport on its own (disabled in viewports, or in
-excluded or disabled collections: `blender.visibility`) get no variable, because a variable
-pulls its target into the graph: a hidden character then costs nothing per frame, as with the
-Armature modifier. If something else evaluates it all the same (a collection instance, say),
-the handler finds it in the graph, skins it fully and lets the batch follow it
-(`pulled_in`).
+excluded or disabled collections: `blender.visibility`) get no variable in the scene's batch,
+because a variable pulls its target into the graph: a hidden character then costs nothing per
+frame, as with the Armature modifier. Each hidden character has a batch of its own instead,
+which only its own carriers read: a graph that evaluates the character anyway (a render's, or
+the viewport's through a collection instance) pulls in that batch with it, and skins the
+character inside its first evaluation, while a graph without the character never evaluates it.
 
 The frame handler stays the authority: the driver only skins a member whose last full
 evaluation still stands as far as the driver can tell (its pose, transforms and shape keys are
@@ -55,9 +56,8 @@ class Member:
     alone: bool = True  # no DQ Skin after it reads its output (it keeps no buffer between frames)
     ordered: bool = False  # the batch's variables cover it (until then the handler skins it)
     # Blender would not evaluate its object in the viewport (disabled there, or in no enabled
-    # collection): no variable follows it, since a variable would pull it into the graph
+    # collection): its object's own batch feeds it, which only its carriers pull into a graph
     hidden: bool = False
-    pulled: bool = False  # something else puts it in the viewport's graph all the same
     skinned: tuple = (0, 0)  # (frame change, depsgraph address) of its last skinning here
     runs: int = 0  # frames skinned here (tests and the benchmark read it)
 
@@ -67,9 +67,9 @@ class Batch:
     uid: int
     scene: int  # the scene's session uid
     carrier: object  # the runtime Empty with the driven property
+    owner: int = 0  # the session uid of the hidden object whose members it feeds (0: the scene's)
     members: dict = field(default_factory=dict)  # ModKey -> Member
     dirty: bool = True  # its variables must be built again (`Feeds.commit`)
-    unfollowed: set = field(default_factory=set)  # object uids of its hidden members, not pulled in
     layout: tuple = ()  # its scene's `visibility.layout` when its members' visibility was read
     runs: int = 0
 
@@ -83,7 +83,10 @@ class Feeds:
     def __init__(self, busy):
         self._busy = busy
         self.skin = None  # set by the session: the engine's fed frame
-        self._batches: dict[int, Batch] = {}  # scene uid -> batch
+        # Set by the routes: points a member's carriers at the batch that now feeds it.
+        self.retarget = None
+        self._batches: dict[tuple[int, int], Batch] = {}  # (scene uid, owner) -> batch
+        self._by_uid: dict[int, Batch] = {}  # the number its driver passes -> batch
         self._of: dict[ModKey, Batch] = {}
         self._frame_change = 0
         self._visibility_stale = True  # visibility may have changed: `commit` reads it again
@@ -94,14 +97,16 @@ class Feeds:
 
     # -- membership ------------------------------------------------------------------------
     def join(self, member: Member, scene) -> Batch:
-        """`member` is fed by `scene`'s batch (made if missing) from its next build on."""
-        batch = self._batches.get(scene.session_uid)
-        if batch is None or not _alive(batch.carrier):
-            batch = self._new_batch(scene)
+        """`member` is fed by a batch of `scene` (made if missing) from its next build on: the
+        scene's, or its object's own where it is known to be hidden."""
         old = self._of.get(member.key)
+        known = old.members.get(member.key) if old is not None and old.scene == scene.session_uid else None
+        if known is not None:
+            member.hidden = known.hidden
+        batch = self._batch(scene, member.key.object_uid if member.hidden else 0)
         if old is not None and old is not batch:
             self.leave(member.key)
-        known = batch.members.get(member.key)
+            known = None
         if known is not None and (known.armature, known.bones, known.bbones, known.shape_keys) == (
             member.armature,
             member.bones,
@@ -110,15 +115,21 @@ class Feeds:
         ):
             known.target, known.kind, known.order, known.previous = member.target, member.kind, member.order, member.previous
             return batch
-        if known is not None:
-            member.hidden, member.pulled = known.hidden, known.pulled
         batch.members[member.key] = member
         batch.dirty = True
         self._of[member.key] = batch
         return batch
 
-    def _new_batch(self, scene) -> Batch:
-        carrier = bpy.data.objects.new(f".DQ Skin feed {scene.name}", None)
+    def _batch(self, scene, owner: int) -> Batch:
+        """`scene`'s batch (`owner` 0) or the batch of its hidden object `owner`, made if missing."""
+        batch = self._batches.get((scene.session_uid, owner))
+        if batch is None or not _alive(batch.carrier):
+            batch = self._new_batch(scene, owner)
+        return batch
+
+    def _new_batch(self, scene, owner: int) -> Batch:
+        name = f".DQ Skin feed {scene.name}" + (f" {owner}" if owner else "")
+        carrier = bpy.data.objects.new(name, None)
         carrier.is_runtime_data = True
         # Drivers do not count as users: without one, Purge Unused would delete it under the
         # carriers that read it.
@@ -126,7 +137,7 @@ class Feeds:
         carrier[PROPERTY] = 1.0
         uid = self._next_uid
         self._next_uid += 1
-        batch = self._batches[scene.session_uid] = Batch(uid, scene.session_uid, carrier)
+        batch = self._batches[(scene.session_uid, owner)] = self._by_uid[uid] = Batch(uid, scene.session_uid, carrier, owner)
         driver = carrier.driver_add(PATH).driver
         driver.type = "SCRIPTED"
         # Set last: Blender compiles the expression now, while the function is known to it (with
@@ -153,68 +164,80 @@ class Feeds:
         """Objects or collections may have been hidden or shown (the next `commit` reads it)."""
         self._visibility_stale = True
 
-    def pulled_in(self, obj_uid: int) -> None:
-        """A hidden member's object is in the viewport's graph all the same (found there by the
-        frame handler): the batch follows it from its next build."""
-        for batch in self._batches.values():
-            if obj_uid not in batch.unfollowed:
-                continue
-            batch.unfollowed.discard(obj_uid)
-            for m in batch.members.values():
-                if m.hidden and m.key.object_uid == obj_uid:
-                    m.pulled = True
-                    batch.dirty = True
-
     def commit(self) -> None:
-        """Builds the variables of every batch whose members changed (once per handler call, not
-        once per member: a crowd joins at once), for the members Blender evaluates."""
+        """Reads which members are hidden where anything may have changed it, moves those that
+        changed to the batch that now feeds them (their carriers follow), and builds the
+        variables of every batch whose members changed (once per handler call, not once per
+        member: a crowd joins at once)."""
         stale, self._visibility_stale = self._visibility_stale, False
-        for scene_uid, batch in list(self._batches.items()):
+        for key, batch in list(self._batches.items()):
             if not batch.members:
-                self._drop(scene_uid)
-                continue
-            if not _alive(batch.carrier):
-                continue
-            scene = next((s for s in bpy.data.scenes if s.session_uid == scene_uid), None)
+                self._drop(key)
+        moved = []
+        for scene_uid in {b.scene for b in self._batches.values()}:
+            batches = [b for b in self._batches.values() if b.scene == scene_uid and _alive(b.carrier)]
+            scene = next((sc for sc in bpy.data.scenes if sc.session_uid == scene_uid), None)
             layout = visibility.layout(scene) if scene is not None else ()
-            if batch.dirty or stale or layout != batch.layout:
-                batch.layout = layout
-                self._read_visibility(batch, scene)
-            if not batch.dirty:
+            if stale or any(b.dirty or b.layout != layout for b in batches):
+                for b in batches:
+                    b.layout = layout
+                moved += self._read_visibility(batches, scene)
+        for batch in list(self._batches.values()):
+            if not batch.dirty or not _alive(batch.carrier):
                 continue
             driver = batch.carrier.animation_data.drivers[0].driver
             while driver.variables:
                 driver.variables.remove(driver.variables[0])
-            followed = [m for m in batch.members.values() if m.pulled or not m.hidden]
-            order_after_inputs(driver, followed)
+            order_after_inputs(driver, list(batch.members.values()))
             for m in batch.members.values():
-                m.ordered = m.pulled or not m.hidden
-            batch.unfollowed = {m.key.object_uid for m in batch.members.values() if not m.ordered}
+                m.ordered = True
             batch.dirty = False
+        for key, batch in list(self._batches.items()):
+            if not batch.members:
+                self._drop(key)
+        if self.retarget is not None:
+            for m in moved:
+                self.retarget(m)
 
-    def _read_visibility(self, batch: Batch, scene) -> None:
-        enabled = visibility.enabled_in_viewport(scene) if scene is not None else None
-        for m in batch.members.values():
-            try:
-                hidden = enabled is not None and not visibility.evaluated_on_its_own(m.target.obj, enabled)
-            except ReferenceError:
-                continue  # (gone: `prune` forgets it)
-            if hidden != m.hidden:
+    def _read_visibility(self, batches: list, scene) -> list:
+        """Marks the members of `scene`'s `batches` hidden or not and moves those that changed
+        to the batch that now feeds them; returns them."""
+        if scene is None:
+            return []  # (the scene is gone: its members are forgotten with their objects)
+        enabled = visibility.enabled_in_viewport(scene)
+        moved = []
+        for batch in batches:
+            for key, m in list(batch.members.items()):
+                try:
+                    hidden = not visibility.evaluated_on_its_own(m.target.obj, enabled)
+                except ReferenceError:
+                    continue  # (gone: `prune` forgets it)
+                if hidden == m.hidden and batch.owner == (key.object_uid if hidden else 0):
+                    continue
                 m.hidden = hidden
-                m.pulled = False
+                m.ordered = False
+                batch.members.pop(key)
                 batch.dirty = True
+                to = self._batch(scene, key.object_uid if hidden else 0)
+                to.members[key] = m
+                to.dirty = True
+                self._of[key] = to
+                moved.append(m)
+        return moved
 
-    def _drop(self, scene_uid: int) -> None:
-        batch = self._batches.pop(scene_uid)
+    def _drop(self, key: tuple) -> None:
+        batch = self._batches.pop(key)
+        self._by_uid.pop(batch.uid, None)
         if _alive(batch.carrier):
             bpy.data.objects.remove(batch.carrier)
 
     def prune(self) -> None:
         """Forgets members whose object is gone and batches whose carrier is (an undo step
         replaced the data-blocks)."""
-        for scene_uid, batch in list(self._batches.items()):
+        for batch_key, batch in list(self._batches.items()):
             if not _alive(batch.carrier):
-                self._batches.pop(scene_uid)
+                self._batches.pop(batch_key)
+                self._by_uid.pop(batch.uid, None)
                 for key in batch.members:
                     self._of.pop(key, None)
                 continue
@@ -226,8 +249,8 @@ class Feeds:
         """Every batch goes (the add-on is disabled). The function stays in the driver namespace
         (with no batch it does nothing): touching the namespace while Blender 4.2 exits crashes
         it (`addon/install.py` under bpy 4.2.23)."""
-        for scene_uid in list(self._batches):
-            self._drop(scene_uid)
+        for key in list(self._batches):
+            self._drop(key)
         self._of.clear()
 
     # -- frames ----------------------------------------------------------------------------
@@ -258,7 +281,7 @@ class Feeds:
         render's). Always 1; never raises (Blender would switch a failing Python driver off)."""
         try:
             depsgraph = bpy.app.driver_namespace.get("depsgraph")
-            batch = next((b for b in self._batches.values() if b.uid == uid), None)
+            batch = self._by_uid.get(uid)
             if batch is not None and depsgraph is not None and self.skin is not None and not self._busy():
                 with self._lock:
                     members = [m for m in batch.members.values() if m.ordered]

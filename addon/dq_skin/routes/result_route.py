@@ -97,6 +97,13 @@ class ResultRoute:
         out.kind = kind
         out.route = RouteKind.NODE if fed else RouteKind.RESULT
 
+    def redrive(self, target: Target) -> None:
+        """The result's carrier reads the batch that feeds the modifier now."""
+        result = target.st.output.result
+        carrier = result.modifiers.get(results.CARRIER) if result is not None else None
+        if carrier is not None:
+            _drive(result, carrier, self.feeds.carrier_of(target.key))
+
     def fed_out(self, target: Target, depsgraph) -> np.ndarray | None:
         """Where the feed's kernel writes this frame: the result mesh `depsgraph` evaluates."""
         result, bound = target.st.output.result, target.st.binding.binding

@@ -19,6 +19,18 @@ class Routes:
         self.feeds = feeds
         self.result = ResultRoute(feeds)
         self.cache = CacheRoute(feeds)
+        feeds.retarget = self.redrive
+
+    def redrive(self, member: Member) -> None:
+        """`member`'s carriers read the batch that now feeds it (a character hidden or shown)."""
+        target = member.target
+        try:
+            if member.kind is RouteKind.CACHE:
+                self.cache.redrive(target)
+            elif member.kind is RouteKind.NODE:
+                self.result.redrive(target)
+        except (ReferenceError, ValueError):
+            pass  # (its object or modifier is gone: `prune` forgets it)
 
     def publish(
         self,

@@ -4,7 +4,8 @@ Every case builds the same scene several times, each object with its own copy of
 the Armature modifier, without skinning, and with DQ Skin on the route it chooses and on each
 route forced (`endtoend.routes`: the Mesh Cache carrier, the fed result object, the result
 written after the first evaluation as before, and where Blender has them the Geometry Nodes
-file-import nodes); on single characters also Blender's floors. Only one of them is in the
+file-import nodes); on single characters also Blender's floors, and on them and the crowd the
+chosen route with no Python of DQ Skin's per frame (`floor_route`). Only one of them is in the
 depsgraph at a time; rounds alternate between them and each keeps its median. Every route is
 checked to show DQ Skin's mesh before it is timed. A benchmark, not a test: it prints a row per
 case and writes JSON (default: target/bench-blender.json); docs/performance.md has the figures.

@@ -55,7 +55,7 @@ def case_cesium(method: str, quick: bool) -> dict:
 def case_crowd(count: int, quick: bool) -> dict:
     scenes.empty_scene()
     pairs = scenes.crowd(count)
-    row = compare(pairs, "DUAL_QUATERNION", (3, 9, 15, 21), 2 if quick else 4, 5 if quick else 7)
+    row = compare(pairs, "DUAL_QUATERNION", (3, 9, 15, 21), 2 if quick else 4, 5 if quick else 7, floors=True)
     n = len(pairs[0][0].data.vertices)
     return {"case": f"{count} characters x {n} vertices, dual_quaternion", "objects": count, "vertices": n * count, **row}
 

@@ -85,11 +85,15 @@ def compare(
         show_only(*auto)
         imported = routes.ImportRoute(auto, rigs)
         variants["route_import"] = imported.objects
-    floor = None
+    floor = route_floor = None
     if floors and len(pairs) == 1:
         st = addon().SESSION.state_of(auto[0], addon().engine.context.dq_skin_modifiers(auto[0])[0])
         floor = routes.Floors(rigs[0], meshes[0], st.binding.binding.bone_names)
         variants.update({k: [o] for k, o in floor.objects.items()})
+    if floors:
+        route_floor = routes.RouteFloor()
+        variants["floor_route"] = auto
+        hooks["floor_route"] = route_floor.hooks
     try:
         row = {"dq_skin_route": chosen, "dq_skin_extra_bytes": int(extra), "payload_bytes": payload_bytes(meshes)}
         row["dq_skin_extra_per_payload"] = extra / max(row["payload_bytes"], 1)
@@ -98,6 +102,10 @@ def compare(
         show_only(*auto)
         with Parts() as parts:
             row.update(parts.measure(auto, frames, per_round * 2))
+        if floor is not None:
+            row["floor_python_driver_calls"] = floor.python_calls
+        if route_floor is not None:
+            row["floor_route_calls"] = route_floor.calls
     finally:
         if imported is not None:
             imported.remove()

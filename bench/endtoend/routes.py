@@ -223,7 +223,8 @@ class Floors:
     `floor_mesh_cache`, a Mesh Cache reading a fixed PC2 file with a driver ordered after the
     bound bones that Blender evaluates without Python: the mesh evaluated again after the pose,
     doing nothing; `floor_python_driver`, the same with a Python driver calling a function that
-    does nothing (what entering Python from the evaluation costs); `floor_armature_idle`, the
+    does nothing (what entering Python from the evaluation costs; `python_calls` counts its
+    calls, so that the floor is known to enter Python); `floor_armature_idle`, the
     Armature modifier with vertex groups and envelopes off (Blender's own modifier visiting the
     vertices with no bone to add); `floor_carried`, the Mesh Cache of `floor_mesh_cache` followed
     by DQ Skin's node group on its carried path (what Blender's evaluation costs the chosen route
@@ -234,14 +235,17 @@ class Floors:
     def __init__(self, rig, body, bone_names):
         self.objects = {}
         n = len(body.data.vertices)
-        self.path = os.path.join(FOLDER, f"dqskin-bench-floor-{os.getpid()}-{body.session_uid}.pc2")
+        # (Not named like DQ Skin's own files, "dqskin-*.pc2": DQ Skin removes a Mesh Cache reading
+        # one of those that no DQ Skin modifier follows, as a copy's leftover carrier.)
+        self.path = os.path.join(FOLDER, f"bench-floor-{os.getpid()}-{body.session_uid}.pc2")
         rest = np.empty(n * 3, np.float32)
         body.data.vertices.foreach_get("co", rest)
         with open(self.path, "wb") as f:
             f.write(b"POINTCACHE2\0" + struct.pack("<iiffi", 1, n, 0.0, 1.0, 1) + rest.tobytes())
         self.name = f"dqskin_bench_nothing_{body.session_uid}"
         self.group = None
-        bpy.app.driver_namespace[self.name] = lambda *_: 1.0
+        self.python_calls = 0
+        bpy.app.driver_namespace[self.name] = self._nothing
         for kind in self.KINDS:
             o = body.copy()
             o.data = body.data.copy()
@@ -272,6 +276,10 @@ class Floors:
                 group.node_group = self.group
                 a.routes.result_route.set_mode(group, a.model.state.ResultMode.CARRIED)
 
+    def _nothing(self, *_):
+        self.python_calls += 1
+        return 1.0
+
     def remove(self):
         bpy.app.driver_namespace.pop(self.name, None)
         for o in self.objects.values():
@@ -279,3 +287,44 @@ class Floors:
         if self.group is not None:
             bpy.data.node_groups.remove(self.group)
         os.unlink(self.path)
+
+
+class RouteFloor:
+    """`floor_route`: DQ Skin's own objects on the route it chose, with no Python of DQ Skin's
+    per character and frame (its frame handler only settling the feed's batches, the feed's
+    driver calling a function that returns at once): what the route itself costs Blender (the batch's object and Python driver, the
+    carriers' drivers, the Mesh Cache or the result object, the node group). `calls` counts the
+    driver's calls. The positions stay those of the last full evaluation: timed, not compared."""
+
+    def __init__(self):
+        self.calls = 0
+        self.saved = None
+
+    def _nothing(self, *_):
+        self.calls += 1
+        return 1.0
+
+    def enter(self):
+        a = addon()
+        tracker, feeds = a.engine.tracker.Tracker, a.SESSION.routes.feeds
+        self.saved = tracker.frame
+        # (Only the feed's bookkeeping: characters just shown leave the batches of their own.)
+        tracker.frame = lambda _self, _depsgraph: feeds.commit()
+        # (On the instance: the feed puts its `run` in the driver namespace again whenever it
+        # makes a batch, as showing and hiding characters does.)
+        feeds.run = self._nothing
+        bpy.app.driver_namespace[a.routes.feed.FUNCTION] = feeds.run
+
+    def leave(self):
+        if self.saved is None:
+            return
+        a = addon()
+        feeds = a.SESSION.routes.feeds
+        a.engine.tracker.Tracker.frame = self.saved
+        del feeds.run
+        bpy.app.driver_namespace[a.routes.feed.FUNCTION] = feeds.run
+        self.saved = None
+
+    @property
+    def hooks(self):
+        return (self.enter, self.leave)

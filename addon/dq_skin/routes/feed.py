@@ -115,10 +115,14 @@ class Feeds:
         ):
             known.target, known.kind, known.order, known.previous = member.target, member.kind, member.order, member.previous
             return batch
+        self._put(member, batch)
+        return batch
+
+    def _put(self, member: Member, batch: Batch) -> None:
+        """`member` into `batch` (its variables are built again at the next commit)."""
         batch.members[member.key] = member
         batch.dirty = True
         self._of[member.key] = batch
-        return batch
 
     def _batch(self, scene, owner: int) -> Batch:
         """`scene`'s batch (`owner` 0) or the batch of its hidden object `owner`, made if missing."""
@@ -170,9 +174,6 @@ class Feeds:
         variables of every batch whose members changed (once per handler call, not once per
         member: a crowd joins at once)."""
         stale, self._visibility_stale = self._visibility_stale, False
-        for key, batch in list(self._batches.items()):
-            if not batch.members:
-                self._drop(key)
         moved = []
         for scene_uid in {b.scene for b in self._batches.values()}:
             batches = [b for b in self._batches.values() if b.scene == scene_uid and _alive(b.carrier)]
@@ -218,10 +219,7 @@ class Feeds:
                 m.ordered = False
                 batch.members.pop(key)
                 batch.dirty = True
-                to = self._batch(scene, key.object_uid if hidden else 0)
-                to.members[key] = m
-                to.dirty = True
-                self._of[key] = to
+                self._put(m, self._batch(scene, key.object_uid if hidden else 0))
                 moved.append(m)
         return moved
 

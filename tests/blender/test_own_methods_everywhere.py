@@ -174,16 +174,21 @@ def test_the_baked_reference_is_the_method_not_blenders(dq_skin, assets, tmp_pat
 # -- simulations on and around the character ----------------------------------------------------
 
 
+def pinned_cloth(obj) -> None:
+    """A cloth on the character, pinned by its upper body, simulated over the baked frames."""
+    upper_body_group(obj)
+    cloth = obj.modifiers.new("Cloth", "CLOTH")
+    cloth.settings.vertex_group_mass = "Pin"
+    cloth.settings.quality = 2
+    cloth.point_cache.frame_end = FRAMES[1]
+
+
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", OWN_METHODS)
 def test_a_pinned_cloth_on_the_character(dq_skin, assets, tmp_path, method, rig):
     s = Scene(dq_skin, assets, tmp_path, method, rig, noisy=True)
     for obj in s.all:
-        upper_body_group(obj)
-        cloth = obj.modifiers.new("Cloth", "CLOTH")
-        cloth.settings.vertex_group_mass = "Pin"
-        cloth.settings.quality = 2
-        cloth.point_cache.frame_end = FRAMES[1]
+        pinned_cloth(obj)
 
     def check(f):
         s.same(world_positions(s.body), world_positions(s.ref), world_positions(s.noisy), f"cloth at frame {f}")
@@ -204,11 +209,7 @@ def test_a_pinned_cloth_on_a_character_disabled_in_viewports_renders(dq_skin, as
     the bit; fed from the frame before, the body was 3 % of its size off)."""
     s = Scene(dq_skin, assets, tmp_path, method, RIGS[0])
     for obj in s.all:
-        upper_body_group(obj)
-        cloth = obj.modifiers.new("Cloth", "CLOTH")
-        cloth.settings.vertex_group_mass = "Pin"
-        cloth.settings.quality = 2
-        cloth.point_cache.frame_end = FRAMES[1]
+        pinned_cloth(obj)
         obj.hide_viewport = True
     scene = setup_scene()
     bpy.context.view_layer.update()

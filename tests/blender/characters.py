@@ -108,20 +108,23 @@ def body_mesh(metarig):
     return obj
 
 
-def animate(rig, frames=(1, 20, 40)) -> None:
-    """Keys the controls of `MOTION` at `frames`: rest, full, then half way back."""
+def animate(rig, frames=(1, 20, 40), scaling_only: bool = False) -> None:
+    """Keys the controls of `MOTION` at `frames`: rest, full, then half way back. With
+    `scaling_only`, only the scales move (the rotations and the IK foot stay at rest): what the
+    animation asks of the body's volume, which no skinning method changes without rotations."""
     for name, fk in LIMBS.items():
         rig.pose.bones[name]["IK_FK"] = fk
     for k, frame in enumerate(frames):
         amount = (0.0, 1.0, 0.5)[k % 3]
+        moves = 0.0 if scaling_only else amount
         foot, offset = IK_FOOT
-        rig.pose.bones[foot].location = tuple(amount * x for x in offset)
+        rig.pose.bones[foot].location = tuple(moves * x for x in offset)
         rig.pose.bones[foot].keyframe_insert("location", frame=frame)
         for name, axis, angle, scale in MOTION:
             pb = rig.pose.bones[name]
             pb.rotation_mode = "QUATERNION"
             a = np.array(axis, float) / np.linalg.norm(axis)
-            half = 0.5 * angle * amount
+            half = 0.5 * angle * moves
             pb.rotation_quaternion = (math.cos(half), *(math.sin(half) * a))
             pb.keyframe_insert("rotation_quaternion", frame=frame)
             if scale is not None:

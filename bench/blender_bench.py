@@ -7,7 +7,9 @@ written after the first evaluation as before, and where Blender has them the Geo
 file-import nodes); on single characters also Blender's floors, and on them and the crowd the
 chosen route with no Python of DQ Skin's per frame (`floor_route`). Only one of them is in the
 depsgraph at a time; rounds alternate between them and each keeps its median. Every route is
-checked to show DQ Skin's mesh before it is timed. A benchmark, not a test: it prints a row per
+checked to show DQ Skin's mesh before it is timed. The timing runs with glibc's allocator kept
+from handing big blocks back to the system (`timing.steady_allocator`: without it a frame that
+frees and allocates a large array page-faults afresh at random frames, whichever variant). A benchmark, not a test: it prints a row per
 case and writes JSON (default: target/bench-blender.json); docs/performance.md has the figures.
 
 Cases (as in the issues): a 3k grid, CesiumMan, 200 CesiumMen, grids of 250k and 1M vertices
@@ -33,7 +35,7 @@ ROOT = Path(__file__).resolve().parent.parent
 os.environ.setdefault("BLENDER_USER_RESOURCES", str(ROOT / ".blender_user"))
 
 from endtoend import cases, memory  # noqa: E402
-from endtoend.timing import ADDON  # noqa: E402
+from endtoend.timing import ADDON, steady_allocator  # noqa: E402
 
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
 
@@ -65,6 +67,7 @@ def main() -> int:
     if args.memory_case:
         print(json.dumps(memory.measure(args.memory_case)), flush=True)
         return 0
+    steady = steady_allocator()  # (after the memory case: memory is measured as Blender allocates)
     only = set(args.only or GROUPS)
     q = args.quick
     big = [250_000] if q else [250_000, 1_000_000]
@@ -106,7 +109,7 @@ def main() -> int:
         for case in memory.CASES:
             report(memory.run_fresh(case))
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    info = {"blender": bpy.app.version_string, "cpu": cpu_name(), "threads": os.cpu_count(), "rows": rows}
+    info = {"blender": bpy.app.version_string, "cpu": cpu_name(), "threads": os.cpu_count(), "steady_allocator": steady, "rows": rows}
     args.out.write_text(json.dumps(info, indent=2))
     print(f"wrote {args.out}")
     return 0

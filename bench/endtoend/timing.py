@@ -3,6 +3,7 @@ the depsgraph at a time), each a median; where DQ Skin's time of a frame goes; m
 
 from __future__ import annotations
 
+import ctypes
 import sys
 import time
 
@@ -15,6 +16,25 @@ ADDON = "bl_ext.user_default.dq_skin"
 
 def addon():
     return sys.modules[ADDON]
+
+
+def steady_allocator() -> bool:
+    """Keeps glibc's allocator from handing big blocks back to the system (its mmap threshold
+    and heap trimming), so that a large array Blender frees and allocates again every frame
+    does not page-fault afresh at random frames: without it, 250k vertices with Corrective
+    Smooth took 48 or 63 ms a frame at random, with the Armature modifier and with DQ Skin
+    alike. Blender's own Linux builds allocate with jemalloc, which keeps freed extents for
+    reuse (`build_files/cmake/config/blender_release.cmake`); the `bpy` module cannot
+    (`bpy_module.cmake`: jemalloc does not work when Python loads the module), so this is the
+    closer of glibc's behaviours. Every variant of a run gets the same allocator. Returns whether
+    it applied (glibc)."""
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    m_trim_threshold, m_mmap_max = -1, -4
+    return bool(mallopt(m_trim_threshold, 1 << 30)) and bool(mallopt(m_mmap_max, 0))
 
 
 def show_only(*objs) -> None:

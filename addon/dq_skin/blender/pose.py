@@ -44,6 +44,12 @@ class PoseReads:
         data, self.error = got
         return data
 
+    def adopt(self, other: PoseReads) -> None:
+        """Takes the poses `other` read in the same evaluation (the feed's run, before the frame
+        handler): they are what reading them again would give."""
+        for key, got in other._read.items():
+            self._read.setdefault(key, got)
+
     def _read_now(self, arm_eval) -> tuple:
         if self.reader is None:
             return None, self.unavailable

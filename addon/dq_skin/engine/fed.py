@@ -156,6 +156,10 @@ def skin_members(session):
     """The feed's skinning function for `session` (`Feeds.skin`)."""
 
     def skin(members, depsgraph):
-        return FedFrame(session, depsgraph).run(members)
+        frame = FedFrame(session, depsgraph)
+        try:
+            return frame.run(members)
+        finally:
+            session.routes.feeds.keep(depsgraph, frame.reads)
 
     return skin

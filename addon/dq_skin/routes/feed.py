@@ -89,6 +89,9 @@ class Feeds:
         self._by_uid: dict[int, Batch] = {}  # the number its driver passes -> batch
         self._of: dict[ModKey, Batch] = {}
         self._frame_change = 0
+        # What the batches' runs read of Blender's memory in one evaluation (`keep`): the
+        # frame handler right after it reads the same pose (`kept`).
+        self._kept: tuple = ((), [])
         self._visibility_stale = True  # visibility may have changed: `commit` reads it again
         self._next_uid = 1
         # A render's graph may run its driver on its own thread while the viewport's runs one:
@@ -259,6 +262,21 @@ class Feeds:
     def stamp(self, depsgraph) -> tuple:
         """What a member skinned in this frame change's evaluation of `depsgraph` carries."""
         return (self._frame_change, depsgraph.as_pointer())
+
+    def keep(self, depsgraph, reads) -> None:
+        """`reads` (a run's `pose.PoseReads`) were made in this frame change's evaluation of
+        `depsgraph`: the frame handler after it adopts them (`kept`) instead of reading the
+        same pose from memory again. Another evaluation's are dropped."""
+        stamp = self.stamp(depsgraph)
+        kept = self._kept
+        if kept[0] != stamp:
+            kept = self._kept = (stamp, [])
+        kept[1].append(reads)
+
+    def kept(self, stamp: tuple) -> list:
+        """The reads the batches' runs made in the evaluation `stamp` names (`keep`)."""
+        kept = self._kept
+        return kept[1] if kept[0] == stamp else []
 
     def skinned_now(self, key: ModKey, depsgraph) -> bool:
         """Whether the batch skinned this member in this frame change's evaluation of `depsgraph`."""

@@ -148,6 +148,33 @@ def test_what_the_pose_alone_does_not_say_is_caught(dq_skin, route):
     assert route_of(dq_skin, obj) == route
 
 
+def test_a_keyed_setting_plays(dq_skin, route):
+    """DQ Skin's settings can be keyed like any modifier's: in playback each frame shows what
+    its keys give there (the driver skins with the settings of the last full evaluation; the
+    frame handler compares the stored values on every frame). Blend with its Blend Factor keyed
+    0, then 1: Linear, then Dual Quaternion, then Linear again when played back."""
+    obj, arm, dual = fed_character(dq_skin, "BLEND")
+    linear = reference_copy(obj, False)
+    linear.data = obj.data.copy()
+    nodes = dq_skin.blender.nodes
+    mod = dq_skin_mods(obj)[0]
+    ident = nodes.socket_ids(mod.node_group)["Blend Factor"]
+    if dq_skin.blender.compat.RNA_INPUTS:
+        path = getattr(mod.properties.inputs, ident).path_from_id("value")
+    else:
+        path = f'{mod.path_from_id()}["{ident}"]'
+    for frame in range(5, 11):  # (a key on every frame played: no interpolation between)
+        nodes.put(mod, "Blend Factor", 0.0 if frame < 8 else 1.0)
+        assert obj.keyframe_insert(data_path=path, frame=frame)
+    scene = bpy.context.scene
+    runs = fed_runs(dq_skin, obj)
+    for f in (5, 6, 7, 8, 9, 10, 6):
+        scene.frame_set(f)
+        assert_same(obj, dual if f >= 8 else linear, f"frame {f}")
+    assert fed_runs(dq_skin, obj) >= runs + 5  # (fed where the factor did not change)
+    assert route_of(dq_skin, obj) == route
+
+
 def test_what_the_object_alone_says_is_caught(dq_skin, route):
     """The frame handler takes the driver's frame without the full evaluation when the driver
     skinned it (`playback.fed_frame_stands`): each edit of the object a script makes right

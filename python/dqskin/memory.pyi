@@ -31,3 +31,5 @@ class PoseMemory:
     def __init__(self, blend_file: bytes) -> None: ...
     def read(self, armature: object) -> PoseData:
         """The pose of a ``bpy.types.Object`` of type ``'ARMATURE'`` (evaluated for this frame)."""
+    def channel_matrices(self, armature: object) -> npt.NDArray[np.float32]:
+        """``(N, 4, 4)`` row-major: every pose bone's ``matrix_channel``, in ``pose.bones`` order."""

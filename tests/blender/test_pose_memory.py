@@ -349,6 +349,47 @@ def test_the_reader_refuses_what_is_not_an_armature(dq_skin):
     assert reader.read(arm).bone_count == 4
 
 
+def test_the_channel_matrices_alone_are_the_python_apis(dq_skin, monkeypatch):
+    """`PoseMemory.channel_matrices`, what characters without B-Bones or envelopes read every
+    frame: every pose bone's `matrix_channel` (deforming or not), in `pose.bones` order, to the
+    bit; what is not an armature is refused; a reader whose first read disagrees with Blender's
+    data is refused for the session and the Python path deforms, still equal to Blender."""
+    obj, arm, _ = bbone_rig()
+    arm.data.bones["Bone1"].use_deform = False
+    arm.pose.bones["Bone2"].rotation_quaternion = Quaternion((0, 1, 0), 0.6)
+    arm.pose.bones["Bone3"].scale = (1.2, 0.9, 1.1)
+    bpy.context.scene.frame_set(3)
+    arm_eval = arm.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    readers = dq_skin.SESSION.readers
+    reader = readers.pose
+    assert reader is not None, readers.pose_error
+    got = reader.channel_matrices(arm_eval)
+    assert got.shape == (len(arm.pose.bones), 4, 4) == (6, 4, 4) and got.dtype == np.float32
+    np.testing.assert_array_equal(got, [_row_major(pb.matrix_channel) for pb in arm_eval.pose.bones])
+    raw = readers._pose
+    with pytest.raises(ValueError, match="armature must be an armature object"):
+        raw.channel_matrices(obj)
+    with pytest.raises(TypeError, match="armature must be a bpy.types.Object"):
+        raw.channel_matrices(arm.data)
+    with pytest.raises(ValueError, match="armature"):
+        raw.channel_matrices(link(bpy.data.objects.new("Empty", None)))
+    # A reader that disagrees on its first read: refused, and the Python path deforms.
+    check = dq_skin.blender.memory_check
+    monkeypatch.setattr(readers, "channels_checked", False)
+    monkeypatch.setattr(check, "channels_differ", lambda *_: "the bones' channel matrices (made up by the test)")
+    monkeypatch.setattr(readers, "_pose", readers._pose)  # (put back after the test)
+    arm.data.bones["Bone1"].use_deform = True
+    for b in arm.data.bones:
+        b.bbone_segments = 1
+    ref = reference_copy(obj, True)
+    add_dq_skin(obj, "DUAL_QUATERNION")
+    bpy.context.scene.frame_set(5)
+    assert readers.pose is None and "channel matrices (made up" in readers.pose_error, readers.pose_error
+    st = dq_skin.SESSION.status_of(obj, [m for m in obj.modifiers if m.type == "NODES"][0])
+    assert st.live, st.message
+    assert relative_deviation(evaluated_positions(obj), evaluated_positions(ref)) <= REL_TOL
+
+
 def test_binding_and_pose_signatures(dq_skin):
     obj, arm, _ = bbone_rig()
     dg = bpy.context.evaluated_depsgraph_get()

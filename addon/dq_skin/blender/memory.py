@@ -33,6 +33,7 @@ class Readers:
         self.positions_refused = False  # the positions are not where the reader looks, or disagreed
         self.positions_error = ""
         self.pose_checked = False
+        self.channels_checked = False
 
     def _build(self) -> None:
         if self._built:
@@ -150,3 +151,18 @@ class CheckedPose:
                 raise ValueError(readers.pose_error)
             readers.pose_checked = True
         return data
+
+    def channel_matrices(self, arm_eval):
+        """Every pose bone's `matrix_channel` (`(N, 4, 4)` row-major), read from memory; the
+        first read of the session is compared with Blender's own (`memory_check`)."""
+        readers = self.readers
+        if readers._pose is None:
+            raise ValueError(readers.pose_error)
+        got = readers._pose.channel_matrices(arm_eval)
+        if not readers.channels_checked:
+            what = memory_check.channels_differ(got, arm_eval)
+            if what:
+                readers.refuse("pose", what)
+                raise ValueError(readers.pose_error)
+            readers.channels_checked = True
+        return got

@@ -20,6 +20,14 @@ def _row_major(matrix) -> np.ndarray:
     return np.array(matrix, np.float32)
 
 
+def channels_differ(matrices, arm_eval) -> str:
+    """What the channel matrices read from memory get wrong about `arm_eval`."""
+    want = [_row_major(pb.matrix_channel) for pb in arm_eval.pose.bones]
+    if len(matrices) != len(want) or not np.array_equal(matrices, np.array(want, np.float32).reshape(-1, 4, 4)):
+        return "the bones' channel matrices"
+    return ""
+
+
 def pose_differs(data, arm_eval) -> str:
     """What the pose read from memory (`dqskin.PoseData`) gets wrong about `arm_eval`."""
     bones = list(arm_eval.pose.bones)

@@ -92,8 +92,15 @@ def _pose_matrices(collection, prop: str) -> np.ndarray:
     return np.ascontiguousarray(flat.reshape(-1, 4, 4).transpose(0, 2, 1))
 
 
-def pose_matrices(armature) -> np.ndarray:
-    """`(B, 4, 4)` deform matrices of all pose bones (`PoseBone.matrix_channel`), row-major."""
+def pose_matrices(armature, memory=None) -> np.ndarray:
+    """`(B, 4, 4)` deform matrices of all pose bones (`PoseBone.matrix_channel`), row-major:
+    read from Blender's memory with `memory` (`blender.memory.CheckedPose`), else through the
+    Python API (no reader, or it refused the armature)."""
+    if memory is not None:
+        try:
+            return memory.channel_matrices(armature)
+        except (TypeError, ValueError):
+            pass
     return _pose_matrices(armature.pose.bones, "matrix_channel")
 
 

@@ -146,7 +146,7 @@ class FedFrame:
     def _pose_matrices(self, arm, arm_eval, bound) -> np.ndarray:
         deform = self.poses.get(arm.session_uid)
         if deform is None:
-            deform = self.poses[arm.session_uid] = rig.pose_matrices(arm_eval)
+            deform = self.poses[arm.session_uid] = rig.pose_matrices(arm_eval, self.reads.reader)
         if len(bound.bone_indices) != len(deform):
             deform = np.ascontiguousarray(deform[bound.bone_indices])
         return deform

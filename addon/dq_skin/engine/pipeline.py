@@ -287,7 +287,7 @@ def pose_matrices(ctx: Context, arm, arm_eval, bound: rig.Binding) -> np.ndarray
     """This evaluation's channel matrices of the bound bones (each armature read once per call)."""
     deform = ctx.poses.get(arm.session_uid)
     if deform is None:
-        deform = ctx.poses[arm.session_uid] = rig.pose_matrices(arm_eval)
+        deform = ctx.poses[arm.session_uid] = rig.pose_matrices(arm_eval, ctx.reads.reader)
     if len(bound.bone_indices) != len(deform):
         deform = deform[bound.bone_indices]
     return deform

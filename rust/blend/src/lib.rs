@@ -18,7 +18,8 @@
 //!   every count checked for sanity before it is used.
 //! - [`PoseLayout`] and [`read_pose`]: an armature object's pose channels as the Armature
 //!   modifier deforms with them (channel matrices, bones' rest data and envelopes, and the
-//!   runtime B-Bone cache), into `dqskin-core`'s [`PoseChannel`](dqskin_core::skin::PoseChannel)s.
+//!   runtime B-Bone cache), into `dqskin-core`'s [`PoseChannel`](dqskin_core::skin::PoseChannel)s;
+//!   [`read_channel_matrices`]: only the channel matrices, for rigs without B-Bones or envelopes.
 //!
 //! No Python and no Blender headers: the only unsafe code is the raw reads in
 //! [`read_deform_verts`] and [`read_pose`], whose callers guarantee the pointer.
@@ -32,5 +33,5 @@ mod test_dna;
 
 pub use memory::ReadError;
 pub use mesh::{positions_in_memory, read_deform_verts, read_positions, DeformVerts, MeshLayout};
-pub use pose::{read_pose, PoseLayout, MAX_CHANNELS};
+pub use pose::{read_channel_matrices, read_pose, PoseLayout, MAX_CHANNELS};
 pub use sdna::{DnaError, Field, Sdna};

@@ -205,6 +205,52 @@ pub unsafe fn read_pose(
     }
 }
 
+/// The channel matrices (`bPoseChannel.chan_mat`, what `PoseBone.matrix_channel` gives, as
+/// stored: by columns) of every channel of the armature object at `object`, in `pose.bones`
+/// order: what the Armature modifier deforms vertex groups with, without the rest of
+/// [`read_pose`] (a crowd's characters read only these every frame).
+///
+/// # Safety
+/// As [`read_pose`]. The walk stops after `expected_channels` channels (at most
+/// [`MAX_CHANNELS`]): another count is an error, so a corrupt list is refused rather than
+/// followed.
+pub unsafe fn read_channel_matrices(
+    layout: &PoseLayout,
+    object: usize,
+    expected_channels: usize,
+) -> Result<Vec<[f32; 16]>, ReadError> {
+    if object == 0 {
+        return Err(ReadError::Null);
+    }
+    if expected_channels > MAX_CHANNELS {
+        return Err(ReadError::Implausible("channel count"));
+    }
+    // SAFETY: as in `read_pose`: offsets from this Blender's SDNA, a live armature object
+    // (checked by its type), channels reached through its pose's list.
+    unsafe {
+        if read::<i16>(object + layout.object_type) != OB_ARMATURE {
+            return Err(ReadError::NotAnArmature("the object is of another type"));
+        }
+        let pose: usize = read(object + layout.object_pose);
+        if pose == 0 {
+            return Err(ReadError::NotAnArmature("the object has no pose"));
+        }
+        let mut matrices = Vec::with_capacity(expected_channels);
+        let mut chan: usize = read(pose + layout.chanbase_first);
+        while chan != 0 {
+            if matrices.len() == expected_channels {
+                return Err(ReadError::ChannelCount { expected: expected_channels, found: expected_channels + 1 });
+            }
+            matrices.push(read::<[f32; 16]>(chan + layout.chan_mat));
+            chan = read(chan + layout.chan_next);
+        }
+        if matrices.len() != expected_channels {
+            return Err(ReadError::ChannelCount { expected: expected_channels, found: matrices.len() });
+        }
+        Ok(matrices)
+    }
+}
+
 /// The bones of the armature at `armature` (a `bArmature`) by name: its bone tree walked depth
 /// first, at most `limit` bones (a pose has one channel per bone).
 ///

@@ -1,7 +1,7 @@
 //! Armature poses from Blender's memory (`dqskin.memory.PoseMemory`, `PoseData`) and the per-frame
 //! influences that use them (`Influences.effective`).
 
-use dqskin_blend::{read_pose, PoseLayout};
+use dqskin_blend::{read_channel_matrices, read_pose, PoseLayout};
 use dqskin_core::glam::Mat4;
 use dqskin_core::skin::ArmaturePose;
 use dqskin_core::{Envelope, Influences};
@@ -40,20 +40,7 @@ impl PyPoseMemory {
     /// (evaluated, ``armature.evaluated_get(depsgraph)``, for this frame's B-Bone shapes).
     fn read(&self, armature: &Bound<'_, PyAny>) -> PyResult<PyPoseData> {
         guard(|| {
-            let py = armature.py();
-            crate::blender::require_bpy_type(py, armature, "Object", "armature")?;
-            let kind: String = armature.getattr("type")?.extract()?;
-            if kind != "ARMATURE" {
-                return Err(PyValueError::new_err(format!(
-                    "armature must be an armature object, got one of type {kind}"
-                )));
-            }
-            let pose = armature.getattr("pose")?;
-            if pose.is_none() {
-                return Err(PyValueError::new_err("armature has no pose"));
-            }
-            let channels: usize = pose.getattr("bones")?.len()?;
-            let ptr: usize = armature.call_method0("as_pointer")?.extract()?;
+            let (ptr, channels) = armature_pointer(armature)?;
             // SAFETY: the address is `Object.as_pointer()` of a live armature object (checked
             // above to be a `bpy.types.Object` of type ARMATURE with this many channels). The
             // extension reads it from a handler or operator, while Blender does not evaluate, or
@@ -67,6 +54,38 @@ impl PyPoseMemory {
             ArmaturePose::new(channels).map(PyPoseData).map_err(|e| PyValueError::new_err(format!("armature: {e}")))
         })
     }
+
+    /// ``(N, 4, 4)`` float32, row-major: every pose bone's ``matrix_channel`` of ``armature``
+    /// (as :meth:`read`), in ``pose.bones`` order; the rest of the pose is not read.
+    fn channel_matrices<'py>(&self, armature: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        guard(|| {
+            let py = armature.py();
+            let (ptr, channels) = armature_pointer(armature)?;
+            // SAFETY: as for `read`.
+            let stored = unsafe { read_channel_matrices(&self.0, ptr, channels) }
+                .map_err(|e| PyValueError::new_err(format!("armature: {e}")))?;
+            let flat: Vec<f32> = stored.iter().flat_map(|m| mat4_to_row_major(&Mat4::from_cols_array(m))).collect();
+            Ok(PyArray1::from_vec(py, flat).reshape([stored.len(), 4, 4])?.into_any())
+        })
+    }
+}
+
+/// The address and channel count of ``armature``, checked to be a ``bpy.types.Object`` of type
+/// ``'ARMATURE'`` with a pose.
+fn armature_pointer(armature: &Bound<'_, PyAny>) -> PyResult<(usize, usize)> {
+    let py = armature.py();
+    crate::blender::require_bpy_type(py, armature, "Object", "armature")?;
+    let kind: String = armature.getattr("type")?.extract()?;
+    if kind != "ARMATURE" {
+        return Err(PyValueError::new_err(format!("armature must be an armature object, got one of type {kind}")));
+    }
+    let pose = armature.getattr("pose")?;
+    if pose.is_none() {
+        return Err(PyValueError::new_err("armature has no pose"));
+    }
+    let channels: usize = pose.getattr("bones")?.len()?;
+    let ptr: usize = armature.call_method0("as_pointer")?.extract()?;
+    Ok((ptr, channels))
 }
 
 /// One frame of an armature's pose as the Armature modifier deforms with it (from

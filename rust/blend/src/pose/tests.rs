@@ -328,6 +328,37 @@ fn the_cache_is_read_only_where_blender_deforms_with_it() {
 }
 
 #[test]
+fn channel_matrices_alone_are_every_channels_in_order() {
+    let f = fixture();
+    let layout = PoseLayout::new(&pose_sdna(false)).unwrap();
+    let object = &f.object as *const _ as usize;
+    let got = unsafe { read_channel_matrices(&layout, object, 2) }.unwrap();
+    assert_eq!(got, vec![matrix(1.0), matrix(2.0)], "the non-deforming channel too, as stored");
+    let full = read_fixture(&f, 2).unwrap();
+    assert_eq!(Mat4::from_cols_array(&got[1]), full[1].channel);
+    assert_eq!(
+        unsafe { read_channel_matrices(&layout, object, 1) },
+        Err(ReadError::ChannelCount { expected: 1, found: 2 })
+    );
+    assert_eq!(
+        unsafe { read_channel_matrices(&layout, object, 3) },
+        Err(ReadError::ChannelCount { expected: 3, found: 2 })
+    );
+    assert_eq!(
+        unsafe { read_channel_matrices(&layout, object, MAX_CHANNELS + 1) },
+        Err(ReadError::Implausible("channel count"))
+    );
+    assert_eq!(unsafe { read_channel_matrices(&layout, 0, 2) }, Err(ReadError::Null));
+    let mut f = fixture();
+    f.object.ty = 1;
+    let object = &f.object as *const _ as usize;
+    assert!(matches!(unsafe { read_channel_matrices(&layout, object, 2) }, Err(ReadError::NotAnArmature(_))));
+    f.object.ty = OB_ARMATURE;
+    f.object.pose = core::ptr::null();
+    assert!(matches!(unsafe { read_channel_matrices(&layout, object, 2) }, Err(ReadError::NotAnArmature(_))));
+}
+
+#[test]
 fn wrong_objects_and_counts_are_refused() {
     let f = fixture();
     assert_eq!(read_fixture(&f, 1), Err(ReadError::ChannelCount { expected: 1, found: 2 }));

@@ -157,7 +157,6 @@ def _read_menu_values(group) -> dict[str, str]:
 def store_ids(group) -> None:
     """Stores the group's input identifiers and menu values on the group itself (when it is
     built or upgraded), so that reading a setting is a dictionary lookup."""
-    _raw_keys.pop(group.session_uid, None)
     if group.library is not None:
         return
     ids, menu = _read_socket_ids(group), _read_menu_values(group)
@@ -183,24 +182,22 @@ def menu_values(group) -> dict[int, str]:
 RAW = ("Armature", "Method", "Blend Amount", "Blend Factor", "Use Vertex Groups", "Use Envelopes", "Mask", "Invert Mask")
 
 
-_raw_keys: dict[int, tuple] = {}  # node group session uid -> the stored keys `raw_settings` reads
+def raw_keys(group) -> tuple:
+    """The stored keys of `RAW` in modifiers of `group` (a field input's value, whether it
+    reads an attribute, and which), for `raw_settings` (up to Blender 5.1)."""
+    ids = socket_ids(group)
+    return tuple(k for n in RAW for k in ((ids[n], ids[n] + "_use_attribute", ids[n] + "_attribute_name") if n in FIELDS else (ids[n],)))
 
 
-def raw_settings(mod) -> tuple:
+def raw_settings(mod, keys: tuple | None = None) -> tuple:
     """The settings' stored values, cheap to read and compare (see `settings.cached`): what
-    `settings.read` reads, read on every frame of every character."""
-    group = mod.node_group
+    `settings.read` reads, read on every frame of every character. `keys`: `raw_keys` of the
+    modifier's group, if the caller keeps them."""
     if compat.RNA_INPUTS:
-        ids = socket_ids(group)
+        ids = socket_ids(mod.node_group)
         inputs = mod.properties.inputs
         return tuple((s.value, s.type, getattr(s, "attribute_name", "")) for s in (getattr(inputs, ids[n]) for n in RAW))
-    keys = _raw_keys.get(group.session_uid)
-    if keys is None:
-        ids = socket_ids(group)
-        keys = _raw_keys[group.session_uid] = tuple(
-            k for n in RAW for k in ((ids[n], ids[n] + "_use_attribute", ids[n] + "_attribute_name") if n in FIELDS else (ids[n],))
-        )
-    return tuple(map(mod.get, keys))
+    return tuple(map(mod.get, keys if keys is not None else raw_keys(mod.node_group)))
 
 
 # -- reading and writing a modifier's settings ---------------------------------------------------

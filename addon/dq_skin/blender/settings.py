@@ -25,7 +25,11 @@ def read(mod) -> Settings:
 def cached(mod, cache) -> Settings:
     """`read(mod)`, again only when the modifier's stored values changed (they can be keyed, so
     they are compared on every evaluation). `cache`: the modifier's `state.SettingsCache`."""
-    raw = nodes.raw_settings(mod)
+    group = mod.node_group
+    of = (group.session_uid, nodes.version_of(group))
+    if cache.raw_keys_of != of:  # (the keys of the group's inputs, once per group and version)
+        cache.raw_keys, cache.raw_keys_of = nodes.raw_keys(group), of
+    raw = nodes.raw_settings(mod, cache.raw_keys)
     if cache.value is None or raw != cache.raw:
         cache.value = read(mod)
         cache.raw = raw

@@ -125,6 +125,8 @@ class CompanionState:
 class SettingsCache:
     raw: tuple = ()
     value: object = None  # settings.Settings
+    raw_keys: tuple = ()  # `nodes.raw_keys` of the modifier's group...
+    raw_keys_of: tuple = ()  # ...(its session uid and version) when they were read
 
 
 @dataclass

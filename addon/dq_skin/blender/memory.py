@@ -140,29 +140,24 @@ class CheckedPose:
         self.readers = readers
 
     def read(self, arm_eval):
-        readers = self.readers
-        if readers._pose is None:
-            raise ValueError(readers.pose_error)
-        data = readers._pose.read(arm_eval)
-        if not readers.pose_checked:
-            what = memory_check.pose_differs(data, arm_eval)
-            if what:
-                readers.refuse("pose", what)
-                raise ValueError(readers.pose_error)
-            readers.pose_checked = True
-        return data
+        return self._checked(arm_eval, "read", "pose_checked", memory_check.pose_differs)
 
     def channel_matrices(self, arm_eval):
-        """Every pose bone's `matrix_channel` (`(N, 4, 4)` row-major), read from memory; the
-        first read of the session is compared with Blender's own (`memory_check`)."""
+        """Every pose bone's `matrix_channel` (`(N, 4, 4)` row-major), read from memory."""
+        return self._checked(arm_eval, "channel_matrices", "channels_checked", memory_check.channels_differ)
+
+    def _checked(self, arm_eval, method: str, checked: str, differs):
+        """The reader's `method` of `arm_eval`; its first call of the session compared with
+        Blender's own data by `differs` (the reader is refused for the session if they differ;
+        `checked`: the `Readers` flag that says it was done)."""
         readers = self.readers
         if readers._pose is None:
             raise ValueError(readers.pose_error)
-        got = readers._pose.channel_matrices(arm_eval)
-        if not readers.channels_checked:
-            what = memory_check.channels_differ(got, arm_eval)
+        got = getattr(readers._pose, method)(arm_eval)
+        if not getattr(readers, checked):
+            what = differs(got, arm_eval)
             if what:
                 readers.refuse("pose", what)
                 raise ValueError(readers.pose_error)
-            readers.channels_checked = True
+            setattr(readers, checked, True)
         return got

@@ -160,16 +160,45 @@ pub unsafe fn read_pose(
     object: usize,
     expected_channels: usize,
 ) -> Result<Vec<PoseChannel>, ReadError> {
+    // SAFETY: for all reads below, offsets come from the SDNA of this Blender and the object is
+    // live (caller); the pose, channels, bones and B-Bone arrays are reached through pointers
+    // read from it, each non-null, and the arrays' lengths come from segment counts checked
+    // against Blender's maximum and against each other.
+    unsafe {
+        let pose = pose_of(layout, object, expected_channels)?;
+        let bones_by_name = match layout.bone_link {
+            BoneLink::Pointer { .. } => None,
+            BoneLink::ByName { object_data, .. } => {
+                Some(bones_by_name(layout, read(object + object_data), expected_channels)?)
+            }
+        };
+        let mut channels = Vec::with_capacity(expected_channels);
+        each_channel(layout, pose, expected_channels, |chan| {
+            let bone = match (&bones_by_name, layout.bone_link) {
+                (None, BoneLink::Pointer { chan_bone }) => read(chan + chan_bone),
+                (Some(map), _) => map.get(name_bytes(chan + layout.chan_name, layout.name_size)).copied().unwrap_or(0),
+                (None, BoneLink::ByName { .. }) => unreachable!("the map is built for this link"),
+            };
+            channels.push(read_channel(layout, chan, bone)?);
+            Ok(())
+        })?;
+        Ok(channels)
+    }
+}
+
+/// The `bPose` of the armature object at `object`, checked: not null, an armature, with a pose,
+/// and a plausible `expected_channels`.
+///
+/// # Safety
+/// As [`read_pose`].
+unsafe fn pose_of(layout: &PoseLayout, object: usize, expected_channels: usize) -> Result<usize, ReadError> {
     if object == 0 {
         return Err(ReadError::Null);
     }
     if expected_channels > MAX_CHANNELS {
         return Err(ReadError::Implausible("channel count"));
     }
-    // SAFETY: for all reads below, offsets come from the SDNA of this Blender and the object is
-    // live (caller); the pose, channels, bones and B-Bone arrays are reached through pointers
-    // read from it, each non-null, and the arrays' lengths come from segment counts checked
-    // against Blender's maximum and against each other.
+    // SAFETY: the caller's (see `read_pose`).
     unsafe {
         if read::<i16>(object + layout.object_type) != OB_ARMATURE {
             return Err(ReadError::NotAnArmature("the object is of another type"));
@@ -178,31 +207,38 @@ pub unsafe fn read_pose(
         if pose == 0 {
             return Err(ReadError::NotAnArmature("the object has no pose"));
         }
-        let bones_by_name = match layout.bone_link {
-            BoneLink::Pointer { .. } => None,
-            BoneLink::ByName { object_data, .. } => {
-                Some(bones_by_name(layout, read(object + object_data), expected_channels)?)
-            }
-        };
-        let mut channels = Vec::with_capacity(expected_channels);
+        Ok(pose)
+    }
+}
+
+/// Calls `each` with the address of every channel of `pose`, in order; exactly
+/// `expected_channels` of them, or an error (the walk stops at the first one too many).
+///
+/// # Safety
+/// As [`read_pose`]; `pose` from [`pose_of`].
+unsafe fn each_channel(
+    layout: &PoseLayout,
+    pose: usize,
+    expected_channels: usize,
+    mut each: impl FnMut(usize) -> Result<(), ReadError>,
+) -> Result<(), ReadError> {
+    let mut found = 0;
+    // SAFETY: the caller's (see `read_pose`).
+    unsafe {
         let mut chan: usize = read(pose + layout.chanbase_first);
         while chan != 0 {
-            if channels.len() == expected_channels {
+            if found == expected_channels {
                 return Err(ReadError::ChannelCount { expected: expected_channels, found: expected_channels + 1 });
             }
-            let bone = match (&bones_by_name, layout.bone_link) {
-                (None, BoneLink::Pointer { chan_bone }) => read(chan + chan_bone),
-                (Some(map), _) => map.get(name_bytes(chan + layout.chan_name, layout.name_size)).copied().unwrap_or(0),
-                (None, BoneLink::ByName { .. }) => unreachable!("the map is built for this link"),
-            };
-            channels.push(read_channel(layout, chan, bone)?);
+            each(chan)?;
+            found += 1;
             chan = read(chan + layout.chan_next);
         }
-        if channels.len() != expected_channels {
-            return Err(ReadError::ChannelCount { expected: expected_channels, found: channels.len() });
-        }
-        Ok(channels)
     }
+    if found != expected_channels {
+        return Err(ReadError::ChannelCount { expected: expected_channels, found });
+    }
+    Ok(())
 }
 
 /// The channel matrices (`bPoseChannel.chan_mat`, what `PoseBone.matrix_channel` gives, as
@@ -219,34 +255,15 @@ pub unsafe fn read_channel_matrices(
     object: usize,
     expected_channels: usize,
 ) -> Result<Vec<[f32; 16]>, ReadError> {
-    if object == 0 {
-        return Err(ReadError::Null);
-    }
-    if expected_channels > MAX_CHANNELS {
-        return Err(ReadError::Implausible("channel count"));
-    }
     // SAFETY: as in `read_pose`: offsets from this Blender's SDNA, a live armature object
     // (checked by its type), channels reached through its pose's list.
     unsafe {
-        if read::<i16>(object + layout.object_type) != OB_ARMATURE {
-            return Err(ReadError::NotAnArmature("the object is of another type"));
-        }
-        let pose: usize = read(object + layout.object_pose);
-        if pose == 0 {
-            return Err(ReadError::NotAnArmature("the object has no pose"));
-        }
+        let pose = pose_of(layout, object, expected_channels)?;
         let mut matrices = Vec::with_capacity(expected_channels);
-        let mut chan: usize = read(pose + layout.chanbase_first);
-        while chan != 0 {
-            if matrices.len() == expected_channels {
-                return Err(ReadError::ChannelCount { expected: expected_channels, found: expected_channels + 1 });
-            }
+        each_channel(layout, pose, expected_channels, |chan| {
             matrices.push(read::<[f32; 16]>(chan + layout.chan_mat));
-            chan = read(chan + layout.chan_next);
-        }
-        if matrices.len() != expected_channels {
-            return Err(ReadError::ChannelCount { expected: expected_channels, found: matrices.len() });
-        }
+            Ok(())
+        })?;
         Ok(matrices)
     }
 }

@@ -482,6 +482,32 @@ def test_a_frame_reads_each_armature_once(memory_only, monkeypatch):
             assert relative_deviation(evaluated_positions(o), evaluated_positions(reference)) <= REL_TOL
 
 
+def test_the_poses_kept_for_the_frame_handler_stay_one_per_armature(memory_only):
+    """The feed keeps the poses it read for the frame handler after it (`Feeds.keep`); posing
+    without changing frames runs the driver again and again in the same frame change: only the
+    newest read of the armature is kept (not one per run), and it is the pose shown."""
+    obj, arm, _ = bbone_rig(segments=4)
+    reference = reference_copy(obj, True)
+    add_dq_skin(obj, "DUAL_QUATERNION")
+    scene = bpy.context.scene
+    for f in (2, 3):
+        scene.frame_set(f)
+    feeds = memory_only.SESSION.routes.feeds
+    pb = arm.pose.bones["Bone2"]
+    for k in range(1, 6):
+        pb.rotation_quaternion = Quaternion((0, 1, 0), 0.15 * k)
+        bpy.context.view_layer.update()
+        _stamp, reads = feeds._kept
+        assert reads is not None and len(reads._read) == 1, k
+        assert relative_deviation(evaluated_positions(obj), evaluated_positions(reference)) <= REL_TOL, k
+    ((data, error),) = reads._read.values()
+    assert data is not None, error
+    np.testing.assert_array_equal(
+        data.deform[: data.bone_count],
+        [_row_major(b.matrix_channel) for b in arm.evaluated_get(bpy.context.evaluated_depsgraph_get()).pose.bones if b.bone.use_deform],
+    )
+
+
 def test_a_generated_rigify_character_matches_the_armature_modifier(memory_only):
     """Rigify's human rig (160 deforming bones, 52 B-Bones with custom handles, ease and scale)
     on a body with automatic weights, playing an animation that bends, twists and scales."""

@@ -46,9 +46,13 @@ class PoseReads:
 
     def adopt(self, other: PoseReads) -> None:
         """Takes the poses `other` read in the same evaluation (the feed's run, before the frame
-        handler): they are what reading them again would give."""
+        handler) where it read none itself: they are what reading them again would give."""
         for key, got in other._read.items():
             self._read.setdefault(key, got)
+
+    def update(self, newer: PoseReads) -> None:
+        """The poses `newer` read (a later run in the same evaluation) in place of these."""
+        self._read.update(newer._read)
 
     def _read_now(self, arm_eval) -> tuple:
         if self.reader is None:

@@ -328,8 +328,9 @@ class Tracker:
                 # A script hid or showed objects or collections before changing frames.
                 feeds.visibility_changed()
         ctx = self.context(depsgraph, batch=[])
-        for reads in feeds.kept(ctx.fed_stamp):  # (the poses the feed read in this evaluation)
-            ctx.reads.adopt(reads)
+        fed_reads = feeds.kept(ctx.fed_stamp)
+        if fed_reads is not None:  # (the poses the feed read in this evaluation)
+            ctx.reads.adopt(fed_reads)
         # Objects Blender did not update in this evaluation keep their settings; those that did
         # not move keep their spaces. Those changed while an operator ran are evaluated fully.
         deferred, self.deferred = self.deferred, set()

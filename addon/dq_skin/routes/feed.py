@@ -91,7 +91,7 @@ class Feeds:
         self._frame_change = 0
         # What the batches' runs read of Blender's memory in one evaluation (`keep`): the
         # frame handler right after it reads the same pose (`kept`).
-        self._kept: tuple = ((), [])
+        self._kept: tuple = ((), None)
         self._visibility_stale = True  # visibility may have changed: `commit` reads it again
         self._next_uid = 1
         # A render's graph may run its driver on its own thread while the viewport's runs one:
@@ -264,19 +264,22 @@ class Feeds:
         return (self._frame_change, depsgraph.as_pointer())
 
     def keep(self, depsgraph, reads) -> None:
-        """`reads` (a run's `pose.PoseReads`) were made in this frame change's evaluation of
-        `depsgraph`: the frame handler after it adopts them (`kept`) instead of reading the
-        same pose from memory again. Another evaluation's are dropped."""
+        """`reads` (a run's `pose.PoseReads`, called under the runs' lock) were made in this
+        frame change's evaluation of `depsgraph`: the frame handler after it adopts them
+        (`kept`) instead of reading the same pose from memory again. Only the newest read of
+        each armature is kept (the driver runs again on every edit until the next frame
+        change), and another evaluation's are dropped."""
         stamp = self.stamp(depsgraph)
         kept = self._kept
-        if kept[0] != stamp:
-            kept = self._kept = (stamp, [])
-        kept[1].append(reads)
+        if kept[0] == stamp and kept[1] is not reads:
+            kept[1].update(reads)
+        else:
+            self._kept = (stamp, reads)
 
-    def kept(self, stamp: tuple) -> list:
-        """The reads the batches' runs made in the evaluation `stamp` names (`keep`)."""
+    def kept(self, stamp: tuple):
+        """The poses the batches' runs read in the evaluation `stamp` names (`keep`), or None."""
         kept = self._kept
-        return kept[1] if kept[0] == stamp else []
+        return kept[1] if kept[0] == stamp else None
 
     def skinned_now(self, key: ModKey, depsgraph) -> bool:
         """Whether the batch skinned this member in this frame change's evaluation of `depsgraph`."""

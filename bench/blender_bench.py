@@ -9,8 +9,9 @@ chosen route with no Python of DQ Skin's per frame (`floor_route`). Only one of 
 depsgraph at a time; rounds alternate between them and each keeps its median. Every route is
 checked to show DQ Skin's mesh before it is timed. The timing runs with glibc's allocator kept
 from handing big blocks back to the system (`timing.steady_allocator`: without it a frame that
-frees and allocates a large array page-faults afresh at random frames, whichever variant). A benchmark, not a test: it prints a row per
-case and writes JSON (default: target/bench-blender.json); docs/performance.md has the figures.
+frees and allocates a large array page-faults afresh at random frames, whichever variant). A
+benchmark, not a test: it prints a row per case and writes JSON (default:
+target/bench-blender.json); docs/performance.md has the figures.
 
 Cases (as in the issues): a 3k grid, CesiumMan, 200 CesiumMen, grids of 250k and 1M vertices
 (64 bones, 4 influences), 250k with Smooth and Corrective Smooth after the skinning modifier, a

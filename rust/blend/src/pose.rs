@@ -241,9 +241,8 @@ unsafe fn each_channel(
     Ok(())
 }
 
-/// The channel matrices (`bPoseChannel.chan_mat`, what `PoseBone.matrix_channel` gives, as
-/// stored: by columns) of every channel of the armature object at `object`, in `pose.bones`
-/// order: what the Armature modifier deforms vertex groups with, without the rest of
+/// The channel matrices (`bPoseChannel.chan_mat`, what `PoseBone.matrix_channel` gives) of
+/// every channel of the armature object at `object`, in `pose.bones` order: what the Armature modifier deforms vertex groups with, without the rest of
 /// [`read_pose`] (a crowd's characters read only these every frame).
 ///
 /// # Safety
@@ -254,14 +253,14 @@ pub unsafe fn read_channel_matrices(
     layout: &PoseLayout,
     object: usize,
     expected_channels: usize,
-) -> Result<Vec<[f32; 16]>, ReadError> {
+) -> Result<Vec<Mat4>, ReadError> {
     // SAFETY: as in `read_pose`: offsets from this Blender's SDNA, a live armature object
     // (checked by its type), channels reached through its pose's list.
     unsafe {
         let pose = pose_of(layout, object, expected_channels)?;
         let mut matrices = Vec::with_capacity(expected_channels);
         each_channel(layout, pose, expected_channels, |chan| {
-            matrices.push(read::<[f32; 16]>(chan + layout.chan_mat));
+            matrices.push(read_mat4(chan + layout.chan_mat));
             Ok(())
         })?;
         Ok(matrices)

@@ -62,10 +62,9 @@ impl PyPoseMemory {
             let py = armature.py();
             let (ptr, channels) = armature_pointer(armature)?;
             // SAFETY: as for `read`.
-            let stored = unsafe { read_channel_matrices(&self.0, ptr, channels) }
+            let matrices = unsafe { read_channel_matrices(&self.0, ptr, channels) }
                 .map_err(|e| PyValueError::new_err(format!("armature: {e}")))?;
-            let flat: Vec<f32> = stored.iter().flat_map(|m| mat4_to_row_major(&Mat4::from_cols_array(m))).collect();
-            Ok(PyArray1::from_vec(py, flat).reshape([stored.len(), 4, 4])?.into_any())
+            matrices_array(py, &matrices)
         })
     }
 }

@@ -155,16 +155,18 @@ def _build_outputs(group) -> None:
         warning.inputs["Show"].default_value = True
         warning.inputs["Message"].default_value = WARNING
         passed = geometry_switch(node, links, warning.outputs["Show"], captured, captured)
-    live = geometry_switch(node, links, positions, captured, set_position.outputs["Geometry"])
-    live = geometry_switch(node, links, replace, live, info.outputs["Geometry"])
     # Where DQ Skin deforms, its output is marked, so that a mesh this modifier was applied to
     # says so (a carried one's Apply changes no position: Blender evaluates the modifier alone).
+    # A whole-mesh result carries the mark in its own mesh (`results.copy_mesh`), stored once
+    # rather than for every point of every frame; the positions are marked here.
     mark = node("GeometryNodeStoreNamedAttribute", data_type="BOOLEAN", domain="POINT")
-    links.new(live, mark.inputs["Geometry"])
+    links.new(set_position.outputs["Geometry"], mark.inputs["Geometry"])
     mark.inputs["Name"].default_value = OUTPUT_MARK
     mark.inputs["Value"].default_value = True
+    live = geometry_switch(node, links, positions, captured, mark.outputs["Geometry"])
+    live = geometry_switch(node, links, replace, live, info.outputs["Geometry"])
     deforming = boolean(node, links, "OR", replace, positions)
-    out = geometry_switch(node, links, deforming, passed, mark.outputs["Geometry"])
+    out = geometry_switch(node, links, deforming, passed, live)
     # Carried (the positions came through a deform-only carrier before the modifier): the mesh,
     # captured if asked, marked, and nothing else evaluated (switches are lazy; this is every
     # frame's path on the Mesh Cache route, where each node evaluated costs every character

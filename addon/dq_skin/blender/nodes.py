@@ -31,8 +31,8 @@ from . import compat
 
 GROUP_NAME = "DQ Skin"
 GROUP_TAG = "dq_skin_version"
-VERSION = 4
-UPGRADABLE = (2, 3, 4)  # group versions brought up to this one in place (`node_group.upgrade`)
+VERSION = 5
+UPGRADABLE = (2, 3, 4, 5)  # group versions brought up to this one in place (`node_group.upgrade`)
 
 # The Mode input's values (see above).
 MODE_PASS_WARN = 0

@@ -24,6 +24,7 @@ import numpy as np
 import bpy
 
 from ..blender import compat
+from ..blender.node_group import OUTPUT_MARK
 
 TAG = "dq_skin_result"
 OWNER_OBJECT = "dq_skin_owner_object"
@@ -88,6 +89,14 @@ def copy_mesh(result, source_mesh) -> None:
     mesh.name = result.name
     if mesh.shape_keys is not None:
         bpy.data.batch_remove([mesh.shape_keys])
+    # DQ Skin's output mark, which the node group stores only on positions it sets.
+    mark = mesh.attributes.get(OUTPUT_MARK)
+    if mark is not None and (mark.data_type, mark.domain) != ("BOOLEAN", "POINT"):
+        mesh.attributes.remove(mark)
+        mark = None
+    if mark is None:
+        mark = mesh.attributes.new(OUTPUT_MARK, "BOOLEAN", "POINT")
+    mark.data.foreach_set("value", np.ones(len(mesh.vertices), bool))
     result.data = mesh
     if old is not None and old.users == 0:
         bpy.data.meshes.remove(old)

@@ -87,6 +87,56 @@ def test_b_bone_frames_are_skinned_in_the_first_evaluation(dq_skin, monkeypatch,
     assert published.count == 0, "the frame handler published a frame the driver had made"
 
 
+def _normals(mesh) -> np.ndarray:
+    out = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertex_normals.foreach_get("vector", out)
+    return out.reshape(-1, 3)
+
+
+def _ray_hits(obj_eval, box: np.ndarray) -> list:
+    """Rays cast at the evaluated object from outside its bounds (`box`: the reference's, in
+    object space) along both side axes, at five places along its longest axis."""
+    from mathutils import Vector
+
+    lo, hi = box.min(0), box.max(0)
+    size = hi - lo
+    long_axis = int(np.argmax(size))
+    hits = []
+    for t in (0.1, 0.3, 0.5, 0.7, 0.9):
+        for side in [a for a in range(3) if a != long_axis]:
+            origin = (lo + hi) / 2
+            origin[long_axis] = lo[long_axis] + t * size[long_axis]
+            origin[side] = hi[side] + size[side]
+            direction = np.zeros(3)
+            direction[side] = -1.0
+            hit, location, _normal, _face = obj_eval.ray_cast(Vector(origin), Vector(direction))
+            hits.append((hit, tuple(location)))
+    return hits
+
+
+def test_fed_frames_come_with_fresh_normals_bounds_and_ray_casts(dq_skin, route):
+    """What Blender keeps about an evaluated mesh (its normals, its bounds, the BVH tree that ray
+    casts, Shrinkwrap and snapping use) is made for each fed frame, not kept from the one before:
+    the feed writes positions inside Blender's evaluation, and the carrier after it must make
+    Blender treat them as new. Each frame's caches are filled (read) before the next frame."""
+    obj, _arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    assert route_of(dq_skin, obj) == route, status(dq_skin, obj).message
+    runs = fed_runs(dq_skin, obj)
+    for k, f in enumerate((5, 9, 14, 18), start=1):
+        bpy.context.scene.frame_set(f)
+        assert fed_runs(dq_skin, obj) == runs + k, "the driver skins once per frame"
+        dg = bpy.context.evaluated_depsgraph_get()
+        got, ref = obj.evaluated_get(dg), reference.evaluated_get(dg)
+        assert_same(obj, reference, f"frame {f}")
+        box = np.array([list(c) for c in ref.bound_box])
+        diag = float(np.linalg.norm(box.max(0) - box.min(0)))
+        assert np.abs(np.array([list(c) for c in got.bound_box]) - box).max() <= 1e-5 * diag, f"frame {f}: bounds"
+        assert np.abs(_normals(got.data) - _normals(ref.data)).max() <= 1e-4, f"frame {f}: vertex normals"
+        hits, expected = _ray_hits(got, box), _ray_hits(ref, box)
+        assert [h for h, _ in hits] == [h for h, _ in expected] and any(h for h, _ in expected), f"frame {f}: ray casts"
+        assert max(float(np.abs(np.subtract(a, b)).max()) for (_, a), (_, b) in zip(hits, expected)) <= 1e-5 * diag, f"frame {f}: ray casts"
+
+
 @pytest.mark.parametrize("method", ["LINEAR", "DUAL_QUATERNION", "BLEND", "CENTERS_OF_ROTATION"])
 def test_vertex_group_characters_are_fed_too(dq_skin, monkeypatch, method, route):
     """Vertex groups alone, every method: fed, and equal to what DQ Skin computes outside the

@@ -152,5 +152,7 @@ class ResultRoute:
 
 
 def _drive(result, carrier, feed) -> None:
-    """The carrier's angle driven by the feed's property (always 0: the driver orders it)."""
-    drive_carrier(result, carrier, "angle", "0 * go", feed)
+    """The carrier aims at the feed, and its driven property follows the feed's (always 0: the
+    driver orders it)."""
+    results.point_carrier(carrier, feed)
+    drive_carrier(result, carrier, results.CARRIER_DRIVEN, "0 * go", feed)

@@ -7,9 +7,9 @@ scene (the modifier's reference keeps it evaluated), and runtime data: Blender n
 result, its mesh or anything of theirs to a file.
 
 A result fed inside Blender's evaluation carries a *carrier*: a deform-only modifier doing
-nothing (SimpleDeform bending by 0, its angle driven by the feed), which orders the result's
-evaluation after the feed and makes Blender copy the positions the feed wrote into its own
-(with fresh caches: bounds, normals).
+nothing (a Hook of no strength aimed at the feed, its strength driven by the feed), which orders the
+result's evaluation after the feed and makes Blender copy the positions the feed wrote into its
+own (with fresh caches: bounds, normals).
 
 Each result records its owner (the object's session uid and the modifier's persistent id): a
 copied object or modifier that still points at another modifier's result gets one of its own.
@@ -130,24 +130,38 @@ def write_positions(result, positions) -> None:
 
 
 CARRIER = "DQ Skin carrier"
+# The carrier is a Hook of no strength: Blender runs it (it has a target object, the feed's), so
+# the result's evaluated mesh gets positions of its own and fresh caches, and it returns before
+# touching a vertex. (A zero SimpleDeform bend first finds the bounds, a pass over every vertex;
+# a Laplacian Deform never bound would need an existing vertex group on every result.)
+CARRIER_TYPE = "HOOK"
+CARRIER_DRIVEN = "strength"
 
 
 def ensure_carrier(result):
-    """The result's carrier modifier (made if missing); returns it."""
+    """The result's carrier modifier (made if missing); returns it. Its target is set where it is
+    driven (`point_carrier`)."""
     m = result.modifiers.get(CARRIER)
-    if m is None or m.type != "SIMPLE_DEFORM":
+    if m is None or m.type != CARRIER_TYPE:
         if m is not None:
-            result.modifiers.remove(m)
-        m = result.modifiers.new(CARRIER, "SIMPLE_DEFORM")
-        m.deform_method = "BEND"
-        m.angle = 0.0  # (Blender's bend returns at once below its tolerance: no vertex is touched)
+            remove_carrier(result)
+        m = result.modifiers.new(CARRIER, CARRIER_TYPE)
+        m.strength = 0.0
     return m
+
+
+def point_carrier(carrier, target) -> None:
+    """The carrier's target object (without one, Blender would skip it: stale caches)."""
+    if carrier.object != target:
+        carrier.object = target
 
 
 def remove_carrier(result) -> None:
     m = result.modifiers.get(CARRIER)
     if m is not None:
-        result.driver_remove(f'modifiers["{CARRIER}"].angle')
+        if result.animation_data is not None:
+            for fc in [fc for fc in result.animation_data.drivers if fc.data_path.startswith(f'modifiers["{CARRIER}"].')]:
+                result.animation_data.drivers.remove(fc)
         result.modifiers.remove(m)
 
 

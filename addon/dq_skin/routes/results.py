@@ -7,9 +7,9 @@ scene (the modifier's reference keeps it evaluated), and runtime data: Blender n
 result, its mesh or anything of theirs to a file.
 
 A result fed inside Blender's evaluation carries a *carrier*: a deform-only modifier doing
-nothing (a Hook of no strength aimed at the feed, its strength driven by the feed), which orders the
-result's evaluation after the feed and makes Blender copy the positions the feed wrote into its
-own (with fresh caches: bounds, normals).
+nothing (a Hook of no strength aimed at the feed's object, its strength driven by the feed),
+which orders the result's evaluation after the feed and makes Blender copy the positions the
+feed wrote into its own (with fresh caches: bounds, normals).
 
 Each result records its owner (the object's session uid and the modifier's persistent id): a
 copied object or modifier that still points at another modifier's result gets one of its own.

@@ -141,6 +141,10 @@ pub(super) struct BatchJob<'a> {
     /// Read by the hand-written AVX-512 centers only.
     #[cfg(target_arch = "x86_64")]
     pub cor_rigid: &'a [CorRigidBone],
+    /// Each bone's move in mesh space (`spaces.rs`), when the job's spaces fold; read by the
+    /// hand-written AVX-512 LBS only (without them LBS runs the one body).
+    #[cfg(target_arch = "x86_64")]
+    pub linear_moves: Option<&'a [LinearBone]>,
     pub premat: Option<&'a Affine3A>,
     pub postmat: Option<&'a Affine3A>,
     pub blend_factor: f32,

@@ -17,6 +17,8 @@ use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{Slot, LANES};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
+use super::pose::LinearBone;
+use super::spaces::mesh_space_moves;
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
 /// A multiple of [`LANES`], so tasks start on batch boundaries.
@@ -26,7 +28,12 @@ const _: () = assert!(CHUNK.is_multiple_of(LANES));
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     assert_eq!(out.len(), job.positions.len(), "one output point per vertex");
     assert!(job.kind() != Kind::CentersOfRotation || job.centers.is_some(), "centers of rotation need the centers");
-    let task = |(i, chunk): (usize, &mut [[f32; 3]])| run_chunk(simd, job, i * CHUNK, chunk);
+    // The AVX-512 LBS reads each bone's move in mesh space, folded once per call.
+    let moves = (job.kind() == Kind::Linear && uses_mesh_space_moves(simd))
+        .then(|| mesh_space_moves(job.pose(), job.premat, job.postmat))
+        .flatten();
+    let moves = moves.as_deref();
+    let task = |(i, chunk): (usize, &mut [[f32; 3]])| run_chunk(simd, job, moves, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
     } else {
@@ -43,19 +50,31 @@ const ISA_AVX512: u8 = 2;
 #[cfg(target_arch = "aarch64")]
 const ISA_NEON: u8 = 3;
 
-/// Runs the copy `simd` of the kernels on vertices `start..start + out.len()`.
-fn run_chunk(simd: Simd, job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+/// Whether the copy `simd` runs LBS from [`mesh_space_moves`] (the hand-written AVX-512 LBS).
+fn uses_mesh_space_moves(simd: Simd) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return simd.instruction_set() == InstructionSet::Avx512;
+    #[cfg(not(target_arch = "x86_64"))]
+    return {
+        let _ = simd;
+        false
+    };
+}
+
+/// Runs the copy `simd` of the kernels on vertices `start..start + out.len()`; `moves` are the
+/// job's [`mesh_space_moves`], where the copy reads them.
+fn run_chunk(simd: Simd, job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
     match simd.instruction_set() {
-        InstructionSet::Baseline => chunk::<ISA_BASELINE>(job, start, out),
+        InstructionSet::Baseline => chunk::<ISA_BASELINE>(job, moves, start, out),
         // SAFETY: a `Simd` of this set exists only where AVX2 and FMA were detected.
         #[cfg(target_arch = "x86_64")]
-        InstructionSet::Avx2Fma => unsafe { chunk_avx2(job, start, out) },
+        InstructionSet::Avx2Fma => unsafe { chunk_avx2(job, moves, start, out) },
         // SAFETY: a `Simd` of this set exists only where AVX-512F, AVX2 and FMA were detected.
         #[cfg(target_arch = "x86_64")]
-        InstructionSet::Avx512 => unsafe { chunk_avx512(job, start, out) },
+        InstructionSet::Avx512 => unsafe { chunk_avx512(job, moves, start, out) },
         // SAFETY: every aarch64 CPU has NEON.
         #[cfg(target_arch = "aarch64")]
-        InstructionSet::Neon => unsafe { chunk_neon(job, start, out) },
+        InstructionSet::Neon => unsafe { chunk_neon(job, moves, start, out) },
     }
 }
 
@@ -63,42 +82,47 @@ fn run_chunk(simd: Simd, job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
 /// The CPU must support AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn chunk_avx2(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
-    chunk::<ISA_AVX2>(job, start, out)
+unsafe fn chunk_avx2(job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<ISA_AVX2>(job, moves, start, out)
 }
 
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn chunk_avx512(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
-    chunk::<ISA_AVX512>(job, start, out)
+unsafe fn chunk_avx512(job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<ISA_AVX512>(job, moves, start, out)
 }
 
 /// # Safety
 /// The CPU must support NEON (every aarch64 CPU does; the attribute lets the intrinsics inline).
 #[cfg(target_arch = "aarch64")]
 #[target_feature(enable = "neon")]
-unsafe fn chunk_neon(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
-    chunk::<ISA_NEON>(job, start, out)
+unsafe fn chunk_neon(job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<ISA_NEON>(job, moves, start, out)
 }
 
 #[inline(always)]
-fn chunk<const ISA: u8>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+fn chunk<const ISA: u8>(job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
     match (job.kind(), job.pose().any_scaled()) {
-        (Kind::Linear, _) => batches::<ISA, LINEAR, false>(job, start, out),
-        (Kind::DualQuaternion, false) => batches::<ISA, DUAL_QUATERNION, false>(job, start, out),
-        (Kind::DualQuaternion, true) => batches::<ISA, DUAL_QUATERNION, true>(job, start, out),
-        (Kind::Blend, false) => batches::<ISA, BLEND, false>(job, start, out),
-        (Kind::Blend, true) => batches::<ISA, BLEND, true>(job, start, out),
-        (Kind::CentersOfRotation, false) => batches::<ISA, CENTERS, false>(job, start, out),
-        (Kind::CentersOfRotation, true) => batches::<ISA, CENTERS, true>(job, start, out),
+        (Kind::Linear, _) => batches::<ISA, LINEAR, false>(job, moves, start, out),
+        (Kind::DualQuaternion, false) => batches::<ISA, DUAL_QUATERNION, false>(job, moves, start, out),
+        (Kind::DualQuaternion, true) => batches::<ISA, DUAL_QUATERNION, true>(job, moves, start, out),
+        (Kind::Blend, false) => batches::<ISA, BLEND, false>(job, moves, start, out),
+        (Kind::Blend, true) => batches::<ISA, BLEND, true>(job, moves, start, out),
+        (Kind::CentersOfRotation, false) => batches::<ISA, CENTERS, false>(job, moves, start, out),
+        (Kind::CentersOfRotation, true) => batches::<ISA, CENTERS, true>(job, moves, start, out),
     }
 }
 
 /// Skins vertices `start..start + out.len()` batch by batch.
 #[inline(always)]
-fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, start: usize, out: &mut [[f32; 3]]) {
+fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
+    job: &Job<'_>,
+    moves: Option<&[LinearBone]>,
+    start: usize,
+    out: &mut [[f32; 3]],
+) {
     let premat = job.premat.map(Affine3A::from_mat4);
     let postmat = job.postmat.map(Affine3A::from_mat4);
     let pose = job.pose();
@@ -110,6 +134,8 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(job: &Job<'_>, sta
         cor: &pose.cor,
         #[cfg(target_arch = "x86_64")]
         cor_rigid: &pose.cor_rigid,
+        #[cfg(target_arch = "x86_64")]
+        linear_moves: moves,
         premat: premat.as_ref(),
         postmat: postmat.as_ref(),
         blend_factor: job.blend_factor,
@@ -246,9 +272,9 @@ unsafe fn full_batch<const ISA: u8, const KIND: u8, const SCALED: bool>(
     // The hand-written AVX-512 kernels where they measure faster than the one body
     // (docs/performance.md); every other method runs the one body of `batch.rs`.
     #[cfg(target_arch = "x86_64")]
-    if ISA == ISA_AVX512 && KIND == LINEAR {
-        // SAFETY: the caller's contract.
-        return unsafe { super::avx512::linear_batch(simd_job, positions, out, slots, strength) };
+    if let (ISA_AVX512, LINEAR, Some(moves)) = (ISA, KIND, simd_job.linear_moves) {
+        // SAFETY: the caller's contract (the moves are one per bone of the pose).
+        return unsafe { super::avx512::linear_batch(moves, positions, out, slots, strength) };
     }
     #[cfg(target_arch = "x86_64")]
     if let (ISA_AVX512, CENTERS, false, Some(centers)) = (ISA, KIND, SCALED, centers) {

@@ -37,6 +37,7 @@ mod kernels;
 #[cfg(target_arch = "aarch64")]
 mod neon;
 mod pose;
+mod spaces;
 
 pub use armature::{ArmaturePose, BBoneCache, PoseChannel};
 pub use bbone::{

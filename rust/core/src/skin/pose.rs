@@ -15,7 +15,7 @@ pub(crate) struct AffineRows {
 }
 
 impl AffineRows {
-    fn from_mat4(m: &Mat4) -> Self {
+    pub(crate) fn from_mat4(m: &Mat4) -> Self {
         Self { rows: [m.row(0), m.row(1), m.row(2)] }
     }
 

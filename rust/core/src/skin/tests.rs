@@ -390,6 +390,20 @@ proptest! {
         }
     }
 
+    /// Spaces that are not each other's inverse are applied as they are, not folded into the
+    /// bones (`spaces.rs`).
+    #[test]
+    fn kernels_match_the_reference_with_spaces_that_do_not_undo_each_other((rig, positions, lists, mask, premat) in case()) {
+        let postmat = Mat4::from_scale_rotation_translation(Vec3::splat(1.5), Quat::from_rotation_y(0.4), Vec3::new(0.3, -0.2, 1.0)) * premat.inverse();
+        let inputs = reference::Inputs {
+            positions: &positions, lists: &lists, deform: &rig.deform, rest: &rig.rest,
+            premat, postmat, mask: Some(&mask),
+        };
+        let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(&mask) };
+        assert_close(&run(Method::Linear, &positions, &lists, &rig, &options), &reference::skin(&inputs, false), 2e-5)?;
+        assert_close(&run(Method::DualQuaternion, &positions, &lists, &rig, &options), &reference::skin(&inputs, true), 2e-5)?;
+    }
+
     #[test]
     fn kernels_match_the_reference_without_spaces_or_mask((rig, positions, lists, _mask, _premat) in case()) {
         let inputs = reference::Inputs {

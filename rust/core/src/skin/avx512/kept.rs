@@ -9,7 +9,7 @@ use core::arch::x86_64::*;
 use super::super::batch::BatchJob;
 use super::super::influences::{Slot, LANES};
 use super::super::pose::LinearBone;
-use super::{join, load_points, scalar_record, store_points, transpose_blocks, transpose_lanes};
+use super::{idx, join, load_points, scalar_record, store_points, transpose_blocks};
 
 /// Transposes eight rows `[record l | record l + 8]` (8 floats each) into eight 16-lane
 /// component vectors.
@@ -94,75 +94,159 @@ impl Affine {
     }
 }
 
-/// LBS sums in registers: the weighted rows `Σ wᵢ·Mᵢ` (row-major 3×4) and the total weight.
+/// Each lane's weighted sum of its bones' moves `Σ wᵢ·Dᵢ` (row-major 3×4 and four zeros, one
+/// vector a lane) and the total weights.
 ///
 /// Summed per lane: each influence adds its weight (a broadcast load) times its bone's whole
-/// 16-float record (one load, folded into the FMA) to its lane's accumulator, and the sixteen
-/// accumulators are transposed once per batch. Transposing every slot's records instead cost
-/// 48 shuffles and 16 inserts per slot, which bounded LBS on the vector ports. One FMA per float,
-/// in slot order.
+/// 16-float record (one load, folded into the FMA) to its lane's accumulator. Transposing every
+/// slot's records instead cost 48 shuffles and 16 inserts per slot, which bounded LBS on the
+/// vector ports. One FMA per float, in slot order.
 ///
 /// # Safety
-/// As [`rigid_sums`], for `linear`.
+/// Every bone index in `slots` must index `moves`.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn linear_sums(slots: &[Slot], linear: &[LinearBone]) -> ([__m512; 12], __m512) {
+unsafe fn lane_moves(slots: &[Slot], moves: &[LinearBone]) -> ([__m512; LANES], __m512) {
     const { assert!(core::mem::size_of::<LinearBone>() == 64) };
     let mut lanes = [_mm512_setzero_ps(); LANES];
     let mut contrib = _mm512_setzero_ps();
     for slot in slots {
         for (l, lane) in lanes.iter_mut().enumerate() {
-            // SAFETY: indices are in range (validated); a LinearBone is 16 floats (rows,
-            // zero padding).
-            let record = unsafe { _mm512_loadu_ps(scalar_record(linear, &slot.bones, l)) };
+            // SAFETY: indices are in range (this function's contract); a LinearBone is 16
+            // floats (rows, zero padding).
+            let record = unsafe { _mm512_loadu_ps(scalar_record(moves, &slot.bones, l)) };
             *lane = _mm512_fmadd_ps(record, _mm512_set1_ps(slot.weights[l]), *lane);
         }
         // SAFETY: a slot has 16 weights.
         contrib = _mm512_add_ps(contrib, unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) });
     }
-    let rows = transpose_lanes(&lanes);
-    (core::array::from_fn(|k| rows[k]), contrib)
+    (lanes, contrib)
 }
 
-/// LBS on one full batch of 16 vertices, in registers: load, `premat`, the weighted rows
-/// ([`linear_sums`]), strength, `postmat`, mask, store. The same arithmetic as the one body
-/// (`batch.rs`).
+/// Float `f` of a block of four lanes' sums (`block_sums`): row `f / 4` of lane `f % 4`. Float
+/// `e` of part `part` of sixteen points as stored (`x0 y0 z0 x1 …`) is coordinate `g % 3` of
+/// lane `g / 3`, `g = 16·part + e`; it comes from block `g / 12` of four lanes, the first
+/// (`part`) or the second (`part + 1`) of the two a part spans.
+const fn stored_order(part: usize) -> [i32; 16] {
+    let mut idx = [0i32; 16];
+    let mut e = 0;
+    while e < 16 {
+        let g = 16 * part + e;
+        let (lane, axis) = (g / 3, g % 3);
+        let second = if lane / 4 == part { 0 } else { 16 };
+        idx[e] = (second + 4 * axis + lane % 4) as i32;
+        e += 1;
+    }
+    idx
+}
+
+/// Lane `g / 3` for float `e` of part `part` of sixteen points as stored (`g = 16·part + e`).
+const fn lane_of_float(part: usize) -> [i32; 16] {
+    let mut idx = [0i32; 16];
+    let mut e = 0;
+    while e < 16 {
+        idx[e] = ((16 * part + e) / 3) as i32;
+        e += 1;
+    }
+    idx
+}
+
+const STORED_ORDER: [[i32; 16]; 3] = [stored_order(0), stored_order(1), stored_order(2)];
+const LANE_OF_FLOAT: [[i32; 16]; 3] = [lane_of_float(0), lane_of_float(1), lane_of_float(2)];
+
+/// The sums of each 128-bit block of four lanes' vectors: block `k` of the result holds the four
+/// lanes' block-`k` sums, in lane order. Every lane's sum is added in the same order.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn block_sums(v: [__m512; 4]) -> __m512 {
+    let pair = |a, b| _mm512_add_ps(_mm512_unpacklo_ps(a, b), _mm512_unpackhi_ps(a, b));
+    let (ab, cd) = (_mm512_castps_pd(pair(v[0], v[1])), _mm512_castps_pd(pair(v[2], v[3])));
+    _mm512_add_ps(_mm512_castpd_ps(_mm512_unpacklo_pd(ab, cd)), _mm512_castpd_ps(_mm512_unpackhi_pd(ab, cd)))
+}
+
+/// The floats of a row block multiplied by a point's coordinates (not the translation).
+const ROW_PRODUCTS: __mmask16 = 0x7777;
+
+/// A lane's summed rows times its point `(x, y, z)` (the four floats at `point`, broadcast to
+/// every row block), the fourth float of each row, the translation, kept: a broadcast load and
+/// one masked multiply. Written out because the compiler otherwise loads each point, broadcasts
+/// it with a shuffle and spills it, and splits the masked multiply into a multiply and a blend.
 ///
 /// # Safety
-/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index
-/// `job.linear`.
+/// The CPU must support AVX-512F; four floats must be readable at `point`.
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn moved_point(rows: __m512, point: *const f32) -> __m512 {
+    let mut out = rows;
+    // SAFETY: the caller's contract; reads 16 bytes at `point`, writes only the two registers.
+    unsafe {
+        core::arch::asm!(
+            "vbroadcastf32x4 {p}, xmmword ptr [{point}]",
+            "vmulps {out}{{{k}}}, {out}, {p}",
+            point = in(reg) point,
+            out = inout(zmm_reg) out,
+            p = out(zmm_reg) _,
+            k = in(kreg) ROW_PRODUCTS,
+            options(pure, readonly, nostack, preserves_flags),
+        );
+    }
+    out
+}
+
+/// LBS on one full batch of 16 vertices, in mesh space and in the points' own layout:
+/// `co + (a/contrib)·Σ wᵢ·Dᵢ·co` with each bone's move `Dᵢ` (`spaces.rs`), lanes whose factor is
+/// 0 (strength 0, too little weight) left bit-identical.
+///
+/// Each lane applies its summed move to its own point where the lane lies: the point's
+/// `(x, y, z)` broadcast to every row block, multiplied into the rows (the fourth float kept: the
+/// translation), block sums; so the sums need no transpose into coordinate vectors (the 16-lane
+/// transpose was a fifth of the kernel's time on a Zen 4) and the results come out in the order
+/// points are stored.
+///
+/// # Safety
+/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `moves`.
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub(in crate::skin) unsafe fn linear_batch(
-    job: &BatchJob<'_>,
+    moves: &[LinearBone],
     positions: &[[f32; 3]; LANES],
     out: &mut [[f32; 3]; LANES],
     slots: &[Slot],
     strength: Option<&[f32; LANES]>,
 ) {
-    // SAFETY: 16 points (and below: every array loaded or stored has exactly 16 lanes).
-    let o = unsafe { load_points(positions) };
-    let p = match job.premat {
-        Some(m) => Affine::new(m).apply(o),
-        None => o,
-    };
+    // SAFETY: as this function's own contract.
+    let (lanes, contrib) = unsafe { lane_moves(slots, moves) };
+    let points = positions.as_ptr().cast::<f32>();
+    let moved: [__m512; LANES] = core::array::from_fn(|l| {
+        if l + 1 < LANES {
+            // SAFETY: point `l` and the next point's first float are floats 3l..3l + 4 of the 48.
+            unsafe { moved_point(lanes[l], points.add(3 * l)) }
+        } else {
+            // The last point's fourth float would lie past the 48: loaded masked (not read).
+            // SAFETY: floats 45..48 of the 48.
+            let v = unsafe { _mm512_maskz_loadu_ps(0b111, points.add(3 * l)) };
+            _mm512_mask_mul_ps(lanes[l], ROW_PRODUCTS, lanes[l], _mm512_shuffle_f32x4::<0>(v, v))
+        }
+    });
+    let quads: [__m512; 4] =
+        core::array::from_fn(|q| block_sums([moved[4 * q], moved[4 * q + 1], moved[4 * q + 2], moved[4 * q + 3]]));
     let a = match strength {
         // SAFETY: the mask has 16 lanes.
         Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
         None => _mm512_set1_ps(1.0),
     };
-    // SAFETY: as this function's own contract.
-    let (acc, contrib) = unsafe { linear_sums(slots, job.linear) };
     let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::super::MIN_TOTAL_WEIGHT));
     let f = _mm512_maskz_div_ps(valid, a, contrib);
-    // co + (a/contrib)·(Σ wᵢ·Mᵢ·co − contrib·co)
-    let axis = |r: usize| {
-        let m = &acc[4 * r..4 * r + 4];
-        let moved = _mm512_fmadd_ps(m[0], p[0], _mm512_fmadd_ps(m[1], p[1], _mm512_fmadd_ps(m[2], p[2], m[3])));
-        _mm512_fmadd_ps(_mm512_fnmadd_ps(p[r], contrib, moved), f, p[r])
-    };
-    let moved = [axis(0), axis(1), axis(2)];
-    // SAFETY: as this function's own contract.
-    unsafe { write_batch(job, moved, a, o, out) }
+    let dst = out.as_mut_ptr().cast::<f32>();
+    for part in 0..3 {
+        let offset = _mm512_permutex2var_ps(quads[part], idx(&STORED_ORDER[part]), quads[part + 1]);
+        let factor = _mm512_permutexvar_ps(idx(&LANE_OF_FLOAT[part]), f);
+        let moving = _mm512_cmp_ps_mask::<_CMP_NEQ_OQ>(factor, _mm512_setzero_ps());
+        // SAFETY: 16 points are 48 floats, in and out.
+        unsafe {
+            let co = _mm512_loadu_ps(points.add(16 * part));
+            _mm512_storeu_ps(dst.add(16 * part), _mm512_mask3_fmadd_ps(factor, offset, co, moving));
+        }
+    }
 }
 
 /// `½·(R·p + t − p)` for the unit quaternions `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v ×

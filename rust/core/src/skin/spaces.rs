@@ -1,0 +1,106 @@
+//! The modifier's spaces folded into LBS's bone matrices, once per call: each bone's move of a
+//! mesh-space point, `Dᵢ = postmat·Mᵢ·premat − I`, so that a kernel weighs and applies one
+//! matrix per vertex and maps no point into armature space and back.
+//!
+//! LBS is `co' = postmat·(p + f·Σ wᵢ·(Mᵢ·p − p))` with `p = premat·co` and `f = a/Σ wᵢ`; since
+//! every term is an affine map of `co`, that is `co + f·Σ wᵢ·Dᵢ·co` exactly when `postmat·premat`
+//! is the identity, as it is for Blender's spaces (`premat` is `postmat`'s inverse). Spaces that
+//! do not undo each other are not folded: the kernels apply them as they are.
+
+use glam::{Affine3A, DMat4, Mat3A, Mat4, Vec3A};
+
+use super::pose::{AffineRows, LinearBone, Pose};
+
+/// How far `postmat·premat` may be from the identity, relative to the matrices' translations,
+/// for the spaces to count as each other's inverse: well above the single-precision inverse's
+/// round-off for a well-conditioned space (about 1e-7), well below the exactness tests' bar
+/// (1e-5 of a mesh's size).
+const INVERSE_TOLERANCE: f64 = 1e-6;
+
+/// Each bone's `postmat·Mᵢ·premat − I`, or `None` when the spaces are not each other's inverse.
+/// A missing space is the identity.
+pub(crate) fn mesh_space_moves(pose: &Pose, premat: Option<Mat4>, postmat: Option<Mat4>) -> Option<Vec<LinearBone>> {
+    let (pre, post) = (premat.unwrap_or(Mat4::IDENTITY), postmat.unwrap_or(Mat4::IDENTITY));
+    if !undo_each_other(&pre.as_dmat4(), &post.as_dmat4()) {
+        return None;
+    }
+    // Single precision, SIMD: a Rigify character has 720 bones to fold every frame.
+    let (pre, post) = (Affine3A::from_mat4(pre), Affine3A::from_mat4(post));
+    let moves = pose
+        .linear
+        .iter()
+        .map(|bone| {
+            let [r0, r1, r2] = bone.matrix.rows;
+            let m = Affine3A::from_cols(
+                Vec3A::new(r0.x, r1.x, r2.x),
+                Vec3A::new(r0.y, r1.y, r2.y),
+                Vec3A::new(r0.z, r1.z, r2.z),
+                Vec3A::new(r0.w, r1.w, r2.w),
+            );
+            let mut d = post * m * pre;
+            d.matrix3 -= Mat3A::IDENTITY;
+            LinearBone { matrix: AffineRows::from_mat4(&Mat4::from(d)), padding: [0.0; 4] }
+        })
+        .collect();
+    Some(moves)
+}
+
+/// Whether `post·pre` is the identity to [`INVERSE_TOLERANCE`].
+fn undo_each_other(pre: &DMat4, post: &DMat4) -> bool {
+    let product = *post * *pre;
+    let reach = 1.0 + pre.w_axis.truncate().abs().max_element() + post.w_axis.truncate().abs().max_element();
+    let linear_ok =
+        (0..3).all(|c| (0..3).all(|r| (product.col(c)[r] - if r == c { 1.0 } else { 0.0 }).abs() <= INVERSE_TOLERANCE));
+    let translation_ok = product.w_axis.truncate().abs().max_element() <= INVERSE_TOLERANCE * reach;
+    linear_ok && translation_ok
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Quat, Vec3, Vec4};
+
+    use super::*;
+
+    fn pose() -> Pose {
+        let deform = [
+            Mat4::from_scale_rotation_translation(Vec3::new(1.0, 1.3, 1.0), Quat::from_rotation_y(0.7), Vec3::X),
+            Mat4::from_rotation_z(-0.4),
+        ];
+        Pose::new(&deform, None).unwrap()
+    }
+
+    #[test]
+    fn blenders_spaces_fold_into_each_bones_move() {
+        let postmat = Mat4::from_scale_rotation_translation(
+            Vec3::splat(0.5),
+            Quat::from_rotation_x(0.3),
+            Vec3::new(100.0, -2.0, 3.0),
+        );
+        let premat = postmat.inverse();
+        let moves = mesh_space_moves(&pose(), Some(premat), Some(postmat)).expect("inverse spaces fold");
+        let co = Vec3::new(0.25, -1.5, 2.0);
+        for (bone, moved) in pose().linear.iter().zip(&moves) {
+            let row = |rows: &AffineRows, r: usize| rows.rows[r].dot(premat.transform_point3(co).extend(1.0));
+            let through = Vec3::new(row(&bone.matrix, 0), row(&bone.matrix, 1), row(&bone.matrix, 2));
+            let want = postmat.transform_point3(through) - co;
+            let got = Vec3::new(
+                moved.matrix.rows[0].dot(co.extend(1.0)),
+                moved.matrix.rows[1].dot(co.extend(1.0)),
+                moved.matrix.rows[2].dot(co.extend(1.0)),
+            );
+            assert!((got - want).length() < 1e-4, "{got} vs {want}");
+            assert_eq!(moved.padding, [0.0; 4]);
+        }
+        let identity = mesh_space_moves(&pose(), None, None).unwrap();
+        assert_eq!(identity[1].matrix.rows[2], Vec4::new(0.0, 0.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn spaces_that_do_not_undo_each_other_are_not_folded() {
+        let pre = Mat4::from_translation(Vec3::new(0.0, 0.0, 10.0));
+        let post = Mat4::from_translation(Vec3::Z);
+        assert!(mesh_space_moves(&pose(), Some(pre), Some(post)).is_none());
+        assert!(mesh_space_moves(&pose(), Some(Mat4::from_rotation_x(1e-3)), None).is_none());
+        assert!(mesh_space_moves(&pose(), None, Some(Mat4::from_scale(Vec3::splat(1.0 + 1e-5)))).is_none());
+    }
+}

@@ -346,10 +346,10 @@ def reference_copy(obj, preserve_volume: bool):
     return copy
 
 
-def perturbed(obj, relative: float = 2e-7):
-    """A copy of `obj` whose deformed mesh is moved by random offsets of `relative` times its
-    size, what two exact float32 skinnings differ by: how much a consumer amplifies that is the
-    precision a comparison of consumers can expect."""
+def perturbed(obj, relative: float = 2e-7, seed: int = 0):
+    """A copy of `obj` whose deformed mesh is moved by random offsets (drawn with `seed`) of
+    `relative` times its size, what two exact float32 skinnings differ by: how much a consumer
+    amplifies that is the precision a comparison of consumers can expect."""
     copy = obj.copy()
     copy.data = obj.data.copy()
     bpy.context.scene.collection.objects.link(copy)
@@ -361,6 +361,7 @@ def perturbed(obj, relative: float = 2e-7):
     rnd.data_type = "FLOAT_VECTOR"
     amp = relative * float(np.linalg.norm(np.ptp(np.array([list(c) for c in obj.bound_box]), axis=0)))
     rnd.inputs["Min"].default_value, rnd.inputs["Max"].default_value = (-amp,) * 3, (amp,) * 3
+    rnd.inputs["Seed"].default_value = seed
     group.links.new(i.outputs[0], sp.inputs["Geometry"])
     group.links.new(rnd.outputs["Value"], sp.inputs["Offset"])
     group.links.new(sp.outputs[0], o.inputs[0])

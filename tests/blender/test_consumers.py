@@ -37,6 +37,7 @@ from mathutils import Vector
 # differently elsewhere; nothing here makes the two characters interact).
 OFFSET = Vector((0.0, 0.0, 0.0))
 SHRINKWRAP_TOL = 1e-4
+PERTURBATIONS = 6  # draws of the float noise a consumer's amplification is measured with
 
 
 def characters(dq_skin, assets, method: str, rig: str):
@@ -205,14 +206,16 @@ def test_particle_hair_on_the_character(dq_skin, assets, method, rig):
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 def test_shrinkwrap_onto_the_character(dq_skin, assets, method, rig):
-    """Within 1e-4 of the Armature scene, or of twice what Shrinkwrap makes of a 2e-7 perturbation
+    """Within 1e-4 of the Armature scene, or of twice what Shrinkwrap makes of 2e-7 perturbations
     of its target under Blender's own Armature modifier, where that is more (projections onto the
-    nearest surface jump at folds: on Blender 4.2 up to 1.2e-4)."""
+    nearest surface jump at folds: on Blender 4.2 up to 1.2e-4). Several perturbations, since
+    one draw may miss a fold that another finds (at frame 10 on Linear, one draw of six jumps
+    by 2e-4, the others by under 1e-5)."""
     body, ref = characters(dq_skin, assets, method, rig)
-    noisy = perturbed(ref)
+    noisy = [perturbed(ref, seed=seed) for seed in range(PERTURBATIONS)]
     wraps = []
     centre = sum((ref.matrix_world @ Vector(c) for c in ref.bound_box), Vector()) / 8  # one place for all
-    for obj in (body, ref, noisy):
+    for obj in (body, ref, *noisy):
         bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=centre)
         s = bpy.context.active_object
         s.modifiers.new("Shrinkwrap", "SHRINKWRAP").target = obj
@@ -220,7 +223,7 @@ def test_shrinkwrap_onto_the_character(dq_skin, assets, method, rig):
 
     def check(f):
         expected = world_positions(wraps[1])
-        amplified = deviation(world_positions(wraps[2]), expected)
+        amplified = max(deviation(world_positions(w), expected) for w in wraps[2:])
         same(world_positions(wraps[0]), expected, f"Shrinkwrap at frame {f}", max(SHRINKWRAP_TOL, 2 * amplified))
 
     play((1, 5, 10, 20, 30), check)

@@ -18,7 +18,7 @@ use super::influences::{Slot, LANES};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
 use super::pose::LinearBone;
-use super::spaces::mesh_space_moves;
+use super::spaces::{fold_spaces, Fold};
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
 /// A multiple of [`LANES`], so tasks start on batch boundaries.
@@ -28,12 +28,12 @@ const _: () = assert!(CHUNK.is_multiple_of(LANES));
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     assert_eq!(out.len(), job.positions.len(), "one output point per vertex");
     assert!(job.kind() != Kind::CentersOfRotation || job.centers.is_some(), "centers of rotation need the centers");
-    // The AVX-512 LBS reads each bone's move in mesh space, folded once per call.
-    let moves = (job.kind() == Kind::Linear && uses_mesh_space_moves(simd))
-        .then(|| mesh_space_moves(job.pose(), job.premat, job.postmat))
+    // LBS reads its bones' records with the spaces folded in, once per call (`spaces.rs`).
+    let folded = (job.kind() == Kind::Linear)
+        .then(|| fold_spaces(job.pose(), job.premat, job.postmat, linear_fold(simd)))
         .flatten();
-    let moves = moves.as_deref();
-    let task = |(i, chunk): (usize, &mut [[f32; 3]])| run_chunk(simd, job, moves, i * CHUNK, chunk);
+    let folded = folded.as_deref();
+    let task = |(i, chunk): (usize, &mut [[f32; 3]])| run_chunk(simd, job, folded, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
     } else {
@@ -50,31 +50,31 @@ const ISA_AVX512: u8 = 2;
 #[cfg(target_arch = "aarch64")]
 const ISA_NEON: u8 = 3;
 
-/// Whether the copy `simd` runs LBS from [`mesh_space_moves`] (the hand-written AVX-512 LBS).
-fn uses_mesh_space_moves(simd: Simd) -> bool {
+/// The folded records the copy `simd`'s LBS reads: each bone's move for the hand-written
+/// AVX-512 LBS, its matrix for the others.
+fn linear_fold(simd: Simd) -> Fold {
     #[cfg(target_arch = "x86_64")]
-    return simd.instruction_set() == InstructionSet::Avx512;
-    #[cfg(not(target_arch = "x86_64"))]
-    return {
-        let _ = simd;
-        false
-    };
+    if simd.instruction_set() == InstructionSet::Avx512 {
+        return Fold::Moves;
+    }
+    let _ = simd;
+    Fold::Matrices
 }
 
-/// Runs the copy `simd` of the kernels on vertices `start..start + out.len()`; `moves` are the
-/// job's [`mesh_space_moves`], where the copy reads them.
-fn run_chunk(simd: Simd, job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+/// Runs the copy `simd` of the kernels on vertices `start..start + out.len()`; `folded` are LBS's
+/// bone records with the job's spaces folded in ([`fold_spaces`]), if they fold.
+fn run_chunk(simd: Simd, job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
     match simd.instruction_set() {
-        InstructionSet::Baseline => chunk::<ISA_BASELINE>(job, moves, start, out),
+        InstructionSet::Baseline => chunk::<ISA_BASELINE>(job, folded, start, out),
         // SAFETY: a `Simd` of this set exists only where AVX2 and FMA were detected.
         #[cfg(target_arch = "x86_64")]
-        InstructionSet::Avx2Fma => unsafe { chunk_avx2(job, moves, start, out) },
+        InstructionSet::Avx2Fma => unsafe { chunk_avx2(job, folded, start, out) },
         // SAFETY: a `Simd` of this set exists only where AVX-512F, AVX2 and FMA were detected.
         #[cfg(target_arch = "x86_64")]
-        InstructionSet::Avx512 => unsafe { chunk_avx512(job, moves, start, out) },
+        InstructionSet::Avx512 => unsafe { chunk_avx512(job, folded, start, out) },
         // SAFETY: every aarch64 CPU has NEON.
         #[cfg(target_arch = "aarch64")]
-        InstructionSet::Neon => unsafe { chunk_neon(job, moves, start, out) },
+        InstructionSet::Neon => unsafe { chunk_neon(job, folded, start, out) },
     }
 }
 
@@ -82,36 +82,36 @@ fn run_chunk(simd: Simd, job: &Job<'_>, moves: Option<&[LinearBone]>, start: usi
 /// The CPU must support AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn chunk_avx2(job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
-    chunk::<ISA_AVX2>(job, moves, start, out)
+unsafe fn chunk_avx2(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<ISA_AVX2>(job, folded, start, out)
 }
 
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn chunk_avx512(job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
-    chunk::<ISA_AVX512>(job, moves, start, out)
+unsafe fn chunk_avx512(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<ISA_AVX512>(job, folded, start, out)
 }
 
 /// # Safety
 /// The CPU must support NEON (every aarch64 CPU does; the attribute lets the intrinsics inline).
 #[cfg(target_arch = "aarch64")]
 #[target_feature(enable = "neon")]
-unsafe fn chunk_neon(job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
-    chunk::<ISA_NEON>(job, moves, start, out)
+unsafe fn chunk_neon(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+    chunk::<ISA_NEON>(job, folded, start, out)
 }
 
 #[inline(always)]
-fn chunk<const ISA: u8>(job: &Job<'_>, moves: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+fn chunk<const ISA: u8>(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
     match (job.kind(), job.pose().any_scaled()) {
-        (Kind::Linear, _) => batches::<ISA, LINEAR, false>(job, moves, start, out),
-        (Kind::DualQuaternion, false) => batches::<ISA, DUAL_QUATERNION, false>(job, moves, start, out),
-        (Kind::DualQuaternion, true) => batches::<ISA, DUAL_QUATERNION, true>(job, moves, start, out),
-        (Kind::Blend, false) => batches::<ISA, BLEND, false>(job, moves, start, out),
-        (Kind::Blend, true) => batches::<ISA, BLEND, true>(job, moves, start, out),
-        (Kind::CentersOfRotation, false) => batches::<ISA, CENTERS, false>(job, moves, start, out),
-        (Kind::CentersOfRotation, true) => batches::<ISA, CENTERS, true>(job, moves, start, out),
+        (Kind::Linear, _) => batches::<ISA, LINEAR, false>(job, folded, start, out),
+        (Kind::DualQuaternion, false) => batches::<ISA, DUAL_QUATERNION, false>(job, folded, start, out),
+        (Kind::DualQuaternion, true) => batches::<ISA, DUAL_QUATERNION, true>(job, folded, start, out),
+        (Kind::Blend, false) => batches::<ISA, BLEND, false>(job, folded, start, out),
+        (Kind::Blend, true) => batches::<ISA, BLEND, true>(job, folded, start, out),
+        (Kind::CentersOfRotation, false) => batches::<ISA, CENTERS, false>(job, folded, start, out),
+        (Kind::CentersOfRotation, true) => batches::<ISA, CENTERS, true>(job, folded, start, out),
     }
 }
 
@@ -119,15 +119,29 @@ fn chunk<const ISA: u8>(job: &Job<'_>, moves: Option<&[LinearBone]>, start: usiz
 #[inline(always)]
 fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
     job: &Job<'_>,
-    moves: Option<&[LinearBone]>,
+    folded: Option<&[LinearBone]>,
     start: usize,
     out: &mut [[f32; 3]],
 ) {
-    let premat = job.premat.map(Affine3A::from_mat4);
-    let postmat = job.postmat.map(Affine3A::from_mat4);
+    // LBS with the spaces folded in has no premat or postmat left to apply.
+    let folded = if KIND == LINEAR { folded } else { None };
+    let spaces = |m: Option<glam::Mat4>| if folded.is_some() { None } else { m.map(Affine3A::from_mat4) };
+    let (premat, postmat) = (spaces(job.premat), spaces(job.postmat));
     let pose = job.pose();
+    // The hand-written AVX-512 LBS reads the moves; every other LBS the folded matrices.
+    #[cfg(target_arch = "x86_64")]
+    let reads_moves = ISA == ISA_AVX512;
+    #[cfg(not(target_arch = "x86_64"))]
+    let reads_moves = false;
+    let (linear, moves) = match folded {
+        Some(records) if reads_moves => (&pose.linear[..], Some(records)),
+        Some(records) => (records, None),
+        None => (&pose.linear[..], None),
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = moves; // no copy here reads them
     let simd_job = BatchJob {
-        linear: &pose.linear,
+        linear,
         dq: &pose.dq,
         pivot: &pose.pivot,
         pivot_dual: &pose.pivot_dual,
@@ -150,7 +164,7 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
             // The baseline's hand-written LBS, where it measures faster than the one body.
             // SAFETY: the job's influences and pose fit together (`Job::new`), so every bone
             // index of the batch's slots indexes the pose's `linear` table.
-            unsafe { super::baseline::linear_batch(job, premat.as_ref(), postmat.as_ref(), first, slots, out) };
+            unsafe { super::baseline::linear_batch(job, linear, premat.as_ref(), postmat.as_ref(), first, slots, out) };
             continue;
         }
         if n == LANES {

@@ -1,6 +1,6 @@
-//! The modifier's spaces folded into LBS's bone matrices, once per call: each bone's move of a
-//! mesh-space point, `Dᵢ = postmat·Mᵢ·premat − I`, so that a kernel weighs and applies one
-//! matrix per vertex and maps no point into armature space and back.
+//! The modifier's spaces folded into LBS's bone matrices, once per call, so that the kernels map
+//! no point into armature space and back: each bone's matrix `postmat·Mᵢ·premat` (the one body
+//! and the baseline), or its move of a mesh-space point `Dᵢ = postmat·Mᵢ·premat − I` (AVX-512).
 //!
 //! LBS is `co' = postmat·(p + f·Σ wᵢ·(Mᵢ·p − p))` with `p = premat·co` and `f = a/Σ wᵢ`; since
 //! every term is an affine map of `co`, that is `co + f·Σ wᵢ·Dᵢ·co` exactly when `postmat·premat`
@@ -17,16 +17,30 @@ use super::pose::{AffineRows, LinearBone, Pose};
 /// (1e-5 of a mesh's size).
 const INVERSE_TOLERANCE: f64 = 1e-6;
 
-/// Each bone's `postmat·Mᵢ·premat − I`, or `None` when the spaces are not each other's inverse.
-/// A missing space is the identity.
-pub(crate) fn mesh_space_moves(pose: &Pose, premat: Option<Mat4>, postmat: Option<Mat4>) -> Option<Vec<LinearBone>> {
+/// What each folded record holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Fold {
+    /// `postmat·Mᵢ·premat`: a matrix of mesh space, for the kernels' usual LBS.
+    Matrices,
+    /// `postmat·Mᵢ·premat − I`: the bone's move of a mesh-space point.
+    Moves,
+}
+
+/// Each bone's record as `fold` says, or `None` when the spaces are not each other's inverse. A
+/// missing space is the identity.
+pub(crate) fn fold_spaces(
+    pose: &Pose,
+    premat: Option<Mat4>,
+    postmat: Option<Mat4>,
+    fold: Fold,
+) -> Option<Vec<LinearBone>> {
     let (pre, post) = (premat.unwrap_or(Mat4::IDENTITY), postmat.unwrap_or(Mat4::IDENTITY));
     if !undo_each_other(&pre.as_dmat4(), &post.as_dmat4()) {
         return None;
     }
     // Single precision, SIMD: a Rigify character has 720 bones to fold every frame.
     let (pre, post) = (Affine3A::from_mat4(pre), Affine3A::from_mat4(post));
-    let moves = pose
+    let records = pose
         .linear
         .iter()
         .map(|bone| {
@@ -38,11 +52,13 @@ pub(crate) fn mesh_space_moves(pose: &Pose, premat: Option<Mat4>, postmat: Optio
                 Vec3A::new(r0.w, r1.w, r2.w),
             );
             let mut d = post * m * pre;
-            d.matrix3 -= Mat3A::IDENTITY;
+            if fold == Fold::Moves {
+                d.matrix3 -= Mat3A::IDENTITY;
+            }
             LinearBone { matrix: AffineRows::from_mat4(&Mat4::from(d)), padding: [0.0; 4] }
         })
         .collect();
-    Some(moves)
+    Some(records)
 }
 
 /// Whether `post·pre` is the identity to [`INVERSE_TOLERANCE`].
@@ -70,14 +86,14 @@ mod tests {
     }
 
     #[test]
-    fn blenders_spaces_fold_into_each_bones_move() {
+    fn blenders_spaces_fold_into_each_bones_matrix_and_move() {
         let postmat = Mat4::from_scale_rotation_translation(
             Vec3::splat(0.5),
             Quat::from_rotation_x(0.3),
             Vec3::new(100.0, -2.0, 3.0),
         );
         let premat = postmat.inverse();
-        let moves = mesh_space_moves(&pose(), Some(premat), Some(postmat)).expect("inverse spaces fold");
+        let moves = fold_spaces(&pose(), Some(premat), Some(postmat), Fold::Moves).expect("inverse spaces fold");
         let co = Vec3::new(0.25, -1.5, 2.0);
         for (bone, moved) in pose().linear.iter().zip(&moves) {
             let row = |rows: &AffineRows, r: usize| rows.rows[r].dot(premat.transform_point3(co).extend(1.0));
@@ -91,7 +107,14 @@ mod tests {
             assert!((got - want).length() < 1e-4, "{got} vs {want}");
             assert_eq!(moved.padding, [0.0; 4]);
         }
-        let identity = mesh_space_moves(&pose(), None, None).unwrap();
+        let identity = fold_spaces(&pose(), None, None, Fold::Moves).unwrap();
+        let matrices = fold_spaces(&pose(), Some(premat), Some(postmat), Fold::Matrices).unwrap();
+        for (m, d) in matrices.iter().zip(&moves) {
+            for r in 0..3 {
+                let unit = Vec4::from_array(core::array::from_fn(|c| if c == r { 1.0 } else { 0.0 }));
+                assert!((m.matrix.rows[r] - unit - d.matrix.rows[r]).abs().max_element() < 1e-6);
+            }
+        }
         assert_eq!(identity[1].matrix.rows[2], Vec4::new(0.0, 0.0, 0.0, 0.0));
     }
 
@@ -99,8 +122,8 @@ mod tests {
     fn spaces_that_do_not_undo_each_other_are_not_folded() {
         let pre = Mat4::from_translation(Vec3::new(0.0, 0.0, 10.0));
         let post = Mat4::from_translation(Vec3::Z);
-        assert!(mesh_space_moves(&pose(), Some(pre), Some(post)).is_none());
-        assert!(mesh_space_moves(&pose(), Some(Mat4::from_rotation_x(1e-3)), None).is_none());
-        assert!(mesh_space_moves(&pose(), None, Some(Mat4::from_scale(Vec3::splat(1.0 + 1e-5)))).is_none());
+        assert!(fold_spaces(&pose(), Some(pre), Some(post), Fold::Matrices).is_none());
+        assert!(fold_spaces(&pose(), Some(Mat4::from_rotation_x(1e-3)), None, Fold::Moves).is_none());
+        assert!(fold_spaces(&pose(), None, Some(Mat4::from_scale(Vec3::splat(1.0 + 1e-5))), Fold::Matrices).is_none());
     }
 }

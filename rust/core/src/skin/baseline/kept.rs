@@ -44,13 +44,16 @@ impl Points {
 }
 
 /// LBS on one batch of up to [`LANES`] vertices from `first` (`out` holds its results; `slots`
-/// its influences): load, `premat`, the sums, strength, `postmat`, mask, store.
+/// its influences) with the bone matrices `table` (the pose's, or with the spaces folded in):
+/// load, `premat`, the sums, strength, `postmat`, mask, store.
 ///
 /// # Safety
-/// Every bone index of the slots indexes the pose's `linear` table (`Job::new` makes sure of it).
+/// Every bone index of the slots indexes `table` (one record per bone of the pose: `Job::new`
+/// makes sure the indices fit the pose).
 #[inline(always)]
 pub(in crate::skin) unsafe fn linear_batch(
     job: &Job<'_>,
+    table: &[LinearBone],
     premat: Option<&Affine3A>,
     postmat: Option<&Affine3A>,
     first: usize,
@@ -68,7 +71,7 @@ pub(in crate::skin) unsafe fn linear_batch(
         None => original,
     };
     // SAFETY: the caller's contract.
-    let moved = unsafe { linear(&co, slots, &job.pose().linear, &strength) };
+    let moved = unsafe { linear(&co, slots, table, &strength) };
     let mut result = match postmat {
         Some(m) => moved.transform(m),
         None => moved,

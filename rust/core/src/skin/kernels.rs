@@ -17,8 +17,8 @@ use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{Slot, LANES};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
-use super::pose::LinearBone;
-use super::spaces::{fold_spaces, Fold};
+use super::pose::{DqBone, LinearBone};
+use super::spaces::{fold_rigid_spaces, fold_spaces, Fold};
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
 /// A multiple of [`LANES`], so tasks start on batch boundaries.
@@ -28,11 +28,17 @@ const _: () = assert!(CHUNK.is_multiple_of(LANES));
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     assert_eq!(out.len(), job.positions.len(), "one output point per vertex");
     assert!(job.kind() != Kind::CentersOfRotation || job.centers.is_some(), "centers of rotation need the centers");
-    // LBS reads its bones' records with the spaces folded in, once per call (`spaces.rs`).
-    let folded = (job.kind() == Kind::Linear)
-        .then(|| fold_spaces(job.pose(), job.premat, job.postmat, linear_fold(simd)))
-        .flatten();
-    let folded = folded.as_deref();
+    // The bones' records with the spaces folded in, once per call (`spaces.rs`): LBS's, and
+    // DQS's (and Blend's) for poses without scale.
+    let (pose, premat, postmat) = (job.pose(), job.premat, job.postmat);
+    let rigid_dqs = matches!(job.kind(), Kind::DualQuaternion | Kind::Blend) && !pose.any_scaled();
+    let dq = rigid_dqs.then(|| fold_rigid_spaces(pose, premat, postmat)).flatten();
+    let linear = match job.kind() {
+        Kind::Linear => fold_spaces(pose, premat, postmat, linear_fold(simd)),
+        Kind::Blend if dq.is_some() => fold_spaces(pose, premat, postmat, Fold::Matrices),
+        _ => None,
+    };
+    let folded = Folded { linear: linear.as_deref(), dq: dq.as_deref() };
     let task = |(i, chunk): (usize, &mut [[f32; 3]])| run_chunk(simd, job, folded, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
@@ -50,6 +56,16 @@ const ISA_AVX512: u8 = 2;
 #[cfg(target_arch = "aarch64")]
 const ISA_NEON: u8 = 3;
 
+/// One call's bone records with the job's spaces folded in ([`fold_spaces`],
+/// [`fold_rigid_spaces`]), where they fold.
+#[derive(Clone, Copy, Default)]
+struct Folded<'a> {
+    /// LBS's matrices (the hand-written AVX-512 LBS: the bones' moves).
+    linear: Option<&'a [LinearBone]>,
+    /// DQS's dual quaternions, for poses without scale.
+    dq: Option<&'a [DqBone]>,
+}
+
 /// The folded records the copy `simd`'s LBS reads: each bone's move for the hand-written
 /// AVX-512 LBS, its matrix for the others.
 fn linear_fold(simd: Simd) -> Fold {
@@ -61,9 +77,9 @@ fn linear_fold(simd: Simd) -> Fold {
     Fold::Matrices
 }
 
-/// Runs the copy `simd` of the kernels on vertices `start..start + out.len()`; `folded` are LBS's
-/// bone records with the job's spaces folded in ([`fold_spaces`]), if they fold.
-fn run_chunk(simd: Simd, job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+/// Runs the copy `simd` of the kernels on vertices `start..start + out.len()`, with the call's
+/// `folded` records.
+fn run_chunk(simd: Simd, job: &Job<'_>, folded: Folded<'_>, start: usize, out: &mut [[f32; 3]]) {
     match simd.instruction_set() {
         InstructionSet::Baseline => chunk::<ISA_BASELINE>(job, folded, start, out),
         // SAFETY: a `Simd` of this set exists only where AVX2 and FMA were detected.
@@ -82,7 +98,7 @@ fn run_chunk(simd: Simd, job: &Job<'_>, folded: Option<&[LinearBone]>, start: us
 /// The CPU must support AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn chunk_avx2(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+unsafe fn chunk_avx2(job: &Job<'_>, folded: Folded<'_>, start: usize, out: &mut [[f32; 3]]) {
     chunk::<ISA_AVX2>(job, folded, start, out)
 }
 
@@ -90,7 +106,7 @@ unsafe fn chunk_avx2(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize,
 /// The CPU must support AVX-512F, AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn chunk_avx512(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+unsafe fn chunk_avx512(job: &Job<'_>, folded: Folded<'_>, start: usize, out: &mut [[f32; 3]]) {
     chunk::<ISA_AVX512>(job, folded, start, out)
 }
 
@@ -98,12 +114,12 @@ unsafe fn chunk_avx512(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usiz
 /// The CPU must support NEON (every aarch64 CPU does; the attribute lets the intrinsics inline).
 #[cfg(target_arch = "aarch64")]
 #[target_feature(enable = "neon")]
-unsafe fn chunk_neon(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+unsafe fn chunk_neon(job: &Job<'_>, folded: Folded<'_>, start: usize, out: &mut [[f32; 3]]) {
     chunk::<ISA_NEON>(job, folded, start, out)
 }
 
 #[inline(always)]
-fn chunk<const ISA: u8>(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usize, out: &mut [[f32; 3]]) {
+fn chunk<const ISA: u8>(job: &Job<'_>, folded: Folded<'_>, start: usize, out: &mut [[f32; 3]]) {
     match (job.kind(), job.pose().any_scaled()) {
         (Kind::Linear, _) => batches::<ISA, LINEAR, false>(job, folded, start, out),
         (Kind::DualQuaternion, false) => batches::<ISA, DUAL_QUATERNION, false>(job, folded, start, out),
@@ -119,21 +135,27 @@ fn chunk<const ISA: u8>(job: &Job<'_>, folded: Option<&[LinearBone]>, start: usi
 #[inline(always)]
 fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
     job: &Job<'_>,
-    folded: Option<&[LinearBone]>,
+    folded: Folded<'_>,
     start: usize,
     out: &mut [[f32; 3]],
 ) {
-    // LBS with the spaces folded in has no premat or postmat left to apply.
-    let folded = if KIND == LINEAR { folded } else { None };
-    let spaces = |m: Option<glam::Mat4>| if folded.is_some() { None } else { m.map(Affine3A::from_mat4) };
+    // A method whose every table was folded has no premat or postmat left to apply.
+    let all_folded = match KIND {
+        LINEAR => folded.linear.is_some(),
+        DUAL_QUATERNION => !SCALED && folded.dq.is_some(),
+        BLEND => !SCALED && folded.dq.is_some() && folded.linear.is_some(),
+        _ => false,
+    };
+    let folded = if all_folded { folded } else { Folded::default() };
+    let spaces = |m: Option<glam::Mat4>| if all_folded { None } else { m.map(Affine3A::from_mat4) };
     let (premat, postmat) = (spaces(job.premat), spaces(job.postmat));
     let pose = job.pose();
     // The hand-written AVX-512 LBS reads the moves; every other LBS the folded matrices.
     #[cfg(target_arch = "x86_64")]
-    let reads_moves = ISA == ISA_AVX512;
+    let reads_moves = ISA == ISA_AVX512 && KIND == LINEAR;
     #[cfg(not(target_arch = "x86_64"))]
     let reads_moves = false;
-    let (linear, moves) = match folded {
+    let (linear, moves) = match folded.linear {
         Some(records) if reads_moves => (&pose.linear[..], Some(records)),
         Some(records) => (records, None),
         None => (&pose.linear[..], None),
@@ -142,7 +164,7 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
     let _ = moves; // no copy here reads them
     let simd_job = BatchJob {
         linear,
-        dq: &pose.dq,
+        dq: folded.dq.unwrap_or(&pose.dq),
         pivot: &pose.pivot,
         pivot_dual: &pose.pivot_dual,
         cor: &pose.cor,

@@ -1,15 +1,16 @@
 //! The modifier's spaces folded into LBS's bone matrices, once per call, so that the kernels map
 //! no point into armature space and back: each bone's matrix `postmat·Mᵢ·premat` (the one body
-//! and the baseline), or its move of a mesh-space point `Dᵢ = postmat·Mᵢ·premat − I` (AVX-512).
+//! and the baseline), or its move of a mesh-space point `Dᵢ = postmat·Mᵢ·premat − I` (AVX-512);
+//! and, for rigid spaces, each bone's dual quaternion likewise ([`fold_rigid_spaces`]).
 //!
 //! LBS is `co' = postmat·(p + f·Σ wᵢ·(Mᵢ·p − p))` with `p = premat·co` and `f = a/Σ wᵢ`; since
 //! every term is an affine map of `co`, that is `co + f·Σ wᵢ·Dᵢ·co` exactly when `postmat·premat`
 //! is the identity, as it is for Blender's spaces (`premat` is `postmat`'s inverse). Spaces that
 //! do not undo each other are not folded: the kernels apply them as they are.
 
-use glam::{Affine3A, DMat4, Mat3A, Mat4, Vec3A};
+use glam::{Affine3A, DMat3, DMat4, Mat3A, Mat4, Quat, Vec3A, Vec4};
 
-use super::pose::{AffineRows, LinearBone, Pose};
+use super::pose::{AffineRows, DqBone, LinearBone, Pose};
 
 /// How far `postmat·premat` may be from the identity, relative to the matrices' translations,
 /// for the spaces to count as each other's inverse: well above the single-precision inverse's
@@ -44,14 +45,7 @@ pub(crate) fn fold_spaces(
         .linear
         .iter()
         .map(|bone| {
-            let [r0, r1, r2] = bone.matrix.rows;
-            let m = Affine3A::from_cols(
-                Vec3A::new(r0.x, r1.x, r2.x),
-                Vec3A::new(r0.y, r1.y, r2.y),
-                Vec3A::new(r0.z, r1.z, r2.z),
-                Vec3A::new(r0.w, r1.w, r2.w),
-            );
-            let mut d = post * m * pre;
+            let mut d = post * affine_of(bone) * pre;
             if fold == Fold::Moves {
                 d.matrix3 -= Mat3A::IDENTITY;
             }
@@ -59,6 +53,54 @@ pub(crate) fn fold_spaces(
         })
         .collect();
     Some(records)
+}
+
+/// Each bone's dual quaternion with rigid spaces folded in: the rotation `q_post·qᵢ·q_pre` and
+/// the translation of `postmat·Mᵢ·premat`; or `None` when `premat` is not a rotation and a
+/// translation (a scale or shear does not pass through the blend), or the spaces do not undo each
+/// other. A common rigid change of space leaves dual quaternion blending unchanged (the sign
+/// choices compare rotations by dot products, which it keeps), so DQS in mesh space gives what
+/// DQS in armature space gives. For poses without scale (their `dq` table).
+pub(crate) fn fold_rigid_spaces(pose: &Pose, premat: Option<Mat4>, postmat: Option<Mat4>) -> Option<Vec<DqBone>> {
+    let (pre, post) = (premat.unwrap_or(Mat4::IDENTITY), postmat.unwrap_or(Mat4::IDENTITY));
+    if !is_rigid(&pre.as_dmat4()) || !undo_each_other(&pre.as_dmat4(), &post.as_dmat4()) {
+        return None;
+    }
+    let (pre, post) = (Affine3A::from_mat4(pre), Affine3A::from_mat4(post));
+    let (q_pre, q_post) = (Quat::from_mat3a(&pre.matrix3).normalize(), Quat::from_mat3a(&post.matrix3).normalize());
+    let records = pose
+        .dq
+        .iter()
+        .zip(&pose.linear)
+        .map(|(bone, matrix)| {
+            let q = q_post * Quat::from_vec4(bone.real) * q_pre;
+            let t = (post * affine_of(matrix) * pre).translation;
+            let dual = Quat::from_xyzw(0.5 * t.x, 0.5 * t.y, 0.5 * t.z, 0.0) * q;
+            DqBone { real: Vec4::from(q), dual: Vec4::from(dual) }
+        })
+        .collect();
+    Some(records)
+}
+
+/// A bone's LBS matrix as an affine transform.
+fn affine_of(bone: &LinearBone) -> Affine3A {
+    let [r0, r1, r2] = bone.matrix.rows;
+    Affine3A::from_cols(
+        Vec3A::new(r0.x, r1.x, r2.x),
+        Vec3A::new(r0.y, r1.y, r2.y),
+        Vec3A::new(r0.z, r1.z, r2.z),
+        Vec3A::new(r0.w, r1.w, r2.w),
+    )
+}
+
+/// Whether `m`'s linear part is a rotation (orthonormal columns, no reflection) to
+/// [`INVERSE_TOLERANCE`].
+fn is_rigid(m: &DMat4) -> bool {
+    let r = DMat3::from_mat4(*m);
+    let gram = r.transpose() * r;
+    let orthonormal =
+        (0..3).all(|c| (0..3).all(|k| (gram.col(c)[k] - if k == c { 1.0 } else { 0.0 }).abs() <= INVERSE_TOLERANCE));
+    orthonormal && r.determinant() > 0.0
 }
 
 /// Whether `post·pre` is the identity to [`INVERSE_TOLERANCE`].

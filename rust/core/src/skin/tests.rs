@@ -390,6 +390,26 @@ proptest! {
         }
     }
 
+    /// Rigid spaces (a rotation and a translation, as most objects have) fold into the dual
+    /// quaternions too (`spaces.rs`): DQS and Blend in mesh space equal them in armature space.
+    #[test]
+    fn kernels_match_the_reference_with_rigid_spaces((rig, positions, lists, mask, premat) in case()) {
+        let (_, rotation, translation) = premat.to_scale_rotation_translation();
+        let premat = Mat4::from_rotation_translation(rotation, translation);
+        let postmat = premat.inverse();
+        let inputs = reference::Inputs {
+            positions: &positions, lists: &lists, deform: &rig.deform, rest: &rig.rest,
+            premat, postmat, mask: Some(&mask),
+        };
+        let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(&mask) };
+        assert_close(&run(Method::Linear, &positions, &lists, &rig, &options), &reference::skin(&inputs, false), 2e-5)?;
+        assert_close(&run(Method::DualQuaternion, &positions, &lists, &rig, &options), &reference::skin(&inputs, true), 2e-5)?;
+        let amount: Vec<f32> = mask.iter().rev().copied().collect();
+        let blend = run(Method::Blend { amount: Some(&amount), factor: 0.8 }, &positions, &lists, &rig, &options);
+        let alpha: Vec<f32> = amount.iter().map(|a| a * 0.8).collect();
+        assert_close(&blend, &reference::blend(&inputs, &alpha), 2e-5)?;
+    }
+
     /// Spaces that are not each other's inverse are applied as they are, not folded into the
     /// bones (`spaces.rs`).
     #[test]

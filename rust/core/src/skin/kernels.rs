@@ -17,7 +17,11 @@ use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{Slot, LANES};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
+#[cfg(target_arch = "x86_64")]
+use super::pose::CorRigidBone;
 use super::pose::{DqBone, LinearBone};
+#[cfg(target_arch = "x86_64")]
+use super::spaces::fold_rigid_centers;
 use super::spaces::{fold_rigid_spaces, fold_spaces, Fold};
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
@@ -31,14 +35,23 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     // The bones' records with the spaces folded in, once per call (`spaces.rs`): LBS's, and
     // DQS's (and Blend's) for poses without scale.
     let (pose, premat, postmat) = (job.pose(), job.premat, job.postmat);
-    let rigid_dqs = matches!(job.kind(), Kind::DualQuaternion | Kind::Blend) && !pose.any_scaled();
+    let rigid_dqs = job.kind() != Kind::Linear && !pose.any_scaled();
     let dq = rigid_dqs.then(|| fold_rigid_spaces(pose, premat, postmat)).flatten();
+    #[cfg(target_arch = "x86_64")]
+    let cor_rigid = (job.kind() == Kind::CentersOfRotation && dq.is_some())
+        .then(|| fold_rigid_centers(pose, premat, postmat))
+        .flatten();
     let linear = match job.kind() {
         Kind::Linear => fold_spaces(pose, premat, postmat, linear_fold(simd)),
-        Kind::Blend if dq.is_some() => fold_spaces(pose, premat, postmat, Fold::Matrices),
+        Kind::Blend | Kind::CentersOfRotation if dq.is_some() => fold_spaces(pose, premat, postmat, Fold::Matrices),
         _ => None,
     };
-    let folded = Folded { linear: linear.as_deref(), dq: dq.as_deref() };
+    let folded = Folded {
+        linear: linear.as_deref(),
+        dq: dq.as_deref(),
+        #[cfg(target_arch = "x86_64")]
+        cor_rigid: cor_rigid.as_deref(),
+    };
     let task = |(i, chunk): (usize, &mut [[f32; 3]])| run_chunk(simd, job, folded, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
@@ -64,6 +77,20 @@ struct Folded<'a> {
     linear: Option<&'a [LinearBone]>,
     /// DQS's dual quaternions, for poses without scale.
     dq: Option<&'a [DqBone]>,
+    /// The hand-written AVX-512 centers' records, for poses without scale.
+    #[cfg(target_arch = "x86_64")]
+    cor_rigid: Option<&'a [CorRigidBone]>,
+}
+
+/// Whether the centers' own records were folded too (the hand-written AVX-512 centers read them).
+fn centers_folded(folded: Folded<'_>) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return folded.cor_rigid.is_some();
+    #[cfg(not(target_arch = "x86_64"))]
+    return {
+        let _ = folded;
+        true
+    };
 }
 
 /// The folded records the copy `simd`'s LBS reads: each bone's move for the hand-written
@@ -144,6 +171,7 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
         LINEAR => folded.linear.is_some(),
         DUAL_QUATERNION => !SCALED && folded.dq.is_some(),
         BLEND => !SCALED && folded.dq.is_some() && folded.linear.is_some(),
+        CENTERS => !SCALED && folded.dq.is_some() && folded.linear.is_some() && centers_folded(folded),
         _ => false,
     };
     let folded = if all_folded { folded } else { Folded::default() };
@@ -169,7 +197,7 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
         pivot_dual: &pose.pivot_dual,
         cor: &pose.cor,
         #[cfg(target_arch = "x86_64")]
-        cor_rigid: &pose.cor_rigid,
+        cor_rigid: folded.cor_rigid.unwrap_or(&pose.cor_rigid),
         #[cfg(target_arch = "x86_64")]
         linear_moves: moves,
         premat: premat.as_ref(),

@@ -1,16 +1,17 @@
 //! The modifier's spaces folded into LBS's bone matrices, once per call, so that the kernels map
 //! no point into armature space and back: each bone's matrix `postmat·Mᵢ·premat` (the one body
 //! and the baseline), or its move of a mesh-space point `Dᵢ = postmat·Mᵢ·premat − I` (AVX-512);
-//! and, for rigid spaces, each bone's dual quaternion likewise ([`fold_rigid_spaces`]).
+//! and, for rigid spaces, each bone's dual quaternion and centers record likewise
+//! ([`fold_rigid_spaces`], [`fold_rigid_centers`]).
 //!
 //! LBS is `co' = postmat·(p + f·Σ wᵢ·(Mᵢ·p − p))` with `p = premat·co` and `f = a/Σ wᵢ`; since
 //! every term is an affine map of `co`, that is `co + f·Σ wᵢ·Dᵢ·co` exactly when `postmat·premat`
 //! is the identity, as it is for Blender's spaces (`premat` is `postmat`'s inverse). Spaces that
 //! do not undo each other are not folded: the kernels apply them as they are.
 
-use glam::{Affine3A, DMat3, DMat4, Mat3A, Mat4, Quat, Vec3A, Vec4};
+use glam::{Affine3A, DMat3, DMat4, Mat3A, Mat4, Quat, Vec3, Vec3A, Vec4};
 
-use super::pose::{AffineRows, DqBone, LinearBone, Pose};
+use super::pose::{AffineRows, CorRigidBone, DqBone, LinearBone, Pose};
 
 /// How far `postmat·premat` may be from the identity, relative to the matrices' translations,
 /// for the spaces to count as each other's inverse: well above the single-precision inverse's
@@ -62,24 +63,46 @@ pub(crate) fn fold_spaces(
 /// choices compare rotations by dot products, which it keeps), so DQS in mesh space gives what
 /// DQS in armature space gives. For poses without scale (their `dq` table).
 pub(crate) fn fold_rigid_spaces(pose: &Pose, premat: Option<Mat4>, postmat: Option<Mat4>) -> Option<Vec<DqBone>> {
+    let records = rigid_folds(pose, premat, postmat)?
+        .map(|(q, t)| {
+            let dual = Quat::from_xyzw(0.5 * t.x, 0.5 * t.y, 0.5 * t.z, 0.0) * q;
+            DqBone { real: Vec4::from(q), dual: Vec4::from(dual) }
+        })
+        .collect();
+    Some(records)
+}
+
+/// [`fold_rigid_spaces`] for the hand-written AVX-512 centers' records (the rotation and half the
+/// translation): centers of rotation move with the points, so the same change of space passes
+/// through them.
+pub(crate) fn fold_rigid_centers(
+    pose: &Pose,
+    premat: Option<Mat4>,
+    postmat: Option<Mat4>,
+) -> Option<Vec<CorRigidBone>> {
+    let records = rigid_folds(pose, premat, postmat)?
+        .map(|(q, t)| CorRigidBone { real: Vec4::from(q), half_translation: (0.5 * t).extend(0.0) })
+        .collect();
+    Some(records)
+}
+
+/// Each bone's rotation `q_post·qᵢ·q_pre` and the translation of `postmat·Mᵢ·premat`, when the
+/// spaces are rigid and undo each other.
+fn rigid_folds<'a>(
+    pose: &'a Pose,
+    premat: Option<Mat4>,
+    postmat: Option<Mat4>,
+) -> Option<impl Iterator<Item = (Quat, Vec3)> + 'a> {
     let (pre, post) = (premat.unwrap_or(Mat4::IDENTITY), postmat.unwrap_or(Mat4::IDENTITY));
     if !is_rigid(&pre.as_dmat4()) || !undo_each_other(&pre.as_dmat4(), &post.as_dmat4()) {
         return None;
     }
     let (pre, post) = (Affine3A::from_mat4(pre), Affine3A::from_mat4(post));
     let (q_pre, q_post) = (Quat::from_mat3a(&pre.matrix3).normalize(), Quat::from_mat3a(&post.matrix3).normalize());
-    let records = pose
-        .dq
-        .iter()
-        .zip(&pose.linear)
-        .map(|(bone, matrix)| {
-            let q = q_post * Quat::from_vec4(bone.real) * q_pre;
-            let t = (post * affine_of(matrix) * pre).translation;
-            let dual = Quat::from_xyzw(0.5 * t.x, 0.5 * t.y, 0.5 * t.z, 0.0) * q;
-            DqBone { real: Vec4::from(q), dual: Vec4::from(dual) }
-        })
-        .collect();
-    Some(records)
+    Some(pose.dq.iter().zip(&pose.linear).map(move |(bone, matrix)| {
+        let q = q_post * Quat::from_vec4(bone.real) * q_pre;
+        (q, Vec3::from((post * affine_of(matrix) * pre).translation))
+    }))
 }
 
 /// A bone's LBS matrix as an affine transform.

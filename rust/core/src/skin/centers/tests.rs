@@ -456,6 +456,22 @@ fn assert_close(got: &[[f32; 3]], want: &[DVec3], tol: f64) -> Result<(), TestCa
 proptest! {
     #![proptest_config(ProptestConfig { cases: 150, ..ProptestConfig::default() })]
 
+    /// Rigid spaces on a pose without scale fold into the bones' records (`spaces.rs`): the
+    /// kernels then work in mesh space, and must give what they give in armature space.
+    #[test]
+    fn kernel_matches_the_reference_with_rigid_spaces(((rest, deform), positions, centers, lists, mask, premat) in case(false)) {
+        let (_, rotation, translation) = premat.to_scale_rotation_translation();
+        let premat = Mat4::from_rotation_translation(rotation, translation);
+        let influences = Influences::from_lists(&lists, rest.len()).unwrap();
+        let pose = Pose::new(&deform, Some(&rest)).unwrap();
+        let postmat = premat.inverse();
+        let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(&mask) };
+        let method = Method::CentersOfRotation { centers: &centers };
+        let got = skin_all(method, &positions, &influences, &pose, &options);
+        let want = reference(&positions, &centers, &lists, &deform, &pose, premat, postmat, Some(&mask));
+        assert_close(&got, &want, 5e-5)?;
+    }
+
     #[test]
     fn kernel_matches_the_reference(((rest, deform), positions, centers, lists, mask, premat) in case(true)) {
         let influences = Influences::from_lists(&lists, rest.len()).unwrap();

@@ -364,24 +364,35 @@ fn assert_close(got: &[[f32; 3]], want: &[DVec3], tol: f64) -> Result<(), TestCa
     Ok(())
 }
 
+/// LBS, DQS and Blend with the spaces `premat`, `postmat` and the mask against the float64
+/// reference; returns Blend's result.
+fn every_method_matches_the_reference(
+    rig: &Rig,
+    positions: &[[f32; 3]],
+    lists: &[Vec<(u32, f32)>],
+    mask: &[f32],
+    premat: Mat4,
+    postmat: Mat4,
+) -> Result<Vec<[f32; 3]>, TestCaseError> {
+    let inputs =
+        reference::Inputs { positions, lists, deform: &rig.deform, rest: &rig.rest, premat, postmat, mask: Some(mask) };
+    let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(mask) };
+    // The deformations reach magnitudes of ~50 units; f32 round-off is ~1e-6 of that.
+    assert_close(&run(Method::Linear, positions, lists, rig, &options), &reference::skin(&inputs, false), 2e-5)?;
+    assert_close(&run(Method::DualQuaternion, positions, lists, rig, &options), &reference::skin(&inputs, true), 2e-5)?;
+    let amount: Vec<f32> = mask.iter().rev().copied().collect();
+    let blend = run(Method::Blend { amount: Some(&amount), factor: 0.8 }, positions, lists, rig, &options);
+    let alpha: Vec<f32> = amount.iter().map(|a| a * 0.8).collect();
+    assert_close(&blend, &reference::blend(&inputs, &alpha), 2e-5)?;
+    Ok(blend)
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
 
     #[test]
     fn kernels_match_the_reference((rig, positions, lists, mask, premat) in case()) {
-        let postmat = premat.inverse();
-        let inputs = reference::Inputs {
-            positions: &positions, lists: &lists, deform: &rig.deform, rest: &rig.rest,
-            premat, postmat, mask: Some(&mask),
-        };
-        let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(&mask) };
-        // The deformations reach magnitudes of ~50 units; f32 round-off is ~1e-6 of that.
-        assert_close(&run(Method::Linear, &positions, &lists, &rig, &options), &reference::skin(&inputs, false), 2e-5)?;
-        assert_close(&run(Method::DualQuaternion, &positions, &lists, &rig, &options), &reference::skin(&inputs, true), 2e-5)?;
-        let amount: Vec<f32> = mask.iter().rev().copied().collect();
-        let blend = run(Method::Blend { amount: Some(&amount), factor: 0.8 }, &positions, &lists, &rig, &options);
-        let alpha: Vec<f32> = amount.iter().map(|a| a * 0.8).collect();
-        assert_close(&blend, &reference::blend(&inputs, &alpha), 2e-5)?;
+        let blend = every_method_matches_the_reference(&rig, &positions, &lists, &mask, premat, premat.inverse())?;
         // Masked-out vertices are copied bit for bit.
         for (v, m) in mask.iter().enumerate() {
             if *m == 0.0 {
@@ -396,18 +407,7 @@ proptest! {
     fn kernels_match_the_reference_with_rigid_spaces((rig, positions, lists, mask, premat) in case()) {
         let (_, rotation, translation) = premat.to_scale_rotation_translation();
         let premat = Mat4::from_rotation_translation(rotation, translation);
-        let postmat = premat.inverse();
-        let inputs = reference::Inputs {
-            positions: &positions, lists: &lists, deform: &rig.deform, rest: &rig.rest,
-            premat, postmat, mask: Some(&mask),
-        };
-        let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(&mask) };
-        assert_close(&run(Method::Linear, &positions, &lists, &rig, &options), &reference::skin(&inputs, false), 2e-5)?;
-        assert_close(&run(Method::DualQuaternion, &positions, &lists, &rig, &options), &reference::skin(&inputs, true), 2e-5)?;
-        let amount: Vec<f32> = mask.iter().rev().copied().collect();
-        let blend = run(Method::Blend { amount: Some(&amount), factor: 0.8 }, &positions, &lists, &rig, &options);
-        let alpha: Vec<f32> = amount.iter().map(|a| a * 0.8).collect();
-        assert_close(&blend, &reference::blend(&inputs, &alpha), 2e-5)?;
+        every_method_matches_the_reference(&rig, &positions, &lists, &mask, premat, premat.inverse())?;
     }
 
     /// Spaces that are not each other's inverse are applied as they are, not folded into the
@@ -415,13 +415,7 @@ proptest! {
     #[test]
     fn kernels_match_the_reference_with_spaces_that_do_not_undo_each_other((rig, positions, lists, mask, premat) in case()) {
         let postmat = Mat4::from_scale_rotation_translation(Vec3::splat(1.5), Quat::from_rotation_y(0.4), Vec3::new(0.3, -0.2, 1.0)) * premat.inverse();
-        let inputs = reference::Inputs {
-            positions: &positions, lists: &lists, deform: &rig.deform, rest: &rig.rest,
-            premat, postmat, mask: Some(&mask),
-        };
-        let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(&mask) };
-        assert_close(&run(Method::Linear, &positions, &lists, &rig, &options), &reference::skin(&inputs, false), 2e-5)?;
-        assert_close(&run(Method::DualQuaternion, &positions, &lists, &rig, &options), &reference::skin(&inputs, true), 2e-5)?;
+        every_method_matches_the_reference(&rig, &positions, &lists, &mask, premat, postmat)?;
     }
 
     #[test]

@@ -453,6 +453,28 @@ fn assert_close(got: &[[f32; 3]], want: &[DVec3], tol: f64) -> Result<(), TestCa
     Ok(())
 }
 
+/// The kernels against the float64 reference with the spaces `premat` and its inverse and the
+/// mask; returns the kernels' result.
+fn matches_the_reference(
+    rest: &[Mat4],
+    deform: &[Mat4],
+    positions: &[[f32; 3]],
+    centers: &[[f32; 3]],
+    lists: &[Vec<(u32, f32)>],
+    mask: &[f32],
+    premat: Mat4,
+) -> Result<Vec<[f32; 3]>, TestCaseError> {
+    let influences = Influences::from_lists(lists, rest.len()).unwrap();
+    let pose = Pose::new(deform, Some(rest)).unwrap();
+    let postmat = premat.inverse();
+    let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(mask) };
+    let got = skin_all(Method::CentersOfRotation { centers }, positions, &influences, &pose, &options);
+    let want = reference(positions, centers, lists, deform, &pose, premat, postmat, Some(mask));
+    // Magnitudes reach ~100 units (scaled bones, far centers); f32 round-off is ~1e-6 of that.
+    assert_close(&got, &want, 5e-5)?;
+    Ok(got)
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 150, ..ProptestConfig::default() })]
 
@@ -462,32 +484,20 @@ proptest! {
     fn kernel_matches_the_reference_with_rigid_spaces(((rest, deform), positions, centers, lists, mask, premat) in case(false)) {
         let (_, rotation, translation) = premat.to_scale_rotation_translation();
         let premat = Mat4::from_rotation_translation(rotation, translation);
-        let influences = Influences::from_lists(&lists, rest.len()).unwrap();
-        let pose = Pose::new(&deform, Some(&rest)).unwrap();
-        let postmat = premat.inverse();
-        let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(&mask) };
-        let method = Method::CentersOfRotation { centers: &centers };
-        let got = skin_all(method, &positions, &influences, &pose, &options);
-        let want = reference(&positions, &centers, &lists, &deform, &pose, premat, postmat, Some(&mask));
-        assert_close(&got, &want, 5e-5)?;
+        matches_the_reference(&rest, &deform, &positions, &centers, &lists, &mask, premat)?;
     }
 
     #[test]
     fn kernel_matches_the_reference(((rest, deform), positions, centers, lists, mask, premat) in case(true)) {
-        let influences = Influences::from_lists(&lists, rest.len()).unwrap();
-        let pose = Pose::new(&deform, Some(&rest)).unwrap();
-        let postmat = premat.inverse();
-        let options = SkinOptions { premat: Some(premat), postmat: Some(postmat), mask: Some(&mask) };
-        let method = Method::CentersOfRotation { centers: &centers };
-        let got = skin_all(method, &positions, &influences, &pose, &options);
-        let want = reference(&positions, &centers, &lists, &deform, &pose, premat, postmat, Some(&mask));
-        // Magnitudes reach ~100 units (scaled bones, far centers); f32 round-off is ~1e-6 of that.
-        assert_close(&got, &want, 5e-5)?;
+        let got = matches_the_reference(&rest, &deform, &positions, &centers, &lists, &mask, premat)?;
         for (v, m) in mask.iter().enumerate() {
             if *m == 0.0 {
                 prop_assert_eq!(got[v], positions[v]);
             }
         }
+        let influences = Influences::from_lists(&lists, rest.len()).unwrap();
+        let pose = Pose::new(&deform, Some(&rest)).unwrap();
+        let method = Method::CentersOfRotation { centers: &centers };
         let plain = skin_all(method, &positions, &influences, &pose, &SkinOptions::default());
         let want = reference(&positions, &centers, &lists, &deform, &pose, Mat4::IDENTITY, Mat4::IDENTITY, None);
         assert_close(&plain, &want, 5e-5)?;

@@ -33,7 +33,7 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     assert_eq!(out.len(), job.positions.len(), "one output point per vertex");
     assert!(job.kind() != Kind::CentersOfRotation || job.centers.is_some(), "centers of rotation need the centers");
     // The bones' records with the spaces folded in, once per call (`spaces.rs`): LBS's, and
-    // DQS's (and Blend's) for poses without scale.
+    // for poses without scale DQS's, Blend's and the centers'.
     let (pose, premat, postmat) = (job.pose(), job.premat, job.postmat);
     let rigid_dqs = job.kind() != Kind::Linear && !pose.any_scaled();
     let dq = rigid_dqs.then(|| fold_rigid_spaces(pose, premat, postmat)).flatten();
@@ -213,7 +213,8 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
         if ISA == ISA_BASELINE && KIND == LINEAR {
             // The baseline's hand-written LBS, where it measures faster than the one body.
             // SAFETY: the job's influences and pose fit together (`Job::new`), so every bone
-            // index of the batch's slots indexes the pose's `linear` table.
+            // index of the batch's slots indexes `linear` (the pose's table, or its folded copy
+            // with one record per bone).
             unsafe { super::baseline::linear_batch(job, linear, premat.as_ref(), postmat.as_ref(), first, slots, out) };
             continue;
         }

@@ -1,7 +1,7 @@
 //! Per-bone data computed once per frame from the deform and rest matrices, so that the
 //! per-vertex kernels only load, weigh and add.
 
-use glam::{Mat3, Mat4, Quat, Vec3, Vec4};
+use glam::{Affine3A, Mat3, Mat4, Quat, Vec3, Vec3A, Vec4};
 
 use super::SkinError;
 use crate::dual_quat::{is_orthonormal, rotation_from_mat3};
@@ -17,6 +17,17 @@ pub(crate) struct AffineRows {
 impl AffineRows {
     pub(crate) fn from_mat4(m: &Mat4) -> Self {
         Self { rows: [m.row(0), m.row(1), m.row(2)] }
+    }
+
+    /// The rows back as an affine transform.
+    pub(crate) fn to_affine(self) -> Affine3A {
+        let [r0, r1, r2] = self.rows;
+        Affine3A::from_cols(
+            Vec3A::new(r0.x, r1.x, r2.x),
+            Vec3A::new(r0.y, r1.y, r2.y),
+            Vec3A::new(r0.z, r1.z, r2.z),
+            Vec3A::new(r0.w, r1.w, r2.w),
+        )
     }
 
     #[cfg(test)]

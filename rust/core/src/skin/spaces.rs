@@ -9,7 +9,7 @@
 //! is the identity, as it is for Blender's spaces (`premat` is `postmat`'s inverse). Spaces that
 //! do not undo each other are not folded: the kernels apply them as they are.
 
-use glam::{Affine3A, DMat3, DMat4, Mat3A, Mat4, Quat, Vec3, Vec3A, Vec4};
+use glam::{Affine3A, DMat3, DMat4, Mat3A, Mat4, Quat, Vec3, Vec4};
 
 use super::pose::{AffineRows, CorRigidBone, DqBone, LinearBone, Pose};
 
@@ -46,7 +46,7 @@ pub(crate) fn fold_spaces(
         .linear
         .iter()
         .map(|bone| {
-            let mut d = post * affine_of(bone) * pre;
+            let mut d = post * bone.matrix.to_affine() * pre;
             if fold == Fold::Moves {
                 d.matrix3 -= Mat3A::IDENTITY;
             }
@@ -101,19 +101,8 @@ fn rigid_folds<'a>(
     let (q_pre, q_post) = (Quat::from_mat3a(&pre.matrix3).normalize(), Quat::from_mat3a(&post.matrix3).normalize());
     Some(pose.dq.iter().zip(&pose.linear).map(move |(bone, matrix)| {
         let q = q_post * Quat::from_vec4(bone.real) * q_pre;
-        (q, Vec3::from((post * affine_of(matrix) * pre).translation))
+        (q, Vec3::from((post * matrix.matrix.to_affine() * pre).translation))
     }))
-}
-
-/// A bone's LBS matrix as an affine transform.
-fn affine_of(bone: &LinearBone) -> Affine3A {
-    let [r0, r1, r2] = bone.matrix.rows;
-    Affine3A::from_cols(
-        Vec3A::new(r0.x, r1.x, r2.x),
-        Vec3A::new(r0.y, r1.y, r2.y),
-        Vec3A::new(r0.z, r1.z, r2.z),
-        Vec3A::new(r0.w, r1.w, r2.w),
-    )
 }
 
 /// Whether `m`'s linear part is a rotation (orthonormal columns, no reflection) to

@@ -1,8 +1,9 @@
 //! The hand-written AVX-512 kernels kept where they measured faster than the one body of
 //! `batch.rs` (docs/performance.md): LBS, whose sixteen lanes each sum a whole 16-float record
-//! per influence, and centers of rotation for poses without scale, which read one table of
-//! rotations and half translations (`CorRigidBone`) where the one body reads two. Arithmetic as
-//! in `batch.rs`.
+//! per influence and apply it in mesh space where the lane lies (from the bones' moves of
+//! `spaces.rs`), and centers of rotation for poses without scale, which read one table of
+//! rotations and half translations (`CorRigidBone`) where the one body reads two, with the one
+//! body's arithmetic.
 
 use core::arch::x86_64::*;
 

@@ -4,6 +4,9 @@ the GIL."""
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
 import sys
 import threading
 import time
@@ -666,3 +669,92 @@ def test_gil_is_released_during_skin():
         f"the main thread ran during only {np.mean(coverage):.0%} of the first halves of the "
         f"skin() calls (per call {coverage}, durations {durations}, iterations {iterations})"
     )
+
+
+# ---------------------------------------------------------------------------------------------
+# Kernel copies
+
+# Skins random meshes with every method, rigid and scaled rigs, each kind of spaces, on the copy
+# DQSKIN_SIMD names, and prints a digest of each result's bytes.
+COPY_DIGESTS = r"""
+import hashlib, json
+import dqskin, numpy as np
+
+def rotations(rng, n):
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], 1)
+
+def affine(rng, n, scale):
+    m = np.tile(np.eye(4), (n, 1, 1))
+    m[:, :3, :3] = rotations(rng, n) * scale
+    m[:, :3, 3] = rng.normal(size=(n, 3))
+    return m.astype(np.float32)
+
+digests = {}
+for seed in range(3):
+    rng = np.random.default_rng(seed)
+    vertices, bones = 4099, 24
+    positions = rng.normal(size=(vertices, 3)).astype(np.float32)
+    slots = rng.integers(0, bones, size=(vertices, 6))
+    weights = rng.random((vertices, 6)).astype(np.float32)
+    weights[rng.random((vertices, 6)) < 0.3] = 0.0
+    influences = dqskin.Influences.from_dense(slots, weights, bones)
+    rest = affine(rng, bones, 1.0)
+    obj = affine(rng, 1, 1.0)[0]
+    scaled_obj = affine(rng, 1, 1.7)[0]
+    spaces = {
+        "none": {},
+        "rigid": dict(premat=np.linalg.inv(obj), postmat=obj),
+        "scaled": dict(premat=np.linalg.inv(scaled_obj), postmat=scaled_obj),
+        "other": dict(premat=np.linalg.inv(obj), postmat=scaled_obj, mask=rng.random(vertices).astype(np.float32)),
+    }
+    extra = {
+        "linear": {},
+        "dual_quaternion": {},
+        "blend": dict(blend=rng.random(vertices).astype(np.float32), blend_factor=0.7),
+        "centers_of_rotation": dict(centers=rng.normal(size=(vertices, 3)).astype(np.float32)),
+    }
+    for rig in ("rigid", "scaled"):
+        deform = affine(rng, bones, 1.0 if rig == "rigid" else rng.uniform(0.6, 1.4, size=(bones, 1, 3)))
+        for method, more in extra.items():
+            for name, space in spaces.items():
+                out = dqskin.skin(positions, influences, deform, rest, method=method, **more, **space)
+                digests[f"{seed} {rig} {method} {name}"] = hashlib.sha256(out.tobytes()).hexdigest()
+print(json.dumps(digests))
+"""
+
+
+def fused_copies():
+    """The kernel copies with fused multiply-adds this CPU runs (x86-64 Linux: from its flags)."""
+    try:
+        flags = next(line for line in open("/proc/cpuinfo") if line.startswith("flags")).split()
+    except (OSError, StopIteration):
+        return []
+    if "avx2" not in flags or "fma" not in flags:
+        return []
+    return ["avx2", "avx512"] if "avx512f" in flags else ["avx2"]
+
+
+@pytest.mark.slow
+def test_every_copy_with_fused_multiply_adds_gives_the_same_bytes():
+    # Which copy runs is chosen by timing in each process: a result must not depend on it (a
+    # farm's chunks, baked in separate processes or on other CPUs, are merged byte for byte).
+    copies = fused_copies()
+    if len(copies) < 2:
+        pytest.skip(f"one copy with fused multiply-adds here ({copies})")
+    digests = {}
+    for simd in copies:
+        env = {**os.environ, "DQSKIN_SIMD": simd}
+        run = subprocess.run([sys.executable, "-c", COPY_DIGESTS], env=env, capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr
+        digests[simd] = json.loads(run.stdout)
+    first, *others = copies
+    for simd in others:
+        differ = [k for k, d in digests[first].items() if digests[simd][k] != d]
+        assert not differ, f"{simd} and {first} differ on {len(differ)} of {len(digests[first])}: {differ[:8]}"

@@ -69,6 +69,7 @@ impl VectorOps for Avx2 {
         div(a, b) -> __m256 = _mm256_div_ps;
         mul_add(a, b, c) -> __m256 = _mm256_fmadd_ps;
         neg_mul_add(a, b, c) -> __m256 = _mm256_fnmadd_ps;
+        mul_sub(a, b, c) -> __m256 = _mm256_fmsub_ps;
         and(a, b) -> __m256 = _mm256_and_ps;
     }
 

@@ -177,6 +177,7 @@ impl VectorOps for Avx512 {
         div(a, b) = _mm512_div_ps;
         mul_add(a, b, c) = _mm512_fmadd_ps;
         neg_mul_add(a, b, c) = _mm512_fnmadd_ps;
+        mul_sub(a, b, c) = _mm512_fmsub_ps;
     }
 
     #[inline(always)]

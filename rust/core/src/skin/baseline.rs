@@ -84,6 +84,11 @@ impl VectorOps for Baseline {
     }
 
     #[inline(always)]
+    fn mul_sub(self, a: F4, b: F4, c: F4) -> F4 {
+        each(|l| a[l] * b[l] - c[l])
+    }
+
+    #[inline(always)]
     fn lt(self, a: F4, b: F4) -> Mask4 {
         mask(|l| a[l] < b[l])
     }

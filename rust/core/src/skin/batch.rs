@@ -9,14 +9,19 @@
 //!    centers of rotation) is a serial chain per vertex, from transposed rotations. Rigid DQS
 //!    sums its dual parts in the same loop (both halves of a record from one index); elsewhere
 //!    the signed weights are kept where a later sum needs them.
-//! 2. **Linear sums.** Everything else is linear in the bones' per-frame records: `Σ wᵢ·Mᵢ`
-//!    (LBS, the centers' anchor), `Σ ±wᵢ·Pᵢ` (the dual parts of bones with scale, see
+//! 2. **Linear sums.** Everything else is linear in the bones' per-frame records: `Σ wᵢ·Dᵢ` or
+//!    `Σ wᵢ·Mᵢ` (LBS's moves or matrices), `Σ ±wᵢ·Pᵢ` (the dual parts of bones with scale, see
 //!    `PivotDualBone`), `Σ wᵢ·Sᵢ` (the scale/shear parts). Each is a sum of record windows that an
 //!    instruction set may accumulate per lane and transpose once per vertex
-//!    ([`VectorOps::window_sums`]), instead of transposing every influence's record.
+//!    ([`VectorOps::window_sums`]), instead of transposing every influence's record. (The rigid
+//!    centers' anchor `Σ wᵢ·(Mᵢ·c − c)` is not linear in its records: it is summed with the
+//!    signs, [`rigid_center_sums`].)
 //! 3. **Finish**: apply the sums to the point (and its center) without building a rotation
 //!    matrix (`p + u·(2a/|q|²)`, see [`dual_quaternion`]), the strength, `postmat`, the untouched
 //!    lanes, store.
+//!
+//! Every copy with fused multiply-adds computes each method in the same operations in the same
+//! order (the hand-written kernels of `avx512/kept.rs` too), so they give the same bits.
 
 use core::mem::offset_of;
 
@@ -24,9 +29,7 @@ use glam::Affine3A;
 
 use super::influences::{Slot, LANES};
 use super::job::{BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
-#[cfg(target_arch = "x86_64")]
-use super::pose::CorRigidBone;
-use super::pose::{CorBone, DqBone, LinearBone, PivotBone, PivotDualBone};
+use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone, PivotDualBone};
 use super::MIN_TOTAL_WEIGHT;
 
 /// The vector operations of one SIMD instruction set, `WIDTH` f32 lanes (one vertex per lane).
@@ -56,6 +59,8 @@ pub(super) trait VectorOps: Copy {
     fn mul_add(self, a: Self::F, b: Self::F, c: Self::F) -> Self::F;
     /// `c − a·b`, fused.
     fn neg_mul_add(self, a: Self::F, b: Self::F, c: Self::F) -> Self::F;
+    /// `a·b − c`, fused.
+    fn mul_sub(self, a: Self::F, b: Self::F, c: Self::F) -> Self::F;
     fn lt(self, a: Self::F, b: Self::F) -> Self::Mask;
     fn gt(self, a: Self::F, b: Self::F) -> Self::Mask;
     fn eq(self, a: Self::F, b: Self::F) -> Self::Mask;
@@ -138,12 +143,9 @@ pub(super) struct BatchJob<'a> {
     pub pivot: &'a [PivotBone],
     pub pivot_dual: &'a [PivotDualBone],
     pub cor: &'a [CorBone],
-    /// Read by the hand-written AVX-512 centers only.
-    #[cfg(target_arch = "x86_64")]
     pub cor_rigid: &'a [CorRigidBone],
-    /// Each bone's move in mesh space (`spaces.rs`), when the job's spaces fold; read by the
-    /// hand-written AVX-512 LBS only (without them LBS runs the one body).
-    #[cfg(target_arch = "x86_64")]
+    /// Each bone's move in mesh space (`spaces.rs`), when the job's spaces fold: LBS then reads
+    /// these rather than `linear`, and has no `premat` or `postmat`.
     pub linear_moves: Option<&'a [LinearBone]>,
     pub premat: Option<&'a Affine3A>,
     pub postmat: Option<&'a Affine3A>,
@@ -254,16 +256,13 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
             let u = rotation_terms(v, &real, offset);
             centers_scaled(v, sum, u, real, contrib, p, a)
         } else {
-            // SAFETY: the caller's contract.
-            let (real, contrib) = unsafe { sign_pass(v, slots, job.dq, DQ_REAL, lane0, None) };
-            // SAFETY: the caller's contract.
-            let matrix = unsafe { v.window_sums(slots, None, lane0, job.linear, window::<3>(0)) };
             let c = armature_points(v, job, &centers[lanes.clone()]);
-            let anchor = each3(|k| affine_row(v, &matrix[k], &c));
+            // SAFETY: the caller's contract.
+            let (real, anchor, contrib) = unsafe { rigid_center_sums(v, slots, job.cor_rigid, lane0, &c) };
             let p = armature_points(v, job, &batch.positions[lanes.clone()]);
             let d = each3(|k| v.sub(p[k], c[k]));
             let u = rotation_terms(v, &real, d);
-            centers_rigid(v, anchor, u, real, contrib, p, c, a)
+            centers_rigid(v, anchor, u, real, contrib, p, a)
         }
     } else {
         // DQS's sums give the points and the total weight to LBS in Blend.
@@ -286,7 +285,16 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
             // with neither sum.
             (armature_points(v, job, &batch.positions[lanes.clone()]), None)
         };
-        let lbs = if KIND == LINEAR || KIND == BLEND {
+        let lbs = if let (LINEAR, Some(moves)) = (KIND, job.linear_moves) {
+            // SAFETY: the caller's contract (the moves are one per bone, as `linear`).
+            let sums = unsafe { v.window_sums(slots, None, lane0, moves, window::<3>(0)) };
+            let mut contrib = v.splat(0.0);
+            for slot in slots {
+                contrib = v.add(contrib, v.load(&slot.weights[lanes.clone()]));
+            }
+            debug_assert!(job.premat.is_none() && job.postmat.is_none(), "moves are in mesh space");
+            linear_in_mesh_space(v, &sums, contrib, v.load_points(&batch.positions[lanes.clone()]), a)
+        } else if KIND == LINEAR || KIND == BLEND {
             // SAFETY: the caller's contract.
             let matrix = unsafe { v.window_sums(slots, None, lane0, job.linear, window::<3>(0)) };
             let (p, contrib) = match summed {
@@ -383,6 +391,62 @@ unsafe fn sign_pass<V: VectorOps, T>(
     (real, contrib)
 }
 
+/// The sums of skinning with centers of rotation for rigid bones, of one part's lanes (from
+/// `lane0`) with centers `c`: the sign-aligned rotations, the anchor `Σ wᵢ·(Mᵢ·c − c)` (each
+/// bone's move of the center from its rotation and half translation, [`rotation_offset`]) and
+/// the total weight, from one table. The hand-written AVX-512 centers (`avx512/kept.rs`) compute
+/// the same, operation for operation.
+///
+/// # Safety
+/// Every bone index of the slots indexes `cor_rigid`.
+#[inline(always)]
+unsafe fn rigid_center_sums<V: VectorOps>(
+    v: V,
+    slots: &[Slot],
+    cor_rigid: &[CorRigidBone],
+    lane0: usize,
+    c: &[V::F; 3],
+) -> ([V::F; 4], [V::F; 3], V::F) {
+    let zero = v.splat(0.0);
+    let (mut real, mut anchor, mut contrib) = ([zero; 4], [zero; 3], zero);
+    for (k, slot) in slots.iter().enumerate() {
+        // SAFETY: the caller's contract; a CorRigidBone is the rotation at floats 0–3 and half
+        // the translation at 4–6 (and a zero).
+        let (q, h) = unsafe {
+            (v.load_columns4(cor_rigid, &slot.bones[lane0..], 0), v.load_columns4(cor_rigid, &slot.bones[lane0..], 4))
+        };
+        let w = v.load(&slot.weights[lane0..]);
+        let moved = rotation_offset(v, &q, &h, c);
+        let w2 = v.add(w, w);
+        for i in 0..3 {
+            anchor[i] = v.mul_add(w2, moved[i], anchor[i]);
+        }
+        let ws = if k == 0 { w } else { signed_weight(v, &q, &real, w) };
+        for i in 0..4 {
+            real[i] = v.mul_add(q[i], ws, real[i]);
+        }
+        contrib = v.add(contrib, w);
+    }
+    (real, anchor, contrib)
+}
+
+/// `½·(R·c + t − c)` for the unit quaternion `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v × a
+/// + h)` with `a = v × c`: a rigid bone's move of the center `c`.
+#[inline(always)]
+fn rotation_offset<V: VectorOps>(v: V, q: &[V::F; 4], h: &[V::F; 4], c: &[V::F; 3]) -> [V::F; 3] {
+    let a = [
+        v.mul_sub(q[1], c[2], v.mul(q[2], c[1])),
+        v.mul_sub(q[2], c[0], v.mul(q[0], c[2])),
+        v.mul_sub(q[0], c[1], v.mul(q[1], c[0])),
+    ];
+    let b = [
+        v.mul_sub(q[1], a[2], v.mul_sub(q[2], a[1], h[0])),
+        v.mul_sub(q[2], a[0], v.mul_sub(q[0], a[2], h[1])),
+        v.mul_sub(q[0], a[1], v.mul_sub(q[1], a[0], h[2])),
+    ];
+    each3(|k| v.mul_add(q[3], a[k], b[k]))
+}
+
 /// Rigid DQS sums of one part's lanes (from `lane0`): the sign-aligned rotations and dual parts
 /// of the influences' `DqBone`s, summed as their signs are chosen (both halves of a record from
 /// one index), and the total weight.
@@ -451,6 +515,28 @@ fn linear<V: VectorOps>(v: V, matrix: &[[V::F; 4]; 3], contrib: V::F, p: [V::F; 
     each3(|r| v.mul_add(v.neg_mul_add(p[r], contrib, affine_row(v, &matrix[r], &p)), f, p[r]))
 }
 
+/// LBS in mesh space of one part's points `co` with strength `a`, from the summed moves
+/// `Σ wᵢ·Dᵢ` (`spaces.rs`): `co + (a/contrib)·Σ wᵢ·Dᵢ·co`, lanes whose factor is 0 left
+/// bit-identical. The hand-written AVX-512 LBS (`avx512/kept.rs`) computes the same, operation
+/// for operation (each row as `(d₀·x + d₂·z) + (d₁·y + d₃)`, the order its block sums add in), so
+/// that every copy with fused multiply-adds gives the same bits.
+#[inline(always)]
+fn linear_in_mesh_space<V: VectorOps>(
+    v: V,
+    moves: &[[V::F; 4]; 3],
+    contrib: V::F,
+    co: [V::F; 3],
+    a: V::F,
+) -> [V::F; 3] {
+    let f = v.select(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.div(a, contrib), v.splat(0.0));
+    let still = v.eq(f, v.splat(0.0));
+    each3(|r| {
+        let [d0, d1, d2, d3] = moves[r];
+        let offset = v.add(v.add(v.mul(d0, co[0]), v.mul(d2, co[2])), v.add(v.mul(d1, co[1]), d3));
+        v.select(still, co[r], v.mul_add(f, offset, co[r]))
+    })
+}
+
 /// `|q|²` of a quaternion sum.
 #[inline(always)]
 fn length_squared<V: VectorOps>(v: V, [x, y, z, w]: &[V::F; 4]) -> V::F {
@@ -515,12 +601,11 @@ fn dual_quaternion<V: VectorOps>(
     each3(|k| v.mul_add(u[k], g, p[k]))
 }
 
-/// Skinning with centers of rotation and rigid bones, of one part's points `p` with centers `c`
-/// (both in armature space), from `anchor = Σ wᵢ·Mᵢ·c`, `u` ([`rotation_terms`] of `d = p − c`)
-/// and the quaternion sum: `co' = anchor/contrib + R·d = anchor/contrib − c + p + 2u/|q|²`, then
-/// the strength: `p + (anchor − contrib·c)·(a/contrib) + u·(2a/|q|²)`; `p` where
-/// `contrib ≤ 0.0001` or the sum is zero. One division serves both factors.
-#[allow(clippy::too_many_arguments)] // the sums and the part's points, one by one
+/// Skinning with centers of rotation and rigid bones, of one part's points `p` (armature space),
+/// from `anchor = Σ wᵢ·(Mᵢ·c − c)` for its centers `c`, `u` ([`rotation_terms`] of `d = p − c`)
+/// and the quaternion sum: `co' = Σ wᵢ·Mᵢ·c/contrib + R·d = anchor/contrib + p + 2u/|q|²`, then
+/// the strength: `p + anchor·(a/contrib) + u·(2a/|q|²)`; `p` where `contrib ≤ 0.0001` or the
+/// sum is zero. One division serves both factors.
 #[inline(always)]
 fn centers_rigid<V: VectorOps>(
     v: V,
@@ -529,7 +614,6 @@ fn centers_rigid<V: VectorOps>(
     real: [V::F; 4],
     contrib: V::F,
     p: [V::F; 3],
-    c: [V::F; 3],
     a: V::F,
 ) -> [V::F; 3] {
     let len2 = length_squared(v, &real);
@@ -538,7 +622,7 @@ fn centers_rigid<V: VectorOps>(
     let inv = v.select(valid, v.div(a, v.mul(len2, contrib)), v.splat(0.0));
     let fa = v.mul(inv, len2);
     let fr = v.mul(v.add(inv, inv), contrib);
-    each3(|k| v.mul_add(v.neg_mul_add(c[k], contrib, anchor[k]), fa, v.mul_add(u[k], fr, p[k])))
+    each3(|k| v.mul_add(anchor[k], fa, v.mul_add(u[k], fr, p[k])))
 }
 
 /// Skinning with centers of rotation and bones with scale, of one part's points `p`, from

@@ -1,8 +1,8 @@
 //! Which compiled copy of the kernels runs by default: the fastest on this CPU, measured rather
 //! than guessed from the vendor or from the widest instruction set (a wider copy is not always
-//! faster: see docs/performance.md). Each kernel variant is timed once per process, on first use,
-//! on a small mesh that stays in the caches, every available copy in turn; the result is kept for
-//! the life of the process. [`set_kernel_copy`] (the API) and `DQSKIN_SIMD` (the environment)
+//! faster: see docs/performance.md), among copies that give the same bits ([`candidates`]). Each
+//! kernel variant is timed once per process, on first use, on a small mesh that stays in the
+//! caches, every candidate in turn; the result is kept for the life of the process. [`set_kernel_copy`] (the API) and `DQSKIN_SIMD` (the environment)
 //! override it, in that order.
 
 use std::sync::{OnceLock, RwLock};
@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use glam::{Mat4, Quat, Vec3};
 
-use super::isa::Simd;
+use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind};
 use super::{kernels, Influences, Pose, SkinError};
 
@@ -111,7 +111,7 @@ pub(crate) fn copy_for(variant: Variant) -> Simd {
 pub(crate) fn measured(variant: Variant) -> Simd {
     static CHOSEN: [OnceLock<Simd>; 7] = [const { OnceLock::new() }; 7];
     *CHOSEN[variant.index()].get_or_init(|| {
-        let candidates = Simd::available();
+        let candidates = candidates();
         if candidates.len() == 1 {
             return candidates[0];
         }
@@ -121,6 +121,21 @@ pub(crate) fn measured(variant: Variant) -> Simd {
             Err(_) => Simd::widest(),
         }
     })
+}
+
+/// The copies calibration chooses between: those with fused multiply-adds where there are any.
+/// They give the same bits (every copy's arithmetic in the same order), so the choice, which
+/// timing noise can flip between processes, never changes a result; the baseline rounds each
+/// product and differs from them in the last bits, so it runs only where it is the one copy (or
+/// when asked for).
+pub(crate) fn candidates() -> Vec<Simd> {
+    let all = Simd::available();
+    let fused: Vec<Simd> = all.iter().copied().filter(|s| s.instruction_set() != InstructionSet::Baseline).collect();
+    if fused.is_empty() {
+        all
+    } else {
+        fused
+    }
 }
 
 /// The most timed rounds per copy (after one warm-up each), interleaved so that every copy sees the
@@ -282,7 +297,7 @@ mod tests {
 
     #[test]
     fn every_variant_chooses_an_available_copy_once() {
-        let all = Simd::available();
+        let all = candidates();
         for variant in Variant::ALL {
             let chosen = measured(variant);
             assert!(all.contains(&chosen));
@@ -312,6 +327,14 @@ mod tests {
         // Bounded by rounds, not by the clock (emulated CPUs run slower): at most all rounds.
         assert!(passes <= Variant::ALL.len() * copies * (MAX_ROUNDS + 1));
         assert!(passes >= Variant::ALL.len() * copies * 2);
+    }
+
+    #[test]
+    fn the_baseline_is_chosen_only_where_it_is_the_one_copy() {
+        let (all, chosen) = (Simd::available(), candidates());
+        assert_eq!(all.len() == 1, chosen.contains(&all[0]), "{all:?} gives {chosen:?}");
+        assert!(chosen.iter().all(|s| all.contains(s)));
+        assert_eq!(chosen.len(), all.len().max(2) - 1);
     }
 
     #[test]

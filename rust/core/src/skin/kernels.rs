@@ -17,12 +17,8 @@ use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{Slot, LANES};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
-#[cfg(target_arch = "x86_64")]
-use super::pose::CorRigidBone;
-use super::pose::{DqBone, LinearBone};
-#[cfg(target_arch = "x86_64")]
-use super::spaces::fold_rigid_centers;
-use super::spaces::{fold_rigid_spaces, fold_spaces, Fold};
+use super::pose::{CorRigidBone, DqBone, LinearBone};
+use super::spaces::{fold_rigid_centers, fold_rigid_spaces, fold_spaces, Fold};
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
 /// A multiple of [`LANES`], so tasks start on batch boundaries.
@@ -37,21 +33,15 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     let (pose, premat, postmat) = (job.pose(), job.premat, job.postmat);
     let rigid_dqs = job.kind() != Kind::Linear && !pose.any_scaled();
     let dq = rigid_dqs.then(|| fold_rigid_spaces(pose, premat, postmat)).flatten();
-    #[cfg(target_arch = "x86_64")]
     let cor_rigid = (job.kind() == Kind::CentersOfRotation && dq.is_some())
         .then(|| fold_rigid_centers(pose, premat, postmat))
         .flatten();
     let linear = match job.kind() {
         Kind::Linear => fold_spaces(pose, premat, postmat, linear_fold(simd)),
-        Kind::Blend | Kind::CentersOfRotation if dq.is_some() => fold_spaces(pose, premat, postmat, Fold::Matrices),
+        Kind::Blend if dq.is_some() => fold_spaces(pose, premat, postmat, Fold::Matrices),
         _ => None,
     };
-    let folded = Folded {
-        linear: linear.as_deref(),
-        dq: dq.as_deref(),
-        #[cfg(target_arch = "x86_64")]
-        cor_rigid: cor_rigid.as_deref(),
-    };
+    let folded = Folded { linear: linear.as_deref(), dq: dq.as_deref(), cor_rigid: cor_rigid.as_deref() };
     let task = |(i, chunk): (usize, &mut [[f32; 3]])| run_chunk(simd, job, folded, i * CHUNK, chunk);
     if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
         out.chunks_mut(CHUNK).enumerate().for_each(task);
@@ -73,35 +63,22 @@ const ISA_NEON: u8 = 3;
 /// [`fold_rigid_spaces`]), where they fold.
 #[derive(Clone, Copy, Default)]
 struct Folded<'a> {
-    /// LBS's matrices (the hand-written AVX-512 LBS: the bones' moves).
+    /// LBS's records: the bones' moves, or for the baseline's LBS (and Blend's) their matrices.
     linear: Option<&'a [LinearBone]>,
     /// DQS's dual quaternions, for poses without scale.
     dq: Option<&'a [DqBone]>,
-    /// The hand-written AVX-512 centers' records, for poses without scale.
-    #[cfg(target_arch = "x86_64")]
+    /// The centers' records, for poses without scale.
     cor_rigid: Option<&'a [CorRigidBone]>,
 }
 
-/// Whether the centers' own records were folded too (the hand-written AVX-512 centers read them).
-fn centers_folded(folded: Folded<'_>) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return folded.cor_rigid.is_some();
-    #[cfg(not(target_arch = "x86_64"))]
-    return {
-        let _ = folded;
-        true
-    };
-}
-
-/// The folded records the copy `simd`'s LBS reads: each bone's move for the hand-written
-/// AVX-512 LBS, its matrix for the others.
+/// The folded records the copy `simd`'s LBS reads: each bone's move, as the copies with fused
+/// multiply-adds compute LBS (all in the same order, so they give the same bits); its matrix for
+/// the baseline's hand-written LBS.
 fn linear_fold(simd: Simd) -> Fold {
-    #[cfg(target_arch = "x86_64")]
-    if simd.instruction_set() == InstructionSet::Avx512 {
-        return Fold::Moves;
+    if simd.instruction_set() == InstructionSet::Baseline {
+        return Fold::Matrices;
     }
-    let _ = simd;
-    Fold::Matrices
+    Fold::Moves
 }
 
 /// Runs the copy `simd` of the kernels on vertices `start..start + out.len()`, with the call's
@@ -171,34 +148,27 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
         LINEAR => folded.linear.is_some(),
         DUAL_QUATERNION => !SCALED && folded.dq.is_some(),
         BLEND => !SCALED && folded.dq.is_some() && folded.linear.is_some(),
-        CENTERS => !SCALED && folded.dq.is_some() && folded.linear.is_some() && centers_folded(folded),
+        CENTERS => !SCALED && folded.dq.is_some() && folded.cor_rigid.is_some(),
         _ => false,
     };
     let folded = if all_folded { folded } else { Folded::default() };
     let spaces = |m: Option<glam::Mat4>| if all_folded { None } else { m.map(Affine3A::from_mat4) };
     let (premat, postmat) = (spaces(job.premat), spaces(job.postmat));
     let pose = job.pose();
-    // The hand-written AVX-512 LBS reads the moves; every other LBS the folded matrices.
-    #[cfg(target_arch = "x86_64")]
-    let reads_moves = ISA == ISA_AVX512 && KIND == LINEAR;
-    #[cfg(not(target_arch = "x86_64"))]
-    let reads_moves = false;
+    // LBS reads the moves, but for the baseline's, which reads the folded matrices (as Blend).
+    let reads_moves = ISA != ISA_BASELINE && KIND == LINEAR;
     let (linear, moves) = match folded.linear {
         Some(records) if reads_moves => (&pose.linear[..], Some(records)),
         Some(records) => (records, None),
         None => (&pose.linear[..], None),
     };
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = moves; // no copy here reads them
     let simd_job = BatchJob {
         linear,
         dq: folded.dq.unwrap_or(&pose.dq),
         pivot: &pose.pivot,
         pivot_dual: &pose.pivot_dual,
         cor: &pose.cor,
-        #[cfg(target_arch = "x86_64")]
         cor_rigid: folded.cor_rigid.unwrap_or(&pose.cor_rigid),
-        #[cfg(target_arch = "x86_64")]
         linear_moves: moves,
         premat: premat.as_ref(),
         postmat: postmat.as_ref(),

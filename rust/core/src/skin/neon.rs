@@ -74,6 +74,7 @@ impl VectorOps for Neon {
         div(a: F, b: F) -> F = vdivq_f32(a, b);
         mul_add(a: F, b: F, c: F) -> F = vfmaq_f32(c, a, b);
         neg_mul_add(a: F, b: F, c: F) -> F = vfmsq_f32(c, a, b);
+        mul_sub(a: F, b: F, c: F) -> F = vfmaq_f32(vnegq_f32(c), a, b);
         lt(a: F, b: F) -> M = vcltq_f32(a, b);
         gt(a: F, b: F) -> M = vcgtq_f32(a, b);
         eq(a: F, b: F) -> M = vceqq_f32(a, b);

@@ -314,8 +314,11 @@ fn run(
     skin_all(method, positions, &influences, &pose, options)
 }
 
-/// Skins with every compiled copy of the kernels (they must agree to round-off); returns the
-/// last one's result.
+/// Skins with every compiled copy of the kernels; returns the last one's result. The copies with
+/// fused multiply-adds (all but the baseline) must give the same bits: which of them runs is
+/// chosen by timing (`calibration.rs`), and a result must not depend on it (a farm's chunks
+/// baked in different processes, or on different CPUs, join byte for byte). The baseline, whose
+/// products are rounded before they are added, must agree to round-off.
 pub(in crate::skin) fn skin_all(
     method: Method<'_>,
     positions: &[[f32; 3]],
@@ -324,9 +327,23 @@ pub(in crate::skin) fn skin_all(
     options: &SkinOptions<'_>,
 ) -> Vec<[f32; 3]> {
     let mut results = Vec::new();
+    let mut fused: Option<(isa::Simd, Vec<[f32; 3]>)> = None;
     for simd in isa::Simd::available() {
         let mut out = vec![[f32::NAN; 3]; positions.len()];
         skin_with(Some(simd), method, positions, influences, pose, options, &mut out).unwrap();
+        if simd.instruction_set() != isa::InstructionSet::Baseline {
+            match &fused {
+                Some((first, want)) => {
+                    for (v, (a, b)) in out.iter().zip(want).enumerate() {
+                        assert!(
+                            a.map(f32::to_bits) == b.map(f32::to_bits),
+                            "{method:?}: vertex {v} is {a:?} on {simd:?} but {b:?} on {first:?}"
+                        );
+                    }
+                }
+                None => fused = Some((simd, out.clone())),
+            }
+        }
         results.push(out);
     }
     let last = results.pop().unwrap();

@@ -1,9 +1,10 @@
 //! The hand-written AVX-512 kernels kept where they measured faster than the one body of
 //! `batch.rs` (docs/performance.md): LBS, whose sixteen lanes each sum a whole 16-float record
 //! per influence and apply it in mesh space where the lane lies (from the bones' moves of
-//! `spaces.rs`), and centers of rotation for poses without scale, which read one table of
-//! rotations and half translations (`CorRigidBone`) where the one body reads two, with the one
-//! body's arithmetic.
+//! `spaces.rs`), and centers of rotation for poses without scale, which load each slot's
+//! rotations and half translations (`CorRigidBone`) in one transpose. Both compute what the one
+//! body computes, operation for operation, so that the copies give the same bits (the tests check
+//! it): only the loads and shuffles differ.
 
 use core::arch::x86_64::*;
 
@@ -241,7 +242,8 @@ pub(in crate::skin) unsafe fn linear_batch(
     for part in 0..3 {
         let offset = _mm512_permutex2var_ps(quads[part], idx(&STORED_ORDER[part]), quads[part + 1]);
         let factor = _mm512_permutexvar_ps(idx(&LANE_OF_FLOAT[part]), f);
-        let moving = _mm512_cmp_ps_mask::<_CMP_NEQ_OQ>(factor, _mm512_setzero_ps());
+        // Unordered too: a NaN factor moves its lane, as in the one body.
+        let moving = _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(factor, _mm512_setzero_ps());
         // SAFETY: 16 points are 48 floats, in and out.
         unsafe {
             let co = _mm512_loadu_ps(points.add(16 * part));

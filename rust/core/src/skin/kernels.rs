@@ -31,11 +31,12 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     // The bones' records with the spaces folded in, once per call (`spaces.rs`): LBS's, and
     // for poses without scale DQS's, Blend's and the centers'.
     let (pose, premat, postmat) = (job.pose(), job.premat, job.postmat);
-    let rigid_dqs = job.kind() != Kind::Linear && !pose.any_scaled();
-    let dq = rigid_dqs.then(|| fold_rigid_spaces(pose, premat, postmat)).flatten();
-    let cor_rigid = (job.kind() == Kind::CentersOfRotation && dq.is_some())
-        .then(|| fold_rigid_centers(pose, premat, postmat))
+    let rigid = !pose.any_scaled();
+    let dq = (rigid && matches!(job.kind(), Kind::DualQuaternion | Kind::Blend))
+        .then(|| fold_rigid_spaces(pose, premat, postmat))
         .flatten();
+    let cor_rigid =
+        (rigid && job.kind() == Kind::CentersOfRotation).then(|| fold_rigid_centers(pose, premat, postmat)).flatten();
     let linear = match job.kind() {
         Kind::Linear => fold_spaces(pose, premat, postmat, linear_fold(simd)),
         Kind::Blend if dq.is_some() => fold_spaces(pose, premat, postmat, Fold::Matrices),
@@ -148,7 +149,7 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
         LINEAR => folded.linear.is_some(),
         DUAL_QUATERNION => !SCALED && folded.dq.is_some(),
         BLEND => !SCALED && folded.dq.is_some() && folded.linear.is_some(),
-        CENTERS => !SCALED && folded.dq.is_some() && folded.cor_rigid.is_some(),
+        CENTERS => !SCALED && folded.cor_rigid.is_some(),
         _ => false,
     };
     let folded = if all_folded { folded } else { Folded::default() };

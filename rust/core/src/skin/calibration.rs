@@ -2,8 +2,8 @@
 //! than guessed from the vendor or from the widest instruction set (a wider copy is not always
 //! faster: see docs/performance.md), among copies that give the same bits ([`candidates`]). Each
 //! kernel variant is timed once per process, on first use, on a small mesh that stays in the
-//! caches, every candidate in turn; the result is kept for the life of the process. [`set_kernel_copy`] (the API) and `DQSKIN_SIMD` (the environment)
-//! override it, in that order.
+//! caches, every candidate in turn; the result is kept for the life of the process.
+//! [`set_kernel_copy`] (the API) and `DQSKIN_SIMD` (the environment) override it, in that order.
 
 use std::sync::{OnceLock, RwLock};
 use std::time::Instant;

@@ -66,7 +66,7 @@ const ISA_NEON: u8 = 3;
 struct Folded<'a> {
     /// LBS's records: the bones' moves, or for the baseline's LBS (and Blend's) their matrices.
     linear: Option<&'a [LinearBone]>,
-    /// DQS's dual quaternions, for poses without scale.
+    /// DQS's and Blend's dual quaternions, for poses without scale.
     dq: Option<&'a [DqBone]>,
     /// The centers' records, for poses without scale.
     cor_rigid: Option<&'a [CorRigidBone]>,

@@ -258,11 +258,11 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
         } else {
             let c = armature_points(v, job, &centers[lanes.clone()]);
             // SAFETY: the caller's contract.
-            let (real, anchor, contrib) = unsafe { rigid_center_sums(v, slots, job.cor_rigid, lane0, &c) };
+            let sums = unsafe { rigid_center_sums(v, slots, job.cor_rigid, lane0, &c) };
             let p = armature_points(v, job, &batch.positions[lanes.clone()]);
             let d = each3(|k| v.sub(p[k], c[k]));
-            let u = rotation_terms(v, &real, d);
-            centers_rigid(v, anchor, u, real, contrib, p, a)
+            let u = rotation_terms(v, &sums.real, d);
+            centers_rigid(v, sums, u, p, a)
         }
     } else {
         // DQS's sums give the points and the total weight to LBS in Blend.
@@ -392,10 +392,7 @@ unsafe fn sign_pass<V: VectorOps, T>(
 }
 
 /// The sums of skinning with centers of rotation for rigid bones, of one part's lanes (from
-/// `lane0`) with centers `c`: the sign-aligned rotations, the anchor `Σ wᵢ·(Mᵢ·c − c)` (each
-/// bone's move of the center from its rotation and half translation, [`rotation_offset`]) and
-/// the total weight, from one table. The hand-written AVX-512 centers (`avx512/kept.rs`) compute
-/// the same, operation for operation.
+/// `lane0`) with centers `c` ([`RigidCenterSums`]), from one table.
 ///
 /// # Safety
 /// Every bone index of the slots indexes `cor_rigid`.
@@ -406,28 +403,53 @@ unsafe fn rigid_center_sums<V: VectorOps>(
     cor_rigid: &[CorRigidBone],
     lane0: usize,
     c: &[V::F; 3],
-) -> ([V::F; 4], [V::F; 3], V::F) {
-    let zero = v.splat(0.0);
-    let (mut real, mut anchor, mut contrib) = ([zero; 4], [zero; 3], zero);
+) -> RigidCenterSums<V> {
+    let mut sums = RigidCenterSums::new(v);
     for (k, slot) in slots.iter().enumerate() {
         // SAFETY: the caller's contract; a CorRigidBone is the rotation at floats 0–3 and half
         // the translation at 4–6 (and a zero).
         let (q, h) = unsafe {
             (v.load_columns4(cor_rigid, &slot.bones[lane0..], 0), v.load_columns4(cor_rigid, &slot.bones[lane0..], 4))
         };
-        let w = v.load(&slot.weights[lane0..]);
-        let moved = rotation_offset(v, &q, &h, c);
+        sums.add(v, k == 0, &q, &h, v.load(&slot.weights[lane0..]), c);
+    }
+    sums
+}
+
+/// The running sums of skinning with centers of rotation for rigid bones: the sign-aligned
+/// rotations, the anchor `Σ wᵢ·(Mᵢ·c − c)` (each bone's move of the center from its rotation and
+/// half translation, [`rotation_offset`]) and the total weight. The one body and the
+/// hand-written AVX-512 centers (`avx512/kept.rs`), which load the records their own way, both
+/// add each slot here, so that they give the same bits.
+pub(super) struct RigidCenterSums<V: VectorOps> {
+    pub real: [V::F; 4],
+    pub anchor: [V::F; 3],
+    pub contrib: V::F,
+}
+
+impl<V: VectorOps> RigidCenterSums<V> {
+    #[inline(always)]
+    pub(super) fn new(v: V) -> Self {
+        let zero = v.splat(0.0);
+        RigidCenterSums { real: [zero; 4], anchor: [zero; 3], contrib: zero }
+    }
+
+    /// Adds a slot: its bones' rotations `q` and half translations `h` (the fourth a zero), its
+    /// weights `w`, for centers `c`. The first slot's weight keeps its sign (the sum is still
+    /// zero there, and Blender keeps it).
+    #[inline(always)]
+    pub(super) fn add(&mut self, v: V, first: bool, q: &[V::F; 4], h: &[V::F; 4], w: V::F, c: &[V::F; 3]) {
+        let moved = rotation_offset(v, q, h, c);
         let w2 = v.add(w, w);
         for i in 0..3 {
-            anchor[i] = v.mul_add(w2, moved[i], anchor[i]);
+            self.anchor[i] = v.mul_add(w2, moved[i], self.anchor[i]);
         }
-        let ws = if k == 0 { w } else { signed_weight(v, &q, &real, w) };
+        let ws = if first { w } else { signed_weight(v, q, &self.real, w) };
         for i in 0..4 {
-            real[i] = v.mul_add(q[i], ws, real[i]);
+            self.real[i] = v.mul_add(q[i], ws, self.real[i]);
         }
-        contrib = v.add(contrib, w);
+        self.contrib = v.add(self.contrib, w);
     }
-    (real, anchor, contrib)
 }
 
 /// `½·(R·c + t − c)` for the unit quaternion `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v × a
@@ -488,7 +510,7 @@ pub(super) fn each4<T>(f: impl Fn(usize) -> T) -> [T; 4] {
 
 /// `m·p` for an affine `m` (its entries broadcast).
 #[inline(always)]
-fn apply<V: VectorOps>(v: V, m: &Affine3A, p: [V::F; 3]) -> [V::F; 3] {
+pub(super) fn apply<V: VectorOps>(v: V, m: &Affine3A, p: [V::F; 3]) -> [V::F; 3] {
     let c = [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation];
     let e = |k: usize, r: usize| v.splat(c[k][r]);
     each3(|r| v.mul_add(e(0, r), p[0], v.mul_add(e(1, r), p[1], v.mul_add(e(2, r), p[2], e(3, r)))))
@@ -559,7 +581,7 @@ fn turn<V: VectorOps>(v: V, [x, y, z, w]: &[V::F; 4], b: [V::F; 3]) -> [V::F; 3]
 /// the rotation of the sum (`|q|²·R·d = |q|²·d + 2·(w·(v × d) + v × (v × d))`), which is how
 /// the kernels rotate: no matrix, and the `d` they already hold is added back at the end.
 #[inline(always)]
-fn rotation_terms<V: VectorOps>(v: V, q: &[V::F; 4], d: [V::F; 3]) -> [V::F; 3] {
+pub(super) fn rotation_terms<V: VectorOps>(v: V, q: &[V::F; 4], d: [V::F; 3]) -> [V::F; 3] {
     let [x, y, z, _] = *q;
     let b = [
         v.neg_mul_add(z, d[1], v.mul(y, d[2])),
@@ -607,15 +629,14 @@ fn dual_quaternion<V: VectorOps>(
 /// the strength: `p + anchor·(a/contrib) + u·(2a/|q|²)`; `p` where `contrib ≤ 0.0001` or the
 /// sum is zero. One division serves both factors.
 #[inline(always)]
-fn centers_rigid<V: VectorOps>(
+pub(super) fn centers_rigid<V: VectorOps>(
     v: V,
-    anchor: [V::F; 3],
+    sums: RigidCenterSums<V>,
     u: [V::F; 3],
-    real: [V::F; 4],
-    contrib: V::F,
     p: [V::F; 3],
     a: V::F,
 ) -> [V::F; 3] {
+    let RigidCenterSums { real, anchor, contrib } = sums;
     let len2 = length_squared(v, &real);
     let valid = v.and(v.gt(contrib, v.splat(MIN_TOTAL_WEIGHT)), v.gt(len2, v.splat(0.0)));
     // a/contrib = inv·|q|², 2a/|q|² = 2·inv·contrib.

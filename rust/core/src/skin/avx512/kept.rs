@@ -8,10 +8,10 @@
 
 use core::arch::x86_64::*;
 
-use super::super::batch::BatchJob;
+use super::super::batch::{apply, centers_rigid, rotation_terms, BatchJob, RigidCenterSums};
 use super::super::influences::{Slot, LANES};
 use super::super::pose::LinearBone;
-use super::{idx, join, load_points, scalar_record, store_points, transpose_blocks};
+use super::{idx, join, load_points, scalar_record, store_points, transpose_blocks, Avx512};
 
 /// Transposes eight rows `[record l | record l + 8]` (8 floats each) into eight 16-lane
 /// component vectors.
@@ -33,67 +33,6 @@ fn transpose(r: [__m512; 8]) -> [__m512; 8] {
         _mm512_permutex2var_ps(u2, hi, u6),
         _mm512_permutex2var_ps(u3, hi, u7),
     ]
-}
-
-/// `w·b + v × b` for the quaternion sums `(v, w)` (see `turn` in `batch.rs`).
-#[inline]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn turn([x, y, z, w]: &[__m512; 4], b: [__m512; 3]) -> [__m512; 3] {
-    let (x, y, z, w) = (*x, *y, *z, *w);
-    [
-        _mm512_fnmadd_ps(z, b[1], _mm512_fmadd_ps(y, b[2], _mm512_mul_ps(w, b[0]))),
-        _mm512_fnmadd_ps(x, b[2], _mm512_fmadd_ps(z, b[0], _mm512_mul_ps(w, b[1]))),
-        _mm512_fnmadd_ps(y, b[0], _mm512_fmadd_ps(x, b[1], _mm512_mul_ps(w, b[2]))),
-    ]
-}
-
-/// `|q|²` of quaternion sums `(x, y, z, w)`, in the other copies' order.
-#[inline]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn length_squared([x, y, z, w]: &[__m512; 4]) -> __m512 {
-    _mm512_fmadd_ps(*z, *z, _mm512_fmadd_ps(*y, *y, _mm512_fmadd_ps(*x, *x, _mm512_mul_ps(*w, *w))))
-}
-
-/// `a·b` of quaternions per lane, in two independent halves: the sign choice that waits on it is
-/// the serial chain, so keep it short.
-#[inline]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn dot4(a: &[__m512], b: &[__m512]) -> __m512 {
-    _mm512_add_ps(
-        _mm512_fmadd_ps(a[1], b[1], _mm512_mul_ps(a[0], b[0])),
-        _mm512_fmadd_ps(a[3], b[3], _mm512_mul_ps(a[2], b[2])),
-    )
-}
-
-/// `w`, negated in the lanes where `dot < 0`: a quaternion's sign chosen against the running sum.
-#[inline]
-#[target_feature(enable = "avx512f")]
-fn signed_weight(dot: __m512, w: __m512) -> __m512 {
-    let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
-    _mm512_mask_sub_ps(w, negative, _mm512_setzero_ps(), w)
-}
-
-/// A 3×4 affine transform with each entry broadcast to all lanes.
-struct Affine {
-    m: [[__m512; 4]; 3],
-}
-
-impl Affine {
-    #[inline]
-    #[target_feature(enable = "avx512f")]
-    fn new(a: &glam::Affine3A) -> Self {
-        let c = [a.matrix3.x_axis, a.matrix3.y_axis, a.matrix3.z_axis, a.translation];
-        Affine { m: core::array::from_fn(|r| core::array::from_fn(|k| _mm512_set1_ps(c[k][r]))) }
-    }
-
-    #[inline]
-    #[target_feature(enable = "avx512f")]
-    fn apply(&self, p: [__m512; 3]) -> [__m512; 3] {
-        core::array::from_fn(|r| {
-            let m = &self.m[r];
-            _mm512_fmadd_ps(m[0], p[0], _mm512_fmadd_ps(m[1], p[1], _mm512_fmadd_ps(m[2], p[2], m[3])))
-        })
-    }
 }
 
 /// Each lane's weighted sum of its bones' moves `Σ wᵢ·Dᵢ` (row-major 3×4 and four zeros, one
@@ -252,24 +191,6 @@ pub(in crate::skin) unsafe fn linear_batch(
     }
 }
 
-/// `½·(R·p + t − p)` for the unit quaternions `q = (v, w)` of `R`, given `h = t/2`: `w·a + (v ×
-/// a + h)` with `a = v × p`: the bone's move of `p` from its rotation and half translation.
-#[inline]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn rotation_offset(q: &[__m512], h: &[__m512], p: &[__m512; 3]) -> [__m512; 3] {
-    let a = [
-        _mm512_fmsub_ps(q[1], p[2], _mm512_mul_ps(q[2], p[1])),
-        _mm512_fmsub_ps(q[2], p[0], _mm512_mul_ps(q[0], p[2])),
-        _mm512_fmsub_ps(q[0], p[1], _mm512_mul_ps(q[1], p[0])),
-    ];
-    let b = [
-        _mm512_fmsub_ps(q[1], a[2], _mm512_fmsub_ps(q[2], a[1], h[0])),
-        _mm512_fmsub_ps(q[2], a[0], _mm512_fmsub_ps(q[0], a[2], h[1])),
-        _mm512_fmsub_ps(q[0], a[1], _mm512_fmsub_ps(q[1], a[0], h[2])),
-    ];
-    core::array::from_fn(|k| _mm512_fmadd_ps(q[3], a[k], b[k]))
-}
-
 /// [`load_columns`] with the indices read as scalars (see [`scalar_record`]).
 ///
 /// # Safety
@@ -289,9 +210,16 @@ unsafe fn load_columns_scalar<T>(table: &[T], bones: &[u16; LANES], offset: usiz
 /// The CPU must support AVX-512F, AVX2 and FMA.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn write_batch(job: &BatchJob<'_>, moved: [__m512; 3], a: __m512, o: [__m512; 3], out: &mut [[f32; 3]; LANES]) {
+unsafe fn write_batch(
+    v: Avx512,
+    job: &BatchJob<'_>,
+    moved: [__m512; 3],
+    a: __m512,
+    o: [__m512; 3],
+    out: &mut [[f32; 3]; LANES],
+) {
     let mut r = match job.postmat {
-        Some(m) => Affine::new(m).apply(moved),
+        Some(m) => apply(v, m, moved),
         None => moved,
     };
     let untouched = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(a, _mm512_setzero_ps());
@@ -304,9 +232,9 @@ unsafe fn write_batch(job: &BatchJob<'_>, moved: [__m512; 3], a: __m512, o: [__m
 
 /// Everything skinning with centers of rotation does to one full batch of 16 vertices, in
 /// registers, for poses without scale: load the points and their centers, `premat` on both, the
-/// sums (where each bone puts the center, from one table of rotations and half translations,
-/// and the sign-aligned rotations), the rotation of the offset, strength, `postmat`, mask,
-/// store. The same arithmetic as the one body (`batch.rs`).
+/// sums, the rotation of the offset, strength, `postmat`, mask, store. The one body's arithmetic
+/// (`batch.rs`: each slot added to [`RigidCenterSums`], then [`centers_rigid`]), with each slot's
+/// records loaded in one 8-float transpose.
 ///
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index
@@ -320,62 +248,31 @@ pub(in crate::skin) unsafe fn centers_rigid_batch(
     slots: &[Slot],
     strength: Option<&[f32; LANES]>,
 ) {
+    // SAFETY: the CPU has AVX-512F, AVX2 and FMA (this function's contract).
+    let v = unsafe { Avx512::new() };
     // SAFETY: 16 points; 16 centers.
     let (o, c) = unsafe { (load_points(positions), load_points(centers)) };
     let (p, c) = match job.premat {
-        Some(m) => {
-            let m = Affine::new(m);
-            (m.apply(o), m.apply(c))
-        }
+        Some(m) => (apply(v, m, o), apply(v, m, c)),
         None => (o, c),
     };
-    let d: [__m512; 3] = core::array::from_fn(|k| _mm512_sub_ps(p[k], c[k]));
-    let mut anchor = [_mm512_setzero_ps(); 3];
-    let mut real = [_mm512_setzero_ps(); 4];
-    let mut contrib = _mm512_setzero_ps();
-    for slot in slots {
+    let mut sums = RigidCenterSums::new(v);
+    for (k, slot) in slots.iter().enumerate() {
         // SAFETY: a slot has 16 weights.
         let w = unsafe { _mm512_loadu_ps(slot.weights.as_ptr()) };
         // SAFETY: indices are in range (validated); a CorRigidBone is 8 floats: the rotation,
         // half the translation and a zero.
         let r = unsafe { load_columns_scalar(job.cor_rigid, &slot.bones, 0) };
-        let moved = rotation_offset(&r[0..4], &r[4..7], &c);
-        let w2 = _mm512_add_ps(w, w);
-        for k in 0..3 {
-            anchor[k] = _mm512_fmadd_ps(w2, moved[k], anchor[k]);
-        }
-        let q = [r[0], r[1], r[2], r[3]];
-        // Rigid poses are bound by throughput: the sign chain as it is.
-        let ws = signed_weight(dot4(&q, &real), w);
-        for k in 0..4 {
-            real[k] = _mm512_fmadd_ps(q[k], ws, real[k]);
-        }
-        contrib = _mm512_add_ps(contrib, w);
+        sums.add(v, k == 0, &[r[0], r[1], r[2], r[3]], &[r[4], r[5], r[6], r[7]], w, &c);
     }
-    let zero = _mm512_setzero_ps();
     let a = match strength {
         // SAFETY: the mask has 16 lanes.
         Some(s) => unsafe { _mm512_loadu_ps(s.as_ptr()) },
         None => _mm512_set1_ps(1.0),
     };
-    // The rotation through `u` (see `rotation_terms` in `batch.rs`), then the strength, as
-    // `centers_rigid` there.
-    let [x, y, z, _] = real;
-    let fma = |a, b, c| _mm512_fmadd_ps(a, b, c);
-    let fnma = |a, b, c| _mm512_fnmadd_ps(a, b, c);
-    let mul = |a, b| _mm512_mul_ps(a, b);
-    let b = [fnma(z, d[1], mul(y, d[2])), fnma(x, d[2], mul(z, d[0])), fnma(y, d[0], mul(x, d[1]))];
-    let u = turn(&real, b);
-    let len2 = length_squared(&real);
-    let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(super::super::MIN_TOTAL_WEIGHT))
-        & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, zero);
-    // One division serves both factors: a/contrib = inv·|q|², 2a/|q|² = 2·inv·contrib.
-    let inv = _mm512_maskz_div_ps(valid, a, mul(len2, contrib));
-    let fa = mul(inv, len2);
-    let inv2 = _mm512_add_ps(inv, inv);
-    let fr = mul(inv2, contrib);
-    // The anchor is Σ wᵢ·(Mᵢ·c − c).
-    let moved: [__m512; 3] = core::array::from_fn(|k| fma(anchor[k], fa, fma(u[k], fr, p[k])));
+    let d: [__m512; 3] = core::array::from_fn(|k| _mm512_sub_ps(p[k], c[k]));
+    let u = rotation_terms(v, &sums.real, d);
+    let moved = centers_rigid(v, sums, u, p, a);
     // SAFETY: as this function's own contract.
-    unsafe { write_batch(job, moved, a, o, out) }
+    unsafe { write_batch(v, job, moved, a, o, out) }
 }

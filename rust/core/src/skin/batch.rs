@@ -288,10 +288,7 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
         let lbs = if let (LINEAR, Some(moves)) = (KIND, job.linear_moves) {
             // SAFETY: the caller's contract (the moves are one per bone, as `linear`).
             let sums = unsafe { v.window_sums(slots, None, lane0, moves, window::<3>(0)) };
-            let mut contrib = v.splat(0.0);
-            for slot in slots {
-                contrib = v.add(contrib, v.load(&slot.weights[lanes.clone()]));
-            }
+            let contrib = total_weight(v, slots, lane0);
             debug_assert!(job.premat.is_none() && job.postmat.is_none(), "moves are in mesh space");
             linear_in_mesh_space(v, &sums, contrib, v.load_points(&batch.positions[lanes.clone()]), a)
         } else if KIND == LINEAR || KIND == BLEND {
@@ -299,13 +296,7 @@ unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
             let matrix = unsafe { v.window_sums(slots, None, lane0, job.linear, window::<3>(0)) };
             let (p, contrib) = match summed {
                 Some(summed) => summed,
-                None => {
-                    let mut contrib = v.splat(0.0);
-                    for slot in slots {
-                        contrib = v.add(contrib, v.load(&slot.weights[lanes.clone()]));
-                    }
-                    (armature_points(v, job, &batch.positions[lanes.clone()]), contrib)
-                }
+                None => (armature_points(v, job, &batch.positions[lanes.clone()]), total_weight(v, slots, lane0)),
             };
             linear(v, &matrix, contrib, p, a)
         } else {
@@ -389,6 +380,12 @@ unsafe fn sign_pass<V: VectorOps, T>(
         }
     }
     (real, contrib)
+}
+
+/// The total weight of one part's lanes (from `lane0`), summed in slot order.
+#[inline(always)]
+fn total_weight<V: VectorOps>(v: V, slots: &[Slot], lane0: usize) -> V::F {
+    slots.iter().fold(v.splat(0.0), |sum, slot| v.add(sum, v.load(&slot.weights[lane0..])))
 }
 
 /// The sums of skinning with centers of rotation for rigid bones, of one part's lanes (from

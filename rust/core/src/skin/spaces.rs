@@ -1,8 +1,8 @@
-//! The modifier's spaces folded into LBS's bone matrices, once per call, so that the kernels map
-//! no point into armature space and back: each bone's matrix `postmat·Mᵢ·premat` (the one body
-//! and the baseline), or its move of a mesh-space point `Dᵢ = postmat·Mᵢ·premat − I` (AVX-512);
-//! and, for rigid spaces, each bone's dual quaternion and centers record likewise
-//! ([`fold_rigid_spaces`], [`fold_rigid_centers`]).
+//! The modifier's spaces folded into the bones' records, once per call, so that the kernels map
+//! no point into armature space and back: each bone's move of a mesh-space point
+//! `Dᵢ = postmat·Mᵢ·premat − I` (LBS on the copies with fused multiply-adds) or its matrix
+//! `postmat·Mᵢ·premat` (the baseline's LBS, Blend's); and, for rigid spaces, each bone's dual
+//! quaternion and centers record likewise ([`fold_rigid_spaces`], [`fold_rigid_centers`]).
 //!
 //! LBS is `co' = postmat·(p + f·Σ wᵢ·(Mᵢ·p − p))` with `p = premat·co` and `f = a/Σ wᵢ`; since
 //! every term is an affine map of `co`, that is `co + f·Σ wᵢ·Dᵢ·co` exactly when `postmat·premat`
@@ -72,7 +72,7 @@ pub(crate) fn fold_rigid_spaces(pose: &Pose, premat: Option<Mat4>, postmat: Opti
     Some(records)
 }
 
-/// [`fold_rigid_spaces`] for the hand-written AVX-512 centers' records (the rotation and half the
+/// [`fold_rigid_spaces`] for the rigid centers' records (the rotation and half the
 /// translation): centers of rotation move with the points, so the same change of space passes
 /// through them.
 pub(crate) fn fold_rigid_centers(
@@ -109,18 +109,14 @@ fn rigid_folds<'a>(
 /// [`INVERSE_TOLERANCE`].
 fn is_rigid(m: &DMat4) -> bool {
     let r = DMat3::from_mat4(*m);
-    let gram = r.transpose() * r;
-    let orthonormal =
-        (0..3).all(|c| (0..3).all(|k| (gram.col(c)[k] - if k == c { 1.0 } else { 0.0 }).abs() <= INVERSE_TOLERANCE));
-    orthonormal && r.determinant() > 0.0
+    (r.transpose() * r).abs_diff_eq(DMat3::IDENTITY, INVERSE_TOLERANCE) && r.determinant() > 0.0
 }
 
 /// Whether `post·pre` is the identity to [`INVERSE_TOLERANCE`].
 fn undo_each_other(pre: &DMat4, post: &DMat4) -> bool {
     let product = *post * *pre;
     let reach = 1.0 + pre.w_axis.truncate().abs().max_element() + post.w_axis.truncate().abs().max_element();
-    let linear_ok =
-        (0..3).all(|c| (0..3).all(|r| (product.col(c)[r] - if r == c { 1.0 } else { 0.0 }).abs() <= INVERSE_TOLERANCE));
+    let linear_ok = DMat3::from_mat4(product).abs_diff_eq(DMat3::IDENTITY, INVERSE_TOLERANCE);
     let translation_ok = product.w_axis.truncate().abs().max_element() <= INVERSE_TOLERANCE * reach;
     linear_ok && translation_ok
 }
@@ -150,14 +146,9 @@ mod tests {
         let moves = fold_spaces(&pose(), Some(premat), Some(postmat), Fold::Moves).expect("inverse spaces fold");
         let co = Vec3::new(0.25, -1.5, 2.0);
         for (bone, moved) in pose().linear.iter().zip(&moves) {
-            let row = |rows: &AffineRows, r: usize| rows.rows[r].dot(premat.transform_point3(co).extend(1.0));
-            let through = Vec3::new(row(&bone.matrix, 0), row(&bone.matrix, 1), row(&bone.matrix, 2));
+            let through = bone.matrix.transform_point(premat.transform_point3(co).extend(1.0));
             let want = postmat.transform_point3(through) - co;
-            let got = Vec3::new(
-                moved.matrix.rows[0].dot(co.extend(1.0)),
-                moved.matrix.rows[1].dot(co.extend(1.0)),
-                moved.matrix.rows[2].dot(co.extend(1.0)),
-            );
+            let got = moved.matrix.transform_point(co.extend(1.0));
             assert!((got - want).length() < 1e-4, "{got} vs {want}");
             assert_eq!(moved.padding, [0.0; 4]);
         }

@@ -733,7 +733,8 @@ print(json.dumps(digests))
 def fused_copies():
     """The kernel copies with fused multiply-adds this CPU runs (x86-64 Linux: from its flags)."""
     try:
-        flags = next(line for line in open("/proc/cpuinfo") if line.startswith("flags")).split()
+        with open("/proc/cpuinfo") as cpuinfo:
+            flags = next(line for line in cpuinfo if line.startswith("flags")).split()
     except (OSError, StopIteration):
         return []
     if "avx2" not in flags or "fma" not in flags:

@@ -96,7 +96,7 @@ class FedFrame:
             influences = pose.influences(
                 bones, bound, arm_eval, positions, input_key, premat, s.use_vertex_groups, s.use_envelopes, cache.envelopes, cache.segments
             )
-            deform, rest, pose_key = data.deform, data.rest, bones.key
+            deform, rest, pose_key = bones.deform, bones.rest, bones.key
         else:
             deform = self._pose_matrices(arm, arm_eval, bound)
             influences, rest, pose_key = bound.influences, bound.rest, PoseKey(matrices=deform.tobytes())

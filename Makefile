@@ -160,6 +160,7 @@ bench: setup
 	if grep -qw avx512f /proc/cpuinfo 2>/dev/null; then \
 	  DQSKIN_SIMD=avx2 cargo run --release -p dqskin-bench -- --json target/bench-kernels-avx2.json; fi
 	$(PY) bench/blender_bench.py --out target/bench-blender.json
+	$(PY) bench/report.py > target/bench-report.md  # the tables of docs/performance.md
 
 clean:
 	rm -rf $(STAMPS) target $(VENV) .venvs

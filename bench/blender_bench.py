@@ -46,14 +46,24 @@ GROUPS = ("small", "cesium", "crowd", "grid", "later", "bbones", "rigify", "cent
 
 
 def cpu_name() -> str:
+    """The CPU's name, with its family and model where Linux gives them (a virtual machine's name
+    may say only "AMD EPYC": the family and model tell its generation)."""
+    fields = {}
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
+                key, _, value = line.partition(":")
+                key = key.strip()
+                if key in ("model name", "cpu family", "model") and key not in fields:
+                    fields[key] = value.strip()
+                if not line.strip() and fields:
+                    break  # (the first processor's block)
     except OSError:
         pass
-    return platform.processor() or platform.machine()
+    name = fields.get("model name") or platform.processor() or platform.machine()
+    if "cpu family" in fields and "model" in fields:
+        name += f" (family {fields['cpu family']}, model {fields['model']})"
+    return name
 
 
 def main() -> int:

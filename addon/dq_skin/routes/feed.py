@@ -376,7 +376,7 @@ def order_after_bones(driver, armature, names, prefix: str = "b") -> int:
     """Adds the variables that make Blender evaluate `driver` after every bone of `names`: each
     B-Bone's segments (a B-Bone property links to them), and the bones with no bound descendant
     (a bone is done after its parent, so after those every bound bone is); each costs Blender a
-    little per frame (docs/performance.md). Returns how many (named `prefix` and a number, after those `driver` has)."""
+    little per frame (about 1 µs: docs/performance-history.md). Returns how many (named `prefix` and a number, after those `driver` has)."""
     above = set()
     bones = armature.data.bones
     for name in names:

@@ -24,6 +24,8 @@ use dqskin_core::rigs::Creature;
 use dqskin_core::{centers_of_rotation, kernel_copies, pool, skin, Influences, Method, Pose, SkinOptions};
 use rayon::prelude::*;
 
+const USAGE: &str = "usage: dqskin-bench [--quick] [--json FILE] [--only LBS-rigid|DQS-rigid|DQS-scaled|Blend-rigid|CoR-rigid|CoR-scaled|precompute] [--vertices N] [--influences K] [--threads T] [--rounds R]";
+
 const BONES: usize = 64;
 /// A mesh larger than any CPU's caches, so that kernels and reference stream from memory.
 const BEYOND_CACHES: usize = 16_000_000;
@@ -144,14 +146,56 @@ struct Row {
     bytes: usize,
 }
 
+/// The narrowings `--only` takes: a kernel case (method and pose) or the precompute.
+const ONLY: [&str; 7] =
+    ["LBS-rigid", "DQS-rigid", "DQS-scaled", "Blend-rigid", "CoR-rigid", "CoR-scaled", "precompute"];
+/// The options that take a value, and the flags that take none.
+const VALUED: [&str; 6] = ["--json", "--only", "--vertices", "--influences", "--threads", "--rounds"];
+const FLAGS: [&str; 1] = ["--quick"];
+
+/// Checks the command line before anything runs (a misspelt option would otherwise time the
+/// whole grid, minutes of a shared machine): `Err` names the first problem.
+fn check_args(args: &[String]) -> Result<(), String> {
+    let mut i = 1;
+    while i < args.len() {
+        let a = args[i].as_str();
+        if FLAGS.contains(&a) {
+            i += 1;
+            continue;
+        }
+        if !VALUED.contains(&a) {
+            return Err(format!("unknown argument {a:?}"));
+        }
+        let Some(v) = args.get(i + 1) else { return Err(format!("{a} needs a value")) };
+        match a {
+            "--only" if !ONLY.contains(&v.as_str()) => {
+                return Err(format!("--only takes one of {}, got {v:?}", ONLY.join(", ")));
+            }
+            "--vertices" | "--influences" | "--threads" | "--rounds" if v.parse::<usize>().map_or(true, |n| n == 0) => {
+                return Err(format!("{a} needs a positive whole number, got {v:?}"));
+            }
+            _ => {}
+        }
+        i += 2;
+    }
+    Ok(())
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
+    if args.iter().any(|a| a == "--help" || a == "-h") {
+        println!("{}", USAGE);
+        return;
+    }
+    if let Err(problem) = check_args(&args) {
+        eprintln!("dqskin-bench: {problem}\n{USAGE}");
+        std::process::exit(2);
+    }
     let quick = args.iter().any(|a| a == "--quick");
     let json = args.iter().position(|a| a == "--json").and_then(|i| args.get(i + 1).cloned());
     let value = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1).cloned());
-    let number = |name: &str| {
-        value(name).map(|v| v.parse::<usize>().unwrap_or_else(|_| panic!("{name} needs a number, got {v}")))
-    };
+    // Checked above: every number given parses.
+    let number = |name: &str| value(name).and_then(|v| v.parse::<usize>().ok());
     let only = value("--only");
     let all = std::thread::available_parallelism().map_or(1, |n| n.get());
     let sizes: Vec<usize> = match number("--vertices") {
@@ -360,4 +404,34 @@ fn precompute_rows(quick: bool, all: usize) -> Vec<PrecomputeRow> {
         }
     }
     rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_args;
+
+    fn check(line: &str) -> Result<(), String> {
+        let args: Vec<String> =
+            std::iter::once("dqskin-bench").chain(line.split_whitespace()).map(String::from).collect();
+        check_args(&args)
+    }
+
+    #[test]
+    fn the_documented_options_pass() {
+        assert_eq!(check(""), Ok(()));
+        assert_eq!(
+            check("--quick --json out.json --only CoR-scaled --vertices 1000 --influences 4 --threads 2 --rounds 3"),
+            Ok(())
+        );
+        assert_eq!(check("--only precompute"), Ok(()));
+    }
+
+    #[test]
+    fn a_bad_option_is_named_before_anything_runs() {
+        assert_eq!(check("--verbose"), Err("unknown argument \"--verbose\"".into()));
+        assert_eq!(check("--json"), Err("--json needs a value".into()));
+        assert!(check("--only LBS").unwrap_err().contains("--only takes one of LBS-rigid"));
+        assert!(check("--threads 0").unwrap_err().contains("positive whole number"));
+        assert!(check("--vertices 1e6").unwrap_err().contains("got \"1e6\""));
+    }
 }

@@ -39,12 +39,21 @@ def payload_bytes(objs) -> int:
 
 
 def compare(
-    pairs, method: str, frames, rounds: int, per_round: int, routes_too: bool = True, floors: bool = False, later: str = ""
+    pairs,
+    method: str,
+    frames,
+    rounds: int,
+    per_round: int,
+    routes_too: bool = True,
+    floors: bool = False,
+    later: str = "",
+    with_route_floor: bool = False,
 ) -> dict:
     """`pairs`: [(mesh with its Armature modifier, its armature)]. Returns a row: `armature_ms`,
     `none_ms`, `dq_skin_ms` (the route DQ Skin chooses, `dq_skin_route`), `route_<kind>_ms` for
     each route forced (and `route_import_ms` where Blender has file-import nodes), where DQ
-    Skin's time goes (`dq_skin_<part>_ms`), the floors, the memory DQ Skin adds, speedups."""
+    Skin's time goes (`dq_skin_<part>_ms`), the floors (`floors`: all of them, on one character;
+    `with_route_floor`: `floor_route` alone), the memory DQ Skin adds, speedups."""
     meshes = [m for m, _ in pairs]
     rigs = [a for _, a in pairs]
     for m in meshes:
@@ -90,7 +99,7 @@ def compare(
         st = addon().SESSION.state_of(auto[0], addon().engine.context.dq_skin_modifiers(auto[0])[0])
         floor = routes.Floors(rigs[0], meshes[0], st.binding.binding.bone_names)
         variants.update({k: [o] for k, o in floor.objects.items()})
-    if floors:
+    if floors or with_route_floor:
         route_floor = routes.RouteFloor()
         variants["floor_route"] = auto
         hooks["floor_route"] = route_floor.hooks

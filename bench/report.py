@@ -76,6 +76,38 @@ def parts_table(rows: list) -> str:
     return "\n".join(out)
 
 
+def bound_table(rows: list, vertices_per_s: float) -> str:
+    """The grids of 100k vertices and more: the most any kernel could reach on DQ Skin's route on
+    this machine, the route's floor plus the kernel's bytes moved at the speed of the bandwidth
+    reference (`vertices_per_s`: the kernels' benchmark, 4 influences as on the grids, from
+    memory, every thread)."""
+    out = [
+        "| Case, ms a frame | Armature modifier | DQ Skin's route with no Python of DQ Skin's (`floor_route`) | A kernel moving its bytes at the bandwidth reference's speed | The most a kernel allows: Armature ÷ (floor + bytes) | DQ Skin | DQ Skin's share of that most |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in skinning_rows(rows):
+        if not r["case"].startswith("grid") or r.get("later") or r.get("vertices", 0) < 100_000 or "floor_route_ms" not in r:
+            continue
+        bytes_ms = 1e3 * r["vertices"] / vertices_per_s
+        most = r["armature_ms"] / (r["floor_route_ms"] + bytes_ms)
+        reached = r["armature_ms"] / r["dq_skin_ms"]
+        out.append(
+            f"| {r['case']} | {ms(r['armature_ms'])} | {ms(r['floor_route_ms'])} | {ms(bytes_ms)} | {ratio(most)} | "
+            f"{ms(r['dq_skin_ms'])} ({ratio(reached)}) | {100 * reached / most:.0f} % |"
+        )
+    return "\n".join(out)
+
+
+def memory_speed(rows: list) -> float | None:
+    """Vertices a second of the bandwidth reference from memory: the largest mesh, 4 influences,
+    the most threads (the kernels' benchmark, the copy the CPU chose)."""
+    cases = [r for r in rows if r["influences"] == 4 and r["method"] == "LBS"]
+    if not cases:
+        return None
+    r = max(cases, key=lambda r: (r["vertices"], r["threads"]))
+    return r["vertices"] / r["reference_seconds"]
+
+
 def floors_table(rows: list) -> str:
     out = [
         "| Case, ms a frame above no skinning | Armature modifier | Mesh Cache reading a fixed file (`floor_mesh_cache`) | The same, its driver calling Python (`floor_python_driver`) | Mesh Cache and DQ Skin's node group (`floor_carried`) | DQ Skin's route, no Python of DQ Skin's (`floor_route`) | DQ Skin |",
@@ -180,6 +212,10 @@ def main() -> int:
         print(f"\nBlender {data['blender']}, {data['cpu']}, {data['threads']} threads, steady allocator: {data['steady_allocator']}\n")
         for table in (blender_table, parts_table, floors_table, memory_table, other_rows):
             print(table(rows) + "\n")
+        speed = memory_speed(copies[next(iter(copies))]) if copies else None
+        if speed is not None:
+            print(f"Large grids against this machine's memory ({speed / 1e6:.0f} Mverts/s):\n")
+            print(bound_table(rows, speed) + "\n")
     return 0
 
 

@@ -100,7 +100,7 @@ def bound_table(rows: list, vertices_per_s: float) -> str:
 
 def memory_speed(rows: list) -> float | None:
     """Vertices a second of the bandwidth reference from memory: the largest mesh, 4 influences,
-    the most threads (the kernels' benchmark, the copy the CPU chose)."""
+    the most threads (the kernels' benchmark; the reference does no math, so any copy's file gives it)."""
     cases = [r for r in rows if r["influences"] == 4 and r["method"] == "LBS"]
     if not cases:
         return None

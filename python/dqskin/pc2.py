@@ -107,8 +107,8 @@ class Writer:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path)
         self._tmp = temporary_path(self.path)
-        _watch(self)
         try:
+            _watch(self)  # inside: a signal arriving in it still unwatches
             self._file = open(self._tmp, "xb")
             self._file.write(HEADER.pack(MAGIC, 1, self.points, *self.header, 0))
         except BaseException:
@@ -195,9 +195,20 @@ def _discard_open(signum: int) -> None:
         writer._remove_temporary()
 
 
+def _forget_discarded() -> None:
+    # A signal that lands on the very entry of `Writer.__exit__` raises before its cleanup runs:
+    # the handler already removed that writer's temporary; drop the writer here, at the next
+    # writer's start or end, so the handlers are still restored.
+    for w in [w for w in _open if w._interrupted is not None]:
+        _open.remove(w)
+        if w._file is not None:
+            w._file.close()
+
+
 def _watch(writer: Writer) -> None:
     if threading.current_thread() is not threading.main_thread():
         return
+    _forget_discarded()
     _open.append(writer)
     for sig in _SIGNALS:
         current = signal.getsignal(sig)
@@ -211,6 +222,7 @@ def _unwatch(writer: Writer) -> None:
     if writer not in _open:
         return
     _open.remove(writer)
+    _forget_discarded()
     if _open:
         return
     for sig, previous in list(_previous.items()):
@@ -290,19 +302,21 @@ def merge(paths, out) -> Header:
             kind = "a gap" if cur.start_frame > expected else "an overlap"
             raise PC2Error(f"{pp} ends before frame {expected} but {cp} starts at {cur.start_frame}: {kind}")
     # In blocks of about MERGE_BLOCK bytes: memory stays flat, and a signal is handled between
-    # blocks (one call reading or writing a whole chunk cannot be interrupted).
+    # blocks (one call reading or writing a whole chunk cannot be interrupted). Read with
+    # readinto, not np.fromfile: fromfile runs os.PathLike's Python isinstance check on the file
+    # object and turns a KeyboardInterrupt raised there into a TypeError.
     frame_bytes = first.points * 12
     per_block = max(1, MERGE_BLOCK // frame_bytes)
+    block = np.empty((per_block, first.points, 3), "<f4")
     with Writer(out, first.points, first.start_frame, first.sample_rate) as w:
         for header, p in headers:
             with open(p, "rb") as f:
                 f.seek(HEADER.size)
                 for done in range(0, header.samples, per_block):
-                    count = min(per_block, header.samples - done)
-                    data = np.fromfile(f, dtype="<f4", count=count * first.points * 3)
-                    if len(data) != count * first.points * 3:
+                    data = block[: min(per_block, header.samples - done)]
+                    if f.readinto(memoryview(data).cast("B")) != data.nbytes:
                         raise PC2Error(f"{p} is shorter than its header says")
-                    w.add_many(data.reshape(count, first.points, 3))
+                    w.add_many(data)
     return read_header(out)
 
 

@@ -226,3 +226,65 @@ def test_a_write_stopped_by_a_signal_refuses_to_go_on(tmp_path):
             with pytest.raises(pc2.PC2Error, match="stopped by SIGINT"):
                 w.add(np.zeros((2, 3)))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_merge_interrupted_at_any_python_call_raises_keyboardinterrupt_and_leaves_nothing(tmp_path):
+    # Python runs a signal's handler at the next Python-level call, wherever that lands. A
+    # profile hook runs SIGINT's handler at the n-th call event of a merge, for every n the merge
+    # has: the caller must always see KeyboardInterrupt (np.fromfile once turned it into a
+    # TypeError), no temporary left behind, and either no output or the whole merge (when the
+    # signal comes after the file was renamed into place).
+    chunks = []
+    for i in range(2):
+        path = tmp_path / f"c{i}.pc2"
+        pc2.write(path, np.full((3, 4, 3), i, np.float32), 1 + 3 * i)
+        chunks.append(path)
+    out = tmp_path / "all.pc2"
+
+    def merge_interrupted_at(n):
+        """Returns how many calls the merge made, or where the handler ran if it returned."""
+        seen, where = 0, None
+
+        def hook(frame, event, arg):
+            nonlocal seen, where
+            if event == "return" and frame.f_code is pc2.merge.__code__:
+                sys.setprofile(None)  # the merge is over: not the test's own calls
+            elif event in ("call", "c_call"):
+                seen += 1
+                if seen == n:
+                    where = (frame.f_code.co_name, frame.f_back.f_code.co_name, event, arg)
+                    signal.getsignal(signal.SIGINT)(signal.SIGINT, frame)
+
+        sys.setprofile(hook)
+        try:
+            pc2.merge(chunks, out)
+        finally:
+            sys.setprofile(None)
+        assert where is None, f"the handler ran at call {n} ({where}) and the merge still returned"
+        return seen
+
+    handler = signal.getsignal(signal.SIGINT)
+    merge_interrupted_at(0)  # n=0 never fires; the first merge's calls include one-time caching
+    whole = out.read_bytes()
+    out.unlink()
+    calls = merge_interrupted_at(0)
+    assert calls > 20
+    out.unlink()
+    kept = 0
+    for n in range(1, calls + 1):
+        with pytest.raises(KeyboardInterrupt):
+            merge_interrupted_at(n)
+        left = sorted(p.name for p in tmp_path.iterdir())
+        if left == ["all.pc2", "c0.pc2", "c1.pc2"]:
+            assert out.read_bytes() == whole, f"call {n}"
+            out.unlink()
+            kept += 1
+        else:
+            assert left == ["c0.pc2", "c1.pc2"], f"call {n}"
+        # Only writers the signal discarded may linger (a signal on the entry of __exit__ raises
+        # before its cleanup); the next writer forgets them and restores the handler.
+        assert all(w._interrupted for w in pc2._open), f"call {n}"
+    assert kept < calls // 4  # most interruptions come before the rename
+    assert merge_interrupted_at(0) == calls
+    assert out.read_bytes() == whole
+    assert signal.getsignal(signal.SIGINT) is handler and not pc2._open

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -157,19 +158,42 @@ def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_ski
     assert len(counted) == first + 1 and len(list(folder.glob("*.npy"))) == 2
 
 
-def slow_down(monkeypatch, centers, seconds: float) -> None:
-    """The centers precompute waits `seconds` at each progress report (a computation slow
-    enough to see running, and to cancel)."""
-    compute = centers.dqskin.centers_of_rotation
+def hold_jobs(monkeypatch, centers) -> list:
+    """From now on each background computation is a real `dqskin.CentersJob` whose end is held
+    back until its `release()` (surely still running when the test looks, or cancels it); returns
+    the list of those made, in order."""
+    real = centers.dqskin.CentersJob
+    made = []
 
-    def slow(*args, progress=None, **kw):
-        def report(done, total):
-            time.sleep(seconds)
-            return progress(done, total) if progress is not None else True
+    class Held:
+        def __init__(self, *args, **kwargs):
+            self.real = real(*args, **kwargs)
+            self.held, self.cancelled = True, False
+            made.append(self)
 
-        return compute(*args, progress=report, **kw)
+        def release(self):
+            self.held = False
 
-    monkeypatch.setattr(centers.dqskin, "centers_of_rotation", slow)
+        done = property(lambda self: self.real.done)
+        total = property(lambda self: self.real.total)
+        finished = property(lambda self: not self.held and self.real.finished)
+
+        def cancel(self):
+            self.real.cancel()
+            self.held, self.cancelled = False, True
+
+        def result(self, **kwargs):
+            return self.real.result(**kwargs)
+
+    monkeypatch.setattr(centers.dqskin, "CentersJob", Held)
+    return made
+
+
+def wait_until(condition, seconds: float = 30.0) -> None:
+    end = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.02)
 
 
 def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancelled(dq_skin, monkeypatch):
@@ -180,7 +204,8 @@ def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancell
     store.forget_memory()
     obj, arm, _ = rig_tube(rings=80, segments=48, bones=3, length=6.0)
     monkeypatch.setattr(centers, "_folder", lambda: None)  # not found on disk either
-    slow_down(monkeypatch, centers, 0.01)  # about a second: still running when checked
+    made = hold_jobs(monkeypatch, centers)
+    threads = {t.ident for t in threading.enumerate()}
     add_dq_skin(obj, "CENTERS_OF_ROTATION")
     arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), math.radians(90))
     bpy.context.view_layer.update()
@@ -188,13 +213,13 @@ def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancell
     st = dq_skin.SESSION.status_of(obj, mod)
     # Until the centers are ready, Blender's own deformation stands in and the modifier says so.
     assert st.mode.value == "fallback" and "Optimized Centers: computing" in st.message
-    job = store.running()[0] if store.running() else store.jobs()[-1]
-    assert obj.name in job.owners or job.finished
-    for _ in range(600):
-        if job.finished:
-            break
-        time.sleep(0.05)
-    assert job.finished and not job.error
+    # No Python thread computes them (the core's own thread does, running no Python).
+    assert {t.ident for t in threading.enumerate()} == threads
+    job = store.jobs()[-1]
+    assert obj.name in job.owners and not job.finished and len(made) == 1
+    made[0].release()
+    wait_until(lambda: job.finished)
+    assert not job.error and job.fraction == 1.0
     store.poll()  # the timer: re-evaluates the waiting objects
     bpy.context.view_layer.update()
     evaluated_positions(obj)
@@ -204,23 +229,52 @@ def test_large_meshes_compute_in_the_background_with_progress_and_can_be_cancell
     # Cancelled: the modifier says so and Blender's deformation stays.
     store.forget_memory()
     obj.vertex_groups[0].add([0], 0.25, "REPLACE")  # new weights, new centers
-    slow_down(monkeypatch, centers, 0.1)  # slow enough to cancel mid-way
     bpy.context.view_layer.update()
     evaluated_positions(obj)
     running = store.running()
     assert running, "a new computation started"
+    assert obj.name in running[0].owners and not running[0].finished
     with bpy.context.temp_override(object=obj):
         assert bpy.ops.object.dq_skin_cancel_centers() == {"FINISHED"}
-    for _ in range(600):
-        if running[0].finished:
-            break
-        time.sleep(0.05)
-    assert running[0].error == "cancelled"
+    wait_until(lambda: running[0].finished)
+    assert running[0].error == "cancelled" and made[-1].cancelled  # the core's job was told
     store.poll()
     bpy.context.view_layer.update()
     evaluated_positions(obj)
     st = dq_skin.SESSION.status_of(obj, mod)
     assert st.mode.value == "fallback" and "cancelled" in st.message
+
+
+def test_background_computations_run_one_at_a_time_and_each_object_gets_its_own(dq_skin, monkeypatch):
+    centers = dq_skin.engine.centers
+    store = dq_skin.SESSION.centers
+    monkeypatch.setattr(centers, "INLINE_VERTICES", 10)
+    monkeypatch.setattr(centers, "in_background", lambda: False)
+    monkeypatch.setattr(centers, "_folder", lambda: None)
+    made = hold_jobs(monkeypatch, centers)
+    store.forget_memory()
+    objs = []
+    for i in range(3):
+        obj, arm, _ = rig_tube(rings=20 + 4 * i, segments=16, bones=3, length=6.0)  # three meshes
+        add_dq_skin(obj, "CENTERS_OF_ROTATION")
+        objs.append((obj, arm))
+    bpy.context.view_layer.update()
+    jobs = [j for j in store.running() if any(o.name in j.owners for o, _ in objs)]
+    assert len(jobs) == 3
+    assert len(made) == 1  # one thread at a time, the others queued
+    for k in range(3):
+        made[k].release()
+        wait_until(lambda k=k: jobs[k].finished)
+        assert not jobs[k].error
+        assert len(made) == min(k + 2, 3)  # collecting one starts the next
+    for _, arm in objs:
+        arm.pose.bones["Bone1"].rotation_quaternion = Quaternion((1, 0, 0), math.radians(60))
+    store.poll()
+    bpy.context.view_layer.update()
+    for obj, arm in objs:
+        mod = dq_skin.engine.context.dq_skin_modifiers(obj)[0]
+        assert dq_skin.SESSION.status_of(obj, mod).live
+        assert deviation(evaluated_positions(obj), expected(dq_skin, obj, arm)) <= REL_TOL
 
 
 def test_on_a_character_the_centers_collapse_less_than_linear(dq_skin, assets):

@@ -9,6 +9,7 @@ frame.
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -169,22 +170,56 @@ def test_a_dq_skin_character_keeps_dq_skin_and_undo_restores_everything(dq_skin)
 
 
 def test_cancelling_changes_nothing(dq_skin):
-    """Esc sets the worker's cancel flag: the computation stops with Cancelled and the plan's
-    finish (the only writer of Blender data) never runs."""
+    """Esc cancels the worker's running job: it stops with Cancelled on the core's thread (no
+    Python thread runs it), the next step never starts, and the plan's finish (the only writer
+    of Blender data) never runs."""
     background, weights_io = dq_skin.ops.background, dq_skin.blender.weights_io
     fig, arm = figure_mesh(), armature()
     rest, bones = weights_io.rest_mesh(fig, arm), weights_io.rest_bones(arm)
-    finished = []
+    finished, started = [], []
 
-    def work(progress):
-        return dq_skin.dqskin.automatic_weights(rest.positions, rest.triangles, bones.heads, bones.tails, resolution=256, progress=progress)
+    def start():
+        started.append(1)
+        return dq_skin.dqskin.automatic_weights_job(rest.positions, rest.triangles, bones.heads, bones.tails, resolution=256)
 
-    worker = background.Worker(background.Plan(work, lambda context, result: finished.append(result) or "", "test"))
-    worker.cancelled = True
-    worker.thread.start()
-    worker.thread.join(60)
-    assert isinstance(worker.error, dq_skin.dqskin.Cancelled) and worker.result is None and not finished
+    plan = background.Plan([(start, 1), (start, 1)], lambda context, results: finished.append(results) or "", "test")
+    worker = background.Worker(plan)
+    threads = threading.active_count()
+    assert not worker.advance()  # the first job runs
+    assert threading.active_count() == threads
+    worker.cancel()
+    end = time.monotonic() + 60
+    while not worker.advance():
+        assert time.monotonic() < end
+        time.sleep(0.01)
+    assert isinstance(worker.error, dq_skin.dqskin.Cancelled) and worker.results == [] and not finished
+    assert len(started) == 1
     assert not fig.vertex_groups and fig.parent is None
+
+
+def test_the_worker_runs_the_steps_in_order_and_reports_progress(dq_skin):
+    background, weights_io = dq_skin.ops.background, dq_skin.blender.weights_io
+    fig, arm = figure_mesh(), armature()
+    rest, bones = weights_io.rest_mesh(fig, arm), weights_io.rest_bones(arm)
+    plain = dq_skin.dqskin.automatic_weights(rest.positions, rest.triangles, bones.heads, bones.tails, resolution=64)
+
+    def start(resolution):
+        return lambda: dq_skin.dqskin.automatic_weights_job(rest.positions, rest.triangles, bones.heads, bones.tails, resolution=resolution)
+
+    worker = background.Worker(background.Plan([(start(64), 3), (start(80), 1)], lambda context, results: "", "test"))
+    seen = []
+    end = time.monotonic() + 60
+    while not worker.advance():
+        assert time.monotonic() < end
+        seen.append(worker.fraction())
+        worker.job.wait(0.01)
+    assert worker.error is None and len(worker.results) == 2
+    assert worker.results[1][1]["grid"] != worker.results[0][1]["grid"]  # in order
+    influences, report = worker.results[0]
+    assert all(report[k] == plain[1][k] for k in ("unreached", "grid", "solid_voxels"))
+    np.testing.assert_array_equal(report["outside_bones"], plain[1]["outside_bones"])
+    np.testing.assert_array_equal(influences.weights, plain[0].weights)
+    assert seen == sorted(seen) and all(0.0 <= f <= 1.0 for f in seen) and worker.fraction() == 1.0
 
 
 def test_transfer_equals_the_body_at_matched_points_and_fills_the_rest(dq_skin):

@@ -13,6 +13,7 @@ import time
 import dqskin
 import numpy as np
 import pytest
+from centers_meshes import dense_of, tube
 from centers_reference import SIGMA, brute_force_centers, diagonal, reference_skin
 from dqmath import quat_to_mat3, random_unit_quat
 
@@ -34,29 +35,6 @@ def check_centers(positions, triangles, influences, sigma=SIGMA):
     assert np.all(np.linalg.norm(got[has] - want[has], axis=1) <= CENTER_TOL * diagonal(positions))
     np.testing.assert_array_equal(got[~has], positions[~has])
     return got, has
-
-
-def tube(rings=24, segments=16, bones=6, seed=0, length=3.0):
-    """A tube along Y over a chain of bones, 4 smooth influences per vertex that drift around
-    the tube (so weight vectors are mostly unique)."""
-    rng = np.random.default_rng(seed)
-    y = np.repeat(np.linspace(0, length, rings), segments)
-    phi = np.tile(np.linspace(0, 2 * np.pi, segments, endpoint=False), rings)
-    positions = np.stack([0.3 * np.cos(phi), y, -0.3 * np.sin(phi)], axis=1).astype(F)
-    s = y / length * bones + 0.15 * np.sin(2 * phi) + 0.01 * rng.standard_normal(len(y))
-    raw = np.exp(-(((s[:, None] - (np.arange(bones) + 0.5)) / 0.8) ** 2))
-    top = np.argsort(-raw, axis=1)[:, :4]
-    w = np.take_along_axis(raw, top, axis=1)
-    w /= w.sum(axis=1, keepdims=True)
-    influences = dqskin.Influences.from_dense(top, w.astype(F), bones)
-    ring = lambda r, k: r * segments + k % segments  # noqa: E731
-    tris = []
-    for r in range(rings - 1):
-        for k in range(segments):
-            tris += [[ring(r, k), ring(r, k + 1), ring(r + 1, k + 1)], [ring(r, k), ring(r + 1, k + 1), ring(r + 1, k)]]
-    rest = np.tile(np.eye(4, dtype=F), (bones, 1, 1))
-    rest[:, 1, 3] = np.arange(bones) * length / bones
-    return positions, np.array(tris, np.int64), influences, rest
 
 
 def random_rig(rest, rng, scaled=True):
@@ -326,11 +304,3 @@ def test_strokes_that_follow_one_another_equal_the_full_precompute_and_compute_l
         # (At least a 16-bit bone and a 32-bit weight a pair, and a 16-bit count a vertex.)
         assert after.nbytes > fresh.nbytes >= 6 * len(fresh) + 2 * fresh.vertex_count
         weights, influences, centers = painted, after, got
-
-
-def dense_of(influences) -> np.ndarray:
-    """`(V, B)` weights of `influences`."""
-    out = np.zeros((influences.vertex_count, influences.bone_count), np.float64)
-    rows = np.repeat(np.arange(influences.vertex_count), np.diff(influences.offsets.astype(np.int64)))
-    np.add.at(out, (rows, influences.bones.astype(np.int64)), influences.weights)
-    return out

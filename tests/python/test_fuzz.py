@@ -113,6 +113,13 @@ def catalogue():
             lambda: dict(positions=POS, triangles=TRI, influences=INF, sigma=0.1, with_mask=True),
             [],
         ),
+        "CentersJob": (
+            lambda **kw: dqskin.CentersJob(**kw).result(),  # waits: no thread outlives its example
+            lambda: dict(positions=POS, triangles=TRI, influences=INF, sigma=0.1),
+            [],
+        ),
+        "CentersJob.wait": (lambda **kw: dqskin.CentersJob(POS, TRI, INF).wait(**kw), lambda: dict(timeout=5.0), []),
+        "CentersJob.result": (lambda **kw: dqskin.CentersJob(POS, TRI, INF).result(**kw), lambda: dict(with_mask=True), []),
         "skin_many": (dqskin.skin_many, lambda: dict(jobs=[job(out=out()), job(method="dqs")]), []),
         "SkinJob": (
             dqskin.SkinJob,
@@ -259,6 +266,14 @@ def catalogue():
         "memory.PoseMemory": (dqskin.memory.PoseMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
         "memory.positions_digest": (dqskin.memory.positions_digest, lambda: dict(positions=POS), []),
     }
+    # The same computations as jobs on the core's thread (result() waits: no thread outlives its example).
+    c["automatic_weights_job"] = (lambda **kw: dqskin.automatic_weights_job(**kw).result(), c["automatic_weights"][1], [])
+    c["transfer_weights_job"] = (lambda **kw: dqskin.transfer_weights_job(**kw).result(), c["transfer_weights"][1], [])
+    c["WeightsJob.wait"] = (
+        lambda **kw: dqskin.transfer_weights_job(**c["transfer_weights"][1]()).wait(**kw),
+        lambda: dict(timeout=5.0),
+        [],
+    )
     return c
 
 

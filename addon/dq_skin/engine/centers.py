@@ -7,10 +7,13 @@ digest of exactly what they depend on:
 - on disk, in the extension's user folder, so opening a file again does not recompute them
   (nothing is written into the user's file or mesh).
 
-Small meshes are computed on the spot. Large ones, in an interactive session, in a background
-thread (the core releases the GIL) while the modifier says so and Blender's own deformation
-stands in; the panel shows the progress and can cancel. In background mode (command line,
-render farms) they are computed on the spot with a progress bar, stopping on Ctrl-C.
+Small meshes are computed on the spot. Large ones, in an interactive session, on a thread of
+the core's own (`dqskin.CentersJob`: no Python runs there, since Blender runs its operators and
+evaluation with the GIL released and a Python thread running then is a hazard), one at a time,
+while the modifier says so and Blender's own deformation stands in; Blender's thread collects
+the result (the timer, or whoever asks next); the panel shows the progress and can cancel. In
+background mode (command line, render farms) they are computed on the spot with a progress
+bar, stopping on Ctrl-C.
 
 After a weight change (a brush stroke) on a mesh whose centers were computed before (the same
 rest positions and triangles, `latest`), only what the change reaches is computed again (the
@@ -22,9 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-import threading
 from collections import OrderedDict
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -45,28 +46,48 @@ MEMORY_ENTRIES = 16
 DISK_BYTES = 1 << 30  # the on-disk cache is trimmed to this, oldest first (the add-on's preferences change it)
 POLL_SECONDS = 0.05  # how soon finished centers show (a stroke's update takes a few tenths)
 FORMAT = 1  # bump when the centers' definition changes: old files are then ignored
+MAX_RUNNING = 1  # computations at once: each already uses every core
 
 
 class Cancelled(Exception):
     """The user cancelled the computation."""
 
 
-@dataclass
 class Job:
-    """A computation running in a background thread."""
+    """A computation on the core's thread (`native`, a `dqskin.CentersJob`), or queued until
+    another one ends (`native` None); its result is collected in Blender's thread, by the
+    first of the timer or a caller asking whether it has `finished`."""
 
-    key: str
-    vertices: int
-    done: int = 0
-    total: int = 1
-    cancel: bool = False
-    error: str = ""
-    finished: bool = False
-    owners: set = field(default_factory=set)  # object names waiting for it (redrawn after)
+    def __init__(self, store: Centers, key: str, vertices: int, inputs: tuple, geometry: str, owners: set):
+        self._store = store
+        self.key = key
+        self.vertices = vertices
+        self.inputs = inputs  # (positions, triangles, influences, previous) until started
+        self.geometry = geometry
+        self.influences = inputs[2]
+        self.owners = owners  # object names waiting for it (redrawn after)
+        self.native = None
+        self.cancelled = False
+        self.error = ""
+        self.collected = False
+
+    @property
+    def done(self) -> int:
+        return self.native.done if self.native is not None else int(self.collected)
+
+    @property
+    def total(self) -> int:
+        return self.native.total if self.native is not None else 1
 
     @property
     def fraction(self) -> float:
         return self.done / max(self.total, 1)
+
+    @property
+    def finished(self) -> bool:
+        if not self.collected:
+            self._store.pump()
+        return self.collected
 
 
 def in_background() -> bool:
@@ -120,7 +141,7 @@ def _trim(folder: Path, limit: int) -> None:
 
 class Centers:
     """The centers computed in this session (an LRU in memory, backed by the user folder) and
-    the computations running in background threads (owned by the session). `interrupted()`:
+    the computations running on the core's threads (owned by the session). `interrupted()`:
     whether Ctrl-C or SIGTERM stopped a batch command."""
 
     def __init__(self, interrupted=lambda: False):
@@ -129,7 +150,6 @@ class Centers:
         # Geometry digest -> (influences, centers) computed last for it (what an update starts from).
         self._latest: OrderedDict[str, tuple] = OrderedDict()
         self._jobs: dict[str, Job] = {}
-        self._lock = threading.Lock()
         self.disk_bytes = DISK_BYTES  # the user folder's centers are trimmed to this, oldest first
 
     def set_disk_limit(self, limit: int) -> None:
@@ -149,6 +169,7 @@ class Centers:
 
     def lookup(self, key: str, vertices: int) -> np.ndarray | None:
         """The centers for `key` if they were computed before (in this session or an earlier one)."""
+        self.pump()
         got = self._memory.get(key)
         if got is not None:
             self._memory.move_to_end(key)
@@ -200,11 +221,10 @@ class Centers:
         return self._latest.get(geometry)
 
     def remember_latest(self, geometry: str, influences, centers: np.ndarray) -> None:
-        with self._lock:
-            self._latest[geometry] = (influences, centers)
-            self._latest.move_to_end(geometry)
-            while len(self._latest) > MEMORY_ENTRIES:
-                self._latest.popitem(last=False)
+        self._latest[geometry] = (influences, centers)
+        self._latest.move_to_end(geometry)
+        while len(self._latest) > MEMORY_ENTRIES:
+            self._latest.popitem(last=False)
 
     def compute(
         self,
@@ -214,22 +234,16 @@ class Centers:
         key: str,
         label: str = "",
         check=None,
-        job: Job | None = None,
         geometry: str = "",
         previous: tuple | None = None,
     ) -> np.ndarray:
         """Computes (and keeps) the centers now (`previous`: the `(influences, centers)` of the
         same geometry, of which only what the weight change reaches is computed again).
-        `check()` may raise to stop (Ctrl-C on the command line); `job.cancel` stops a
-        background computation."""
+        `check()` may raise to stop (Ctrl-C on the command line)."""
         progress = Progress(None, 100, label) if label else None
         last = [0]
 
         def report(done: int, total: int) -> bool:
-            if job is not None:
-                job.done, job.total = done, total
-                if job.cancel:
-                    return False
             if progress is not None:
                 step = int(100 * done / max(total, 1))
                 if step > last[0]:
@@ -253,53 +267,89 @@ class Centers:
         return centers
 
     def start(self, positions, triangles, influences, key: str, owner: str, geometry: str = "", previous: tuple | None = None) -> Job:
-        """The background computation of `key` (started if not running)."""
-        with self._lock:
-            job = self._jobs.get(key)
-            if job is not None and not job.finished:
-                job.owners.add(owner)
-                return job
-            job = self._jobs[key] = Job(key, len(positions), owners={owner})
-        positions, triangles = positions.copy(), triangles.copy()
-
-        def work():
-            try:
-                self.compute(positions, triangles, influences, key, job=job, geometry=geometry, previous=previous)
-            except Cancelled:
-                job.error = "cancelled"
-            except Exception as e:  # reported on the modifier
-                job.error = f"{type(e).__name__}: {e}"
-            job.finished = True
-
-        threading.Thread(target=work, name=f"dq_skin centers {key[:8]}", daemon=True).start()
+        """The background computation of `key` (queued if another one is running)."""
+        job = self._jobs.get(key)
+        if job is not None and not job.finished:
+            job.owners.add(owner)
+            return job
+        inputs = (positions.copy(), triangles.copy(), influences, previous)
+        job = self._jobs[key] = Job(self, key, len(positions), inputs, geometry, {owner})
+        self.pump()
         if not bpy.app.timers.is_registered(self.poll):
             bpy.app.timers.register(self.poll, first_interval=POLL_SECONDS)
         return job
 
+    def pump(self) -> None:
+        """Collects what the core's threads finished and starts queued computations, at most
+        MAX_RUNNING at a time (each uses every core). Blender's thread only."""
+        for job in self._jobs.values():
+            if job.native is not None and not job.collected and job.native.finished:
+                self._collect(job)
+        running = sum(1 for j in self._jobs.values() if j.native is not None and not j.collected)
+        for job in self._jobs.values():
+            if running >= MAX_RUNNING:
+                break
+            if job.native is None and not job.collected:
+                self._launch(job)
+                running += not job.collected
+
+    def _launch(self, job: Job) -> None:
+        positions, triangles, influences, previous = job.inputs
+        job.inputs = None
+        try:
+            job.native = dqskin.CentersJob(positions, triangles, influences, SIGMA, previous=previous)
+        except (ValueError, TypeError, RuntimeError) as e:  # reported on the modifier
+            job.error, job.collected = f"{type(e).__name__}: {e}", True
+
+    def _collect(self, job: Job) -> None:
+        try:
+            if job.cancelled:  # as the artist asked, even if the thread had just finished
+                raise dqskin.Cancelled()
+            centers = np.ascontiguousarray(job.native.result(), np.float32)
+        except dqskin.Cancelled:
+            job.error = "cancelled"
+        except Exception as e:  # reported on the modifier
+            job.error = f"{type(e).__name__}: {e}"
+        else:
+            self._store(job.key, centers)
+            if job.geometry:
+                self.remember_latest(job.geometry, job.influences, centers)
+        job.collected = True
+        job.native = job.influences = None
+
     def running(self) -> list[Job]:
-        return [j for j in self._jobs.values() if not j.finished]
+        self.pump()
+        return [j for j in self._jobs.values() if not j.collected]
 
     def jobs(self) -> list[Job]:
         """Every computation started in this session, running or finished, oldest first."""
+        self.pump()
         return list(self._jobs.values())
 
     def job_of(self, key: str) -> Job | None:
+        self.pump()
         return self._jobs.get(key)
 
     def cancel(self, key: str) -> None:
         job = self._jobs.get(key)
-        if job is not None:
-            job.cancel = True
+        if job is None or job.collected:
+            return
+        job.cancelled = True
+        if job.native is not None:
+            job.native.cancel()  # collected as cancelled once its thread stops
+        else:
+            job.inputs, job.error, job.collected = None, "cancelled", True
 
     def close(self) -> None:
-        """Stops every background computation (their threads end at their next progress call)."""
-        for job in self._jobs.values():
-            job.cancel = True
+        """Stops every background computation (their threads end at their next step)."""
+        for key in list(self._jobs):
+            self.cancel(key)
         if bpy.app.timers.is_registered(self.poll):
             bpy.app.timers.unregister(self.poll)
 
     def poll(self):
         """While computations run: redraw their progress; when one ends, re-evaluate its objects."""
+        self.pump()
         running = False
         for job in list(self._jobs.values()):
             if job.finished and job.owners:

@@ -101,7 +101,6 @@ class OBJECT_OT_dq_skin_automatic_weights(BackgroundOperator):
         if not bones.names:
             return f"{armature.name} has no {'deforming ' if self.deforming_only else ''}bones to weight to"
         rest = [weights_io.rest_mesh(obj, armature) for obj in meshes]
-        total = sum(len(r.positions) for r in rest) or 1
         options = {
             "resolution": self.resolution,
             "falloff": self.falloff,
@@ -110,17 +109,10 @@ class OBJECT_OT_dq_skin_automatic_weights(BackgroundOperator):
             "mirror": bones.names if self.mirror else None,
         }
 
-        def work(progress):
-            results, before = [], 0
-            for r in rest:
-                share = len(r.positions)
+        def starter(r):
+            return lambda: dqskin.automatic_weights_job(r.positions, r.triangles, bones.heads, bones.tails, **options)
 
-                def part(done, of, before=before, share=share):
-                    return progress(before * 1000 + share * 1000 * done // max(of, 1), total * 1000)
-
-                results.append(dqskin.automatic_weights(r.positions, r.triangles, bones.heads, bones.tails, **options, progress=part))
-                before += share
-            return results
+        steps = [(starter(r), len(r.positions)) for r in rest]
 
         def finish(context, results) -> str:
             parent_like_blender(armature, meshes)
@@ -138,7 +130,7 @@ class OBJECT_OT_dq_skin_automatic_weights(BackgroundOperator):
                 text += f"; bones outside the mesh: {', '.join(outside[:8])}{' ...' if len(outside) > 8 else ''}"
             return text
 
-        return Plan(work, finish, "Automatic weights")
+        return Plan(steps, finish, "Automatic weights")
 
 
 CLASSES = (OBJECT_OT_dq_skin_automatic_weights,)

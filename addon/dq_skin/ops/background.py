@@ -1,14 +1,15 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Operators whose work takes seconds: Blender data is read first, the computation (numpy and
-`dqskin` only, the GIL released) runs in a thread while the UI shows its progress and Esc
-cancels it, and Blender data is written only once it has finished. Cancelled or failed, nothing
-is changed. From scripts and the command line (`execute`) the same work runs on the spot with a
-progress bar on the terminal."""
+"""Operators whose work takes seconds: Blender data is read first, the computation runs as
+`dqskin` jobs on the core's own thread (`dqskin.WeightsJob`: no Python runs there, since
+Blender runs its operators, evaluation and UI with the GIL released and a Python thread running
+beside them is a hazard) while the UI polls their progress and Esc cancels them, and Blender
+data is written only once they have finished. Cancelled or failed, nothing is changed. From
+scripts and the command line (`execute`) the same jobs run while a progress bar shows on the
+terminal, and Ctrl-C cancels them."""
 
 from __future__ import annotations
 
-import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,41 +18,69 @@ import bpy
 from .. import dqskin
 from ..progress import Progress
 
-# How often the UI polls the thread.
+# How often the UI polls the jobs.
 POLL_SECONDS = 0.1
 
 
 @dataclass
 class Plan:
-    """What an operator does: `work(progress)` in the thread (returns the result; `progress(done,
-    total)` returns False once cancelled), then `finish(context, result)` in Blender's thread,
-    which returns the report's text; `label` names the work in the progress bar."""
+    """What an operator does: `steps`, each `(start, share)`: `start()` starts one `dqskin` job
+    (which has `done`, `total`, `finished`, `cancel()` and `result()`), run one after the other,
+    `share` its part of the progress (its vertices); then `finish(context, results)` in
+    Blender's thread, with the jobs' results in order, which returns the report's text; `label`
+    names the work in the progress bar."""
 
-    work: Callable[[Callable[[int, int], bool]], Any]
-    finish: Callable[[Any, Any], str]
+    steps: Sequence[tuple[Callable[[], Any], int]]
+    finish: Callable[[Any, list], str]
     label: str
 
 
 class Worker:
-    """A plan's work in a thread, with its progress and a cancel flag."""
+    """A plan's jobs, one after the other, advanced from Blender's thread."""
 
     def __init__(self, plan: Plan):
         self.plan = plan
-        self.done, self.total = 0, 1
+        self.results: list = []
+        self.job = None
         self.cancelled = False
-        self.result = None
         self.error: BaseException | None = None
-        self.thread = threading.Thread(target=self._run, name="dq_skin weights", daemon=True)
 
-    def progress(self, done: int, total: int) -> bool:
-        self.done, self.total = done, max(total, 1)
-        return not self.cancelled
+    def advance(self) -> bool:
+        """Collects the running job if it has finished and starts the next; True once every
+        step has ended, one failed, or the plan was cancelled."""
+        while True:
+            if self.job is not None:
+                if not self.job.finished:
+                    return False
+                try:
+                    self.results.append(self.job.result())
+                except (ValueError, TypeError, dqskin.Cancelled) as e:
+                    self.error = e
+                self.job = None
+                if self.error is not None:
+                    return True
+            if self.cancelled:
+                self.error = self.error or dqskin.Cancelled(f"{self.plan.label} was cancelled")
+                return True
+            if len(self.results) == len(self.plan.steps):
+                return True
+            try:
+                self.job = self.plan.steps[len(self.results)][0]()
+            except (ValueError, TypeError) as e:
+                self.error = e
+                return True
 
-    def _run(self) -> None:
-        try:
-            self.result = self.plan.work(self.progress)
-        except BaseException as e:  # handed to Blender's thread, which reports it
-            self.error = e
+    def cancel(self) -> None:
+        self.cancelled = True
+        if self.job is not None:
+            self.job.cancel()
+
+    def fraction(self) -> float:
+        shares = [max(share, 1) for _start, share in self.plan.steps]
+        done = sum(shares[: len(self.results)])
+        if self.job is not None:
+            done += shares[len(self.results)] * self.job.done / max(self.job.total, 1)
+        return done / max(sum(shares), 1)
 
 
 class BackgroundOperator(bpy.types.Operator):
@@ -66,15 +95,21 @@ class BackgroundOperator(bpy.types.Operator):
         if isinstance(plan, str):
             self.report({"ERROR"}, plan)
             return {"CANCELLED"}
+        worker = Worker(plan)
         bar = Progress(context, 1000, plan.label)
         try:
-            result = plan.work(lambda done, total: bar.set(1000 * done // max(total, 1)) or True)
-        except (ValueError, TypeError, dqskin.Cancelled) as e:
-            self.report({"ERROR"}, f"{plan.label} failed, nothing changed: {e}")
-            return {"CANCELLED"}
+            while not worker.advance():
+                worker.job.wait(POLL_SECONDS)
+                bar.set(int(1000 * worker.fraction()))
+        except BaseException:  # Ctrl-C: the job stops too
+            worker.cancel()
+            raise
         finally:
             bar.end()
-        return self._finish(context, plan, result)
+        if worker.error is not None:
+            self.report({"ERROR"}, f"{plan.label} failed, nothing changed: {worker.error}")
+            return {"CANCELLED"}
+        return self._finish(context, plan, worker.results)
 
     def invoke(self, context, event):
         if context.window is None or bpy.app.background:
@@ -84,7 +119,6 @@ class BackgroundOperator(bpy.types.Operator):
             self.report({"ERROR"}, plan)
             return {"CANCELLED"}
         self._worker = Worker(plan)
-        self._worker.thread.start()
         wm = context.window_manager
         self._timer = wm.event_timer_add(POLL_SECONDS, window=context.window)
         wm.progress_begin(0, 1000)
@@ -95,11 +129,12 @@ class BackgroundOperator(bpy.types.Operator):
     def modal(self, context, event):
         worker = self._worker
         if event.type == "ESC" and event.value == "PRESS":
-            worker.cancelled = True
+            worker.cancel()
         if event.type != "TIMER" and not worker.cancelled:
             return {"PASS_THROUGH"}
-        context.window_manager.progress_update(1000 * worker.done // worker.total)
-        if worker.thread.is_alive():
+        ended = worker.advance()
+        context.window_manager.progress_update(int(1000 * worker.fraction()))
+        if not ended:
             return {"RUNNING_MODAL"}
         self._end(context)
         if worker.cancelled or isinstance(worker.error, dqskin.Cancelled):
@@ -108,7 +143,7 @@ class BackgroundOperator(bpy.types.Operator):
         if worker.error is not None:
             self.report({"ERROR"}, f"{worker.plan.label} failed, nothing changed: {worker.error}")
             return {"CANCELLED"}
-        return self._finish(context, worker.plan, worker.result)
+        return self._finish(context, worker.plan, worker.results)
 
     def _end(self, context) -> None:
         wm = context.window_manager
@@ -116,7 +151,7 @@ class BackgroundOperator(bpy.types.Operator):
         wm.progress_end()
         context.workspace.status_text_set(None)
 
-    def _finish(self, context, plan: Plan, result):
-        text = plan.finish(context, result)
+    def _finish(self, context, plan: Plan, results: list):
+        text = plan.finish(context, results)
         self.report({"INFO"}, text)
         return {"FINISHED"}

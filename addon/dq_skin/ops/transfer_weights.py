@@ -110,19 +110,12 @@ class OBJECT_OT_dq_skin_transfer_weights(BackgroundOperator):
             "max_influences": self.max_influences,
         }
 
-        def work(progress):
-            results = []
-            for k, c in enumerate(cloth):
+        def starter(c):
+            return lambda: dqskin.transfer_weights_job(
+                body_mesh.positions, body_mesh.triangles, source, c.positions, c.triangles, **options
+            )
 
-                def part(done, of, k=k):
-                    return progress(k * 1000 + 1000 * done // max(of, 1), len(cloth) * 1000)
-
-                results.append(
-                    dqskin.transfer_weights(
-                        body_mesh.positions, body_mesh.triangles, source, c.positions, c.triangles, **options, progress=part
-                    )
-                )
-            return results
+        steps = [(starter(c), len(c.positions)) for c in cloth]
 
         def finish(context, results) -> str:
             for obj, (influences, _report) in zip(garments, results):
@@ -136,7 +129,7 @@ class OBJECT_OT_dq_skin_transfer_weights(BackgroundOperator):
                 f"{inpainted} filled in, {nearest} in loose parts took the nearest match"
             )
 
-        return Plan(work, finish, "Weight transfer")
+        return Plan(steps, finish, "Weight transfer")
 
 
 CLASSES = (OBJECT_OT_dq_skin_transfer_weights,)

@@ -11,8 +11,10 @@
 mod args;
 mod armature;
 mod arrays;
+mod background;
 mod blender;
 mod blending;
+mod centers_job;
 mod dual_quat;
 mod job;
 mod method;
@@ -78,6 +80,7 @@ fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     blender::register(m)?;
     armature::register(m)?;
     skinning::register(m)?;
+    centers_job::register(m)?;
     job::register(m)?;
     rigs::register(m)?;
     tracks::register(m)?;

@@ -35,11 +35,11 @@ impl PyInfluences {
 
     /// What an update of the centers computed from these weights kept for the next one (taken:
     /// an update replaces it).
-    fn take_center_sums(&self) -> Option<CenterSums> {
+    pub(crate) fn take_center_sums(&self) -> Option<CenterSums> {
         self.1.lock().unwrap_or_else(|p| p.into_inner()).take()
     }
 
-    fn keep_center_sums(&self, sums: CenterSums) {
+    pub(crate) fn keep_center_sums(&self, sums: CenterSums) {
         *self.1.lock().unwrap_or_else(|p| p.into_inner()) = Some(sums);
     }
 }
@@ -456,7 +456,7 @@ fn centers_of_rotation<'py>(
 /// the mask found from the rows holding their own vertex's position).
 /// The `(influences, centers)` of `previous`, and what the update that made them kept (taken
 /// from that `Influences`: see `keep_center_sums`).
-fn previous_centers(
+pub(crate) fn previous_centers(
     previous: &Bound<'_, PyAny>,
     points: &[[f32; 3]],
 ) -> PyResult<(Influences, Centers, Option<CenterSums>)> {

@@ -1,7 +1,10 @@
 //! Skin weights: `automatic_weights` (geodesic voxel binding) and `transfer_weights` (closest
 //! points and inpainting), over `dqskin_core::weights`.
 
-use dqskin_core::weights::{self, AutoOptions, Bone, TransferOptions, WeightsError};
+use std::sync::Arc;
+
+use dqskin_core::weights::{self, AutoOptions, AutoWeights, Bone, TransferOptions, Transferred, WeightsError};
+use dqskin_core::Influences;
 use numpy::{PyArray1, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -9,6 +12,7 @@ use pyo3::types::{PyDict, PyString, PyTuple};
 
 use crate::args;
 use crate::arrays;
+use crate::background::{Outcome, Task};
 use crate::guard;
 use crate::skinning::{as_points, named_triangle_indices, triangle_indices, Cancelled, PyInfluences};
 
@@ -110,6 +114,43 @@ fn automatic_weights<'py>(
 ) -> PyResult<Bound<'py, PyTuple>> {
     guard(|| {
         let py = positions.py();
+        let request = AutoRequest::new(
+            positions,
+            triangles,
+            heads,
+            tails,
+            resolution,
+            falloff,
+            max_influences,
+            smoothing,
+            mirror,
+        )?;
+        let result = with_progress(py, progress, "automatic_weights", |p| request.run(p))?;
+        auto_output(py, &result)
+    })
+}
+
+/// `automatic_weights`' arguments, checked and owned (a job's thread takes them).
+struct AutoRequest {
+    positions: Vec<[f32; 3]>,
+    triangles: Vec<[u32; 3]>,
+    bones: Vec<Bone>,
+    options: AutoOptions,
+}
+
+impl AutoRequest {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        positions: &Bound<'_, PyAny>,
+        triangles: &Bound<'_, PyAny>,
+        heads: &Bound<'_, PyAny>,
+        tails: &Bound<'_, PyAny>,
+        resolution: Option<&Bound<'_, PyAny>>,
+        falloff: Option<&Bound<'_, PyAny>>,
+        max_influences: Option<&Bound<'_, PyAny>>,
+        smoothing: Option<&Bound<'_, PyAny>>,
+        mirror: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
         let defaults = AutoOptions::default();
         let resolution = args::or(resolution, defaults.resolution as i64, |o| {
             args::int(o, "resolution", weights::MIN_RESOLUTION as i64, weights::MAX_RESOLUTION as i64)
@@ -149,18 +190,23 @@ fn automatic_weights<'py>(
             _ => None,
         };
         let options = AutoOptions { resolution, falloff, max_influences, smoothing, mirror };
-        let points = as_points(pos.as_slice()?);
-        let result = with_progress(py, progress, "automatic_weights", |p| {
-            weights::automatic_weights(points, &tris, &bones, &options, p)
-        })?;
-        let report = PyDict::new(py);
-        report.set_item("unreached", result.unreached)?;
-        report.set_item("outside_bones", PyArray1::from_vec(py, result.outside_bones))?;
-        report.set_item("grid", PyTuple::new(py, result.grid)?)?;
-        report.set_item("solid_voxels", result.solid_voxels)?;
-        let influences = Bound::new(py, PyInfluences::wrap(result.influences))?;
-        PyTuple::new(py, [influences.into_any(), report.into_any()])
-    })
+        Ok(Self { positions: as_points(pos.as_slice()?).to_vec(), triangles: tris, bones, options })
+    }
+
+    fn run(&self, progress: &mut dyn FnMut(usize, usize) -> bool) -> Result<AutoWeights, WeightsError> {
+        weights::automatic_weights(&self.positions, &self.triangles, &self.bones, &self.options, progress)
+    }
+}
+
+/// `(influences, report)` as `automatic_weights` returns them.
+fn auto_output<'py>(py: Python<'py>, result: &AutoWeights) -> PyResult<Bound<'py, PyTuple>> {
+    let report = PyDict::new(py);
+    report.set_item("unreached", result.unreached)?;
+    report.set_item("outside_bones", PyArray1::from_vec(py, result.outside_bones.clone()))?;
+    report.set_item("grid", PyTuple::new(py, result.grid)?)?;
+    report.set_item("solid_voxels", result.solid_voxels)?;
+    let influences = Bound::new(py, PyInfluences::wrap(result.influences.clone()))?;
+    PyTuple::new(py, [influences.into_any(), report.into_any()])
 }
 
 /// Transfers skin weights from a body to clothing (Abdrashitov et al., "Robust Skin Weights
@@ -201,6 +247,47 @@ fn transfer_weights<'py>(
 ) -> PyResult<Bound<'py, PyTuple>> {
     guard(|| {
         let py = body_positions.py();
+        let request = TransferRequest::new(
+            body_positions,
+            body_triangles,
+            body_influences,
+            cloth_positions,
+            cloth_triangles,
+            max_distance,
+            max_angle,
+            flipped_normals,
+            smoothing,
+            max_influences,
+        )?;
+        let result = with_progress(py, progress, "transfer_weights", |p| request.run(p))?;
+        transfer_output(py, &result)
+    })
+}
+
+/// `transfer_weights`' arguments, checked and owned (a job's thread takes them).
+struct TransferRequest {
+    body_positions: Vec<[f32; 3]>,
+    body_triangles: Vec<[u32; 3]>,
+    body_influences: Influences,
+    cloth_positions: Vec<[f32; 3]>,
+    cloth_triangles: Vec<[u32; 3]>,
+    options: TransferOptions,
+}
+
+impl TransferRequest {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        body_positions: &Bound<'_, PyAny>,
+        body_triangles: &Bound<'_, PyAny>,
+        body_influences: &Bound<'_, PyAny>,
+        cloth_positions: &Bound<'_, PyAny>,
+        cloth_triangles: &Bound<'_, PyAny>,
+        max_distance: Option<&Bound<'_, PyAny>>,
+        max_angle: Option<&Bound<'_, PyAny>>,
+        flipped_normals: Option<&Bound<'_, PyAny>>,
+        smoothing: Option<&Bound<'_, PyAny>>,
+        max_influences: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
         let defaults = TransferOptions::default();
         let max_distance = match max_distance {
             Some(d) if !d.is_none() => Some(args::float_in(d, "max_distance", 0.0, f32::MAX)?),
@@ -227,21 +314,194 @@ fn transfer_weights<'py>(
         let bt = named_triangle_indices(body_triangles, "body_triangles")?;
         let cp = arrays::readonly::<f32>(cloth_positions, "cloth_positions", &[None, Some(3)], &["V"])?;
         let ct = named_triangle_indices(cloth_triangles, "cloth_triangles")?;
-        let options = TransferOptions { max_distance, max_angle, flipped_normals, smoothing, max_influences };
-        let (bpts, cpts) = (as_points(bp.as_slice()?), as_points(cp.as_slice()?));
-        let result = with_progress(py, progress, "transfer_weights", |p| {
-            weights::transfer_weights(bpts, &bt, infl, cpts, &ct, &options, p)
+        Ok(Self {
+            body_positions: as_points(bp.as_slice()?).to_vec(),
+            body_triangles: bt,
+            body_influences: infl.clone(),
+            cloth_positions: as_points(cp.as_slice()?).to_vec(),
+            cloth_triangles: ct,
+            options: TransferOptions { max_distance, max_angle, flipped_normals, smoothing, max_influences },
+        })
+    }
+
+    fn run(&self, progress: &mut dyn FnMut(usize, usize) -> bool) -> Result<Transferred, WeightsError> {
+        weights::transfer_weights(
+            &self.body_positions,
+            &self.body_triangles,
+            &self.body_influences,
+            &self.cloth_positions,
+            &self.cloth_triangles,
+            &self.options,
+            progress,
+        )
+    }
+}
+
+/// `(influences, report)` as `transfer_weights` returns them.
+fn transfer_output<'py>(py: Python<'py>, result: &Transferred) -> PyResult<Bound<'py, PyTuple>> {
+    let report = PyDict::new(py);
+    let matched_count = result.matched.iter().filter(|&&m| m).count();
+    report.set_item("matched", PyArray1::from_vec(py, result.matched.clone()))?;
+    report.set_item("matched_count", matched_count)?;
+    report.set_item("inpainted", result.inpainted)?;
+    report.set_item("from_nearest", result.from_nearest)?;
+    report.set_item("max_distance", result.max_distance)?;
+    report.set_item("iterations", result.iterations)?;
+    let influences = Bound::new(py, PyInfluences::wrap(result.influences.clone()))?;
+    PyTuple::new(py, [influences.into_any(), report.into_any()])
+}
+
+/// What a weights job computes: the result of `automatic_weights` or of `transfer_weights`.
+enum WeightsResult {
+    Automatic(AutoWeights),
+    Transfer(Transferred),
+}
+
+/// :func:`automatic_weights` or :func:`transfer_weights` on a thread of dqskin's own, started
+/// at once, that never runs Python nor holds the GIL (for hosts such as Blender, where a Python
+/// thread running beside the host's own code is a hazard): made by :func:`automatic_weights_job`
+/// and :func:`transfer_weights_job`, with the same arguments but ``progress``. The arguments'
+/// types and shapes are checked at once and the arrays copied; what the computation itself
+/// refuses (a triangle out of range, a resolution that needs too much memory) is raised by
+/// ``result()``. Read ``done``/``total``, ``cancel()``, and take ``(influences, report)`` with
+/// ``result()`` once ``finished``. Dropping a running job cancels it.
+#[pyclass(name = "WeightsJob", module = "dqskin", frozen)]
+pub struct PyWeightsJob {
+    task: Arc<Task<WeightsResult>>,
+    what: &'static str,
+}
+
+impl Drop for PyWeightsJob {
+    fn drop(&mut self) {
+        self.task.cancel();
+    }
+}
+
+impl PyWeightsJob {
+    fn start(
+        what: &'static str,
+        run: impl FnOnce(&mut dyn FnMut(usize, usize) -> bool) -> Result<WeightsResult, WeightsError> + Send + 'static,
+    ) -> PyResult<Self> {
+        let task = Task::spawn("dqskin weights", move |reports| {
+            match run(&mut |done, total| reports.progress(done, total)) {
+                Ok(result) => Outcome::Done(result),
+                Err(WeightsError::Cancelled) => Outcome::Cancelled,
+                Err(e) => Outcome::Failed(e.to_string()),
+            }
         })?;
-        let report = PyDict::new(py);
-        let matched_count = result.matched.iter().filter(|&&m| m).count();
-        report.set_item("matched", PyArray1::from_vec(py, result.matched))?;
-        report.set_item("matched_count", matched_count)?;
-        report.set_item("inpainted", result.inpainted)?;
-        report.set_item("from_nearest", result.from_nearest)?;
-        report.set_item("max_distance", result.max_distance)?;
-        report.set_item("iterations", result.iterations)?;
-        let influences = Bound::new(py, PyInfluences::wrap(result.influences))?;
-        PyTuple::new(py, [influences.into_any(), report.into_any()])
+        Ok(Self { task, what })
+    }
+}
+
+#[pymethods]
+impl PyWeightsJob {
+    /// Units of work done so far (of ``total``).
+    #[getter]
+    fn done(&self) -> usize {
+        self.task.done()
+    }
+
+    /// Units of work in all.
+    #[getter]
+    fn total(&self) -> usize {
+        self.task.total()
+    }
+
+    /// Whether the thread has ended (with the weights, an error, or cancelled).
+    #[getter]
+    fn finished(&self) -> bool {
+        self.task.finished()
+    }
+
+    /// Asks the thread to stop at its next step; ``result()`` then raises :class:`Cancelled`
+    /// unless the weights were already complete.
+    fn cancel(&self) {
+        self.task.cancel();
+    }
+
+    /// Waits (the GIL released) until the thread ends or ``timeout`` seconds pass; returns
+    /// ``finished``. Ctrl-C stops the wait (``KeyboardInterrupt``), not the job.
+    #[pyo3(signature = (timeout = None))]
+    fn wait(&self, py: Python<'_>, timeout: Option<&Bound<'_, PyAny>>) -> PyResult<bool> {
+        guard(|| self.task.wait(py, timeout))
+    }
+
+    /// ``(influences, report)`` as the function returns them (waits for the thread if it is
+    /// still running). Raises :class:`Cancelled` if it was cancelled, ``ValueError`` if the
+    /// inputs could not give weights.
+    fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        guard(|| {
+            self.task.with_result(py, self.what, |result| match result {
+                WeightsResult::Automatic(r) => auto_output(py, r),
+                WeightsResult::Transfer(r) => transfer_output(py, r),
+            })
+        })
+    }
+}
+
+/// :func:`automatic_weights` as a :class:`WeightsJob` (the same arguments but ``progress``).
+#[pyfunction]
+#[pyo3(signature = (positions, triangles, heads, tails, *, resolution = None, falloff = None, max_influences = None,
+    smoothing = None, mirror = None))]
+#[allow(clippy::too_many_arguments)]
+fn automatic_weights_job(
+    positions: &Bound<'_, PyAny>,
+    triangles: &Bound<'_, PyAny>,
+    heads: &Bound<'_, PyAny>,
+    tails: &Bound<'_, PyAny>,
+    resolution: Option<&Bound<'_, PyAny>>,
+    falloff: Option<&Bound<'_, PyAny>>,
+    max_influences: Option<&Bound<'_, PyAny>>,
+    smoothing: Option<&Bound<'_, PyAny>>,
+    mirror: Option<&Bound<'_, PyAny>>,
+) -> PyResult<PyWeightsJob> {
+    guard(|| {
+        let request = AutoRequest::new(
+            positions,
+            triangles,
+            heads,
+            tails,
+            resolution,
+            falloff,
+            max_influences,
+            smoothing,
+            mirror,
+        )?;
+        PyWeightsJob::start("automatic_weights", move |p| request.run(p).map(WeightsResult::Automatic))
+    })
+}
+
+/// :func:`transfer_weights` as a :class:`WeightsJob` (the same arguments but ``progress``).
+#[pyfunction]
+#[pyo3(signature = (body_positions, body_triangles, body_influences, cloth_positions, cloth_triangles, *,
+    max_distance = None, max_angle = None, flipped_normals = None, smoothing = None, max_influences = None))]
+#[allow(clippy::too_many_arguments)]
+fn transfer_weights_job(
+    body_positions: &Bound<'_, PyAny>,
+    body_triangles: &Bound<'_, PyAny>,
+    body_influences: &Bound<'_, PyAny>,
+    cloth_positions: &Bound<'_, PyAny>,
+    cloth_triangles: &Bound<'_, PyAny>,
+    max_distance: Option<&Bound<'_, PyAny>>,
+    max_angle: Option<&Bound<'_, PyAny>>,
+    flipped_normals: Option<&Bound<'_, PyAny>>,
+    smoothing: Option<&Bound<'_, PyAny>>,
+    max_influences: Option<&Bound<'_, PyAny>>,
+) -> PyResult<PyWeightsJob> {
+    guard(|| {
+        let request = TransferRequest::new(
+            body_positions,
+            body_triangles,
+            body_influences,
+            cloth_positions,
+            cloth_triangles,
+            max_distance,
+            max_angle,
+            flipped_normals,
+            smoothing,
+            max_influences,
+        )?;
+        PyWeightsJob::start("transfer_weights", move |p| request.run(p).map(WeightsResult::Transfer))
     })
 }
 
@@ -255,6 +515,9 @@ fn mirrored_bone_name(name: &Bound<'_, PyAny>) -> PyResult<Option<String>> {
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(automatic_weights, m)?)?;
     m.add_function(wrap_pyfunction!(transfer_weights, m)?)?;
+    m.add_function(wrap_pyfunction!(automatic_weights_job, m)?)?;
+    m.add_function(wrap_pyfunction!(transfer_weights_job, m)?)?;
+    m.add_class::<PyWeightsJob>()?;
     m.add_function(wrap_pyfunction!(mirrored_bone_name, m)?)?;
     Ok(())
 }

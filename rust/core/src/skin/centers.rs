@@ -183,7 +183,6 @@ fn update(
     progress: &mut dyn FnMut(usize, usize) -> bool,
     interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<(Centers, Option<CenterSums>), SkinError> {
-    check_previous(influences, previous)?;
     let simd = Simd::detect();
     let tolerance = Some(cells::TOLERANCE);
     centers_counted_since(
@@ -200,6 +199,34 @@ fn update(
         interrupted,
     )
     .map(|(c, _, k)| (c, k))
+}
+
+/// The errors the centers' computation would return on these inputs (lengths, σ, non-finite
+/// positions, triangles out of range, `previous` of other vertices), found before any work: a
+/// caller that runs the computation elsewhere (the Python module's `CentersJob`) refuses bad
+/// input at once.
+pub fn check_centers_inputs(
+    positions: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    influences: &Influences,
+    sigma: f32,
+    previous: Option<PreviousCenters<'_>>,
+) -> Result<(), SkinError> {
+    let n = influences.vertex_count();
+    if positions.len() != n {
+        return Err(SkinError::LengthMismatch { what: "positions", expected: n, got: positions.len() });
+    }
+    if !(sigma > 0.0 && sigma.is_finite()) {
+        return Err(SkinError::InvalidSigma(sigma));
+    }
+    if let Some(index) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(SkinError::NotFinite { what: "positions", index });
+    }
+    super::check_triangles(triangles, n)?;
+    match previous {
+        Some(p) => check_previous(influences, p),
+        None => Ok(()),
+    }
 }
 
 fn check_previous(influences: &Influences, previous: PreviousCenters<'_>) -> Result<(), SkinError> {
@@ -268,17 +295,8 @@ pub(super) fn centers_counted_since(
     progress: &mut dyn FnMut(usize, usize) -> bool,
     interrupted: &mut dyn FnMut() -> bool,
 ) -> Result<(Centers, usize, Option<CenterSums>), SkinError> {
+    check_centers_inputs(positions, triangles, influences, sigma, previous)?;
     let n = influences.vertex_count();
-    if positions.len() != n {
-        return Err(SkinError::LengthMismatch { what: "positions", expected: n, got: positions.len() });
-    }
-    if !(sigma > 0.0 && sigma.is_finite()) {
-        return Err(SkinError::InvalidSigma(sigma));
-    }
-    if let Some(index) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-        return Err(SkinError::NotFinite { what: "positions", index });
-    }
-    super::check_triangles(triangles, n)?;
     let mut check = || if interrupted() { Err(SkinError::Cancelled) } else { Ok(()) };
     check()?;
     let weights = WeightVectors::new(influences);

@@ -47,8 +47,8 @@ pub use bbone::{
 pub use calibration::set_kernel_copy;
 pub use centers::{
     centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_update,
-    centers_of_rotation_update_keeping, centers_of_rotation_with_progress, CenterSums, Centers, PreviousCenters,
-    DEFAULT_SIGMA,
+    centers_of_rotation_update_keeping, centers_of_rotation_with_progress, check_centers_inputs, CenterSums, Centers,
+    PreviousCenters, DEFAULT_SIGMA,
 };
 pub use envelope::{distance_factor, Effective, Envelope};
 pub use groups::{armature_spaces, deform_group_weights, DeformGroups};

@@ -1,0 +1,153 @@
+//! Long computations on a thread of dqskin's own that never runs Python nor holds the GIL
+//! (`CentersJob`, `AutomaticWeightsJob`, `TransferWeightsJob`). A host such as Blender runs its
+//! own code (operators, evaluation, the UI) with the GIL released; a Python thread running then
+//! is a hazard there, so the work, its progress and its cancellation live in Rust and the
+//! caller polls from its own thread.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+
+use crate::args;
+use crate::skinning::Cancelled;
+
+/// How a task ended.
+pub(crate) enum Outcome<T> {
+    Done(T),
+    /// Its inputs could not give a result (the message of the `ValueError`).
+    Failed(String),
+    Cancelled,
+    Panicked(String),
+}
+
+/// A task's progress, cancel flag and outcome, shared by its thread and its owner.
+pub(crate) struct Task<T> {
+    done: AtomicUsize,
+    total: AtomicUsize,
+    cancel: AtomicBool,
+    outcome: Mutex<Option<Outcome<T>>>,
+    ended: Condvar,
+}
+
+/// What a task's work gets: `progress(done, total)` (false once cancelled) and `cancelled()`.
+pub(crate) struct Reports<'a, T> {
+    task: &'a Task<T>,
+}
+
+impl<T> Reports<'_, T> {
+    pub fn progress(&self, done: usize, total: usize) -> bool {
+        self.task.total.store(total, Ordering::Relaxed);
+        self.task.done.store(done, Ordering::Relaxed);
+        !self.cancelled()
+    }
+
+    pub fn cancelled(&self) -> bool {
+        self.task.cancel.load(Ordering::Relaxed)
+    }
+}
+
+impl<T: Send + 'static> Task<T> {
+    /// Starts `work` on a thread named `name`; a panic in it becomes `Outcome::Panicked`.
+    pub fn spawn(name: &str, work: impl FnOnce(&Reports<'_, T>) -> Outcome<T> + Send + 'static) -> PyResult<Arc<Self>> {
+        let task = Arc::new(Self {
+            done: AtomicUsize::new(0),
+            total: AtomicUsize::new(1),
+            cancel: AtomicBool::new(false),
+            outcome: Mutex::new(None),
+            ended: Condvar::new(),
+        });
+        let theirs = Arc::clone(&task);
+        std::thread::Builder::new()
+            .name(name.into())
+            .spawn(move || {
+                let reports = Reports { task: &theirs };
+                let outcome = catch_unwind(AssertUnwindSafe(|| work(&reports))).unwrap_or_else(|payload| {
+                    let msg = payload
+                        .downcast_ref::<&str>()
+                        .map(|s| s.to_string())
+                        .or_else(|| payload.downcast_ref::<String>().cloned())
+                        .unwrap_or_else(|| "unknown panic".into());
+                    Outcome::Panicked(msg)
+                });
+                *theirs.outcome() = Some(outcome);
+                theirs.ended.notify_all();
+            })
+            .map_err(|e| PyRuntimeError::new_err(format!("cannot start a thread for {name}: {e}")))?;
+        Ok(task)
+    }
+}
+
+impl<T: Send> Task<T> {
+    fn outcome(&self) -> MutexGuard<'_, Option<Outcome<T>>> {
+        self.outcome.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    pub fn done(&self) -> usize {
+        self.done.load(Ordering::Relaxed)
+    }
+
+    pub fn total(&self) -> usize {
+        self.total.load(Ordering::Relaxed).max(1)
+    }
+
+    pub fn finished(&self) -> bool {
+        self.outcome().is_some()
+    }
+
+    pub fn cancel(&self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
+
+    /// Waits (the GIL released) until the thread ends or `timeout` seconds pass (None: no
+    /// limit), in slices so that Ctrl-C stops the wait (not the task); returns `finished`.
+    pub fn wait(&self, py: Python<'_>, timeout: Option<&Bound<'_, PyAny>>) -> PyResult<bool> {
+        let timeout = match timeout {
+            Some(t) if !t.is_none() => {
+                let t = args::float(t, "timeout")?;
+                let fits = (t >= 0.0 && t.is_finite()).then(|| Duration::try_from_secs_f32(t).ok()).flatten();
+                let Some(t) = fits.filter(|t| Instant::now().checked_add(*t).is_some()) else {
+                    return Err(PyValueError::new_err(format!(
+                        "timeout must be a finite number of seconds >= 0 (None: no limit), got {t}"
+                    )));
+                };
+                Some(t)
+            }
+            _ => None,
+        };
+        let deadline = timeout.map(|t| Instant::now() + t);
+        loop {
+            let slice = Duration::from_millis(100);
+            let step = deadline.map_or(slice, |d| d.saturating_duration_since(Instant::now()).min(slice));
+            let finished = py.detach(|| {
+                let guard = self.outcome();
+                let (guard, _) =
+                    self.ended.wait_timeout_while(guard, step, |o| o.is_none()).unwrap_or_else(|p| p.into_inner());
+                guard.is_some()
+            });
+            if finished || deadline.is_some_and(|d| Instant::now() >= d) {
+                return Ok(finished);
+            }
+            py.check_signals()?;
+        }
+    }
+
+    /// Waits for the end, then gives `read` the result: `Cancelled` if the task was cancelled
+    /// (`what` names it), `ValueError` if it failed, `RuntimeError` for a panic.
+    pub fn with_result<R>(&self, py: Python<'_>, what: &str, read: impl FnOnce(&T) -> PyResult<R>) -> PyResult<R> {
+        self.wait(py, None)?;
+        let outcome = self.outcome();
+        match outcome.as_ref() {
+            Some(Outcome::Done(result)) => read(result),
+            Some(Outcome::Cancelled) => Err(Cancelled::new_err(format!("{what} was cancelled"))),
+            Some(Outcome::Failed(e)) => Err(PyValueError::new_err(e.clone())),
+            Some(Outcome::Panicked(msg)) => {
+                Err(PyRuntimeError::new_err(format!("internal error in dqskin (please report it): {msg}")))
+            }
+            None => unreachable!("wait returned before the thread ended"),
+        }
+    }
+}

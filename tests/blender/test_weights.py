@@ -222,6 +222,67 @@ def test_the_worker_runs_the_steps_in_order_and_reports_progress(dq_skin):
     assert seen == sorted(seen) and all(0.0 <= f <= 1.0 for f in seen) and worker.fraction() == 1.0
 
 
+class FakeWindowManager:
+    """What the modal operator calls on `context.window_manager` (no window in the bpy module)."""
+
+    def __init__(self):
+        self.calls = []
+
+    def __getattr__(self, name):
+        return lambda *args, **kwargs: self.calls.append(name)
+
+
+def modal_operator(dq_skin, plan):
+    """The modal path of a BackgroundOperator (what the UI runs), on stand-ins for the operator
+    instance, the context and the events: the bpy module has no window to invoke it in."""
+    from types import SimpleNamespace
+
+    op_class = dq_skin.ops.background.BackgroundOperator
+    reports = []
+    op = SimpleNamespace(_worker=dq_skin.ops.background.Worker(plan), _timer=None, reports=reports)
+    op.report = lambda kind, text: reports.append((set(kind), text))
+    op._end = lambda context: op_class._end(op, context)
+    op._finish = lambda context, plan, results: op_class._finish(op, context, plan, results)
+    context = SimpleNamespace(window_manager=FakeWindowManager(), workspace=SimpleNamespace(status_text_set=lambda text: None))
+    return op, context, lambda kind, value="NOTHING": op_class.modal(op, context, SimpleNamespace(type=kind, value=value))
+
+
+def test_the_modal_operator_polls_the_jobs_and_esc_cancels_them(dq_skin):
+    weights_io = dq_skin.blender.weights_io
+    fig, arm = figure_mesh(), armature()
+    rest, bones = weights_io.rest_mesh(fig, arm), weights_io.rest_bones(arm)
+    finished = []
+
+    def start(resolution):
+        return lambda: dq_skin.dqskin.automatic_weights_job(rest.positions, rest.triangles, bones.heads, bones.tails, resolution=resolution)
+
+    plan = dq_skin.ops.background.Plan(
+        [(start(48), 1), (start(64), 1)], lambda context, results: finished.append(results) or "done", "test"
+    )
+    op, context, event = modal_operator(dq_skin, plan)
+    assert event("MOUSEMOVE") == {"PASS_THROUGH"}  # the UI stays live
+    end = time.monotonic() + 60
+    while (state := event("TIMER")) == {"RUNNING_MODAL"}:
+        assert time.monotonic() < end
+        time.sleep(0.02)
+    assert state == {"FINISHED"} and len(finished) == 1 and len(finished[0]) == 2
+    assert op.reports == [({"INFO"}, "done")]
+    assert {"progress_update", "event_timer_remove", "progress_end"} <= set(context.window_manager.calls)
+
+    plan = dq_skin.ops.background.Plan([(start(256), 1), (start(256), 1)], lambda context, results: finished.append(results) or "", "test")
+    op, context, event = modal_operator(dq_skin, plan)
+    assert event("TIMER") == {"RUNNING_MODAL"}  # the first job runs
+    end = time.monotonic() + 60
+    state = event("ESC", "PRESS")
+    while state == {"RUNNING_MODAL"}:
+        assert time.monotonic() < end
+        time.sleep(0.02)
+        state = event("TIMER")
+    assert state == {"CANCELLED"} and len(finished) == 1  # finish never ran again
+    assert op.reports == [({"WARNING"}, "test cancelled, nothing changed")]
+    assert not fig.vertex_groups and fig.parent is None
+
+
 def test_transfer_equals_the_body_at_matched_points_and_fills_the_rest(dq_skin):
     from mathutils.bvhtree import BVHTree
 

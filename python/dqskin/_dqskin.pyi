@@ -1,7 +1,7 @@
 """Type stubs for the compiled core of dqskin (see the package docstring for conventions)."""
 
 from collections.abc import Callable, Sequence
-from typing import Literal, SupportsFloat, TypedDict, final, overload
+from typing import Any, Literal, SupportsFloat, TypedDict, final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -286,41 +286,6 @@ def skin_many(jobs: Sequence[SkinJob]) -> list[str | None]:
     """Runs the jobs at once, in parallel across meshes; returns None or the error message per
     job (a failed job's ``out`` is untouched)."""
 
-class CentersJob:
-    """:func:`centers_of_rotation` on a thread of dqskin's own, started at once, that never runs
-    Python nor holds the GIL (for hosts such as Blender, where a Python thread running beside
-    the host's own code is a hazard). The arguments are checked now (bad input raises here) and
-    copied. Read ``done``/``total``, ``cancel()``, and take the centers with ``result()`` once
-    ``finished``; ``result()`` waits for the thread if needed, raises :class:`Cancelled` if it
-    was cancelled, and hands what an update (``previous``) kept to ``influences`` for the next.
-    Dropping a running job cancels it."""
-
-    def __init__(
-        self,
-        positions: F32Array,
-        triangles: IntArray,
-        influences: Influences,
-        sigma: float = 0.1,
-        *,
-        previous: tuple[Influences, F32Array | tuple[F32Array, npt.NDArray[np.bool_]]] | None = None,
-    ) -> None: ...
-    @property
-    def done(self) -> int: ...
-    @property
-    def total(self) -> int: ...
-    @property
-    def vertices(self) -> int: ...
-    @property
-    def finished(self) -> bool: ...
-    def cancel(self) -> None: ...
-    def wait(self, timeout: float | None = None) -> bool:
-        """Waits until the thread ends or ``timeout`` seconds pass (Ctrl-C stops the wait, not
-        the job); returns ``finished``."""
-    @overload
-    def result(self, *, with_mask: Literal[False] = False) -> F32Array: ...
-    @overload
-    def result(self, *, with_mask: Literal[True]) -> tuple[F32Array, npt.NDArray[np.bool_]]: ...
-
 @overload
 def centers_of_rotation(
     positions: F32Array,
@@ -420,12 +385,11 @@ def transfer_weights(
     default 5 % of the clothing's bounding-box diagonal, and ``max_angle`` degrees; the rest
     filled by a Laplacian-energy solve; loose parts with no match take the nearest match)."""
 
-class WeightsJob:
-    """:func:`automatic_weights` or :func:`transfer_weights` on a thread of dqskin's own,
-    started at once, that never runs Python nor holds the GIL (made by
-    :func:`automatic_weights_job` and :func:`transfer_weights_job`). The arguments' types and
-    shapes are checked at once and the arrays copied; what the computation itself refuses is
-    raised by ``result()``. Dropping a running job cancels it."""
+class Job:
+    """A long computation on a thread of dqskin's own that never runs Python nor holds the GIL
+    (for hosts such as Blender, where a Python thread running beside the host's own code is a
+    hazard), started by :func:`centers_of_rotation_job`, :func:`automatic_weights_job` or
+    :func:`transfer_weights_job`. Dropping a running job cancels it."""
 
     @property
     def done(self) -> int: ...
@@ -433,13 +397,28 @@ class WeightsJob:
     def total(self) -> int: ...
     @property
     def finished(self) -> bool: ...
-    def cancel(self) -> None: ...
+    def cancel(self) -> None:
+        """Stops the thread at its next step; ``result()`` then raises :class:`Cancelled`
+        unless the work was already complete."""
     def wait(self, timeout: float | None = None) -> bool:
         """Waits until the thread ends or ``timeout`` seconds pass (Ctrl-C stops the wait, not
         the job); returns ``finished``."""
-    def result(self) -> tuple[Influences, AutomaticWeightsReport | TransferReport]:
-        """``(influences, report)`` as the function returns them (waits if needed); raises
-        :class:`Cancelled` if the job was cancelled."""
+    def result(self) -> Any:
+        """What the function would have returned, bit for bit (waits if needed); raises
+        :class:`Cancelled` if the job was cancelled, ``ValueError`` if its inputs gave none."""
+
+def centers_of_rotation_job(
+    positions: F32Array,
+    triangles: IntArray,
+    influences: Influences,
+    sigma: float = 0.1,
+    *,
+    with_mask: bool = False,
+    previous: tuple[Influences, F32Array | tuple[F32Array, npt.NDArray[np.bool_]]] | None = None,
+) -> Job:
+    """:func:`centers_of_rotation` as a :class:`Job` (the same arguments but ``progress``; bad
+    input raises here, the arrays are copied); an update (``previous``) hands what it kept to
+    ``influences`` when ``result()`` is taken."""
 
 def automatic_weights_job(
     positions: F32Array,
@@ -452,8 +431,9 @@ def automatic_weights_job(
     max_influences: int = 4,
     smoothing: int = 0,
     mirror: Sequence[str] | None = None,
-) -> WeightsJob:
-    """:func:`automatic_weights` as a :class:`WeightsJob` (the same arguments but ``progress``)."""
+) -> Job:
+    """:func:`automatic_weights` as a :class:`Job` (the same arguments but ``progress``; types
+    and shapes are checked here, what the computation refuses is raised by ``result()``)."""
 
 def transfer_weights_job(
     body_positions: F32Array,
@@ -467,8 +447,8 @@ def transfer_weights_job(
     flipped_normals: bool = False,
     smoothing: int = 0,
     max_influences: int = 4,
-) -> WeightsJob:
-    """:func:`transfer_weights` as a :class:`WeightsJob` (the same arguments but ``progress``)."""
+) -> Job:
+    """:func:`transfer_weights` as a :class:`Job` (as :func:`automatic_weights_job`)."""
 
 def mirrored_bone_name(name: str) -> str | None:
     """The bone name of the other side (``hand.L`` → ``hand.R``), or None."""

@@ -159,10 +159,10 @@ def test_centers_are_computed_once_and_kept_across_duplicates_and_reloads(dq_ski
 
 
 def hold_jobs(monkeypatch, centers) -> list:
-    """From now on each background computation is a real `dqskin.CentersJob` whose end is held
+    """From now on each background computation is a real `dqskin.centers_of_rotation_job` whose end is held
     back until its `release()` (surely still running when the test looks, or cancels it); returns
     the list of those made, in order."""
-    real = centers.dqskin.CentersJob
+    real = centers.dqskin.centers_of_rotation_job
     made = []
 
     class Held:
@@ -185,7 +185,7 @@ def hold_jobs(monkeypatch, centers) -> list:
         def result(self, **kwargs):
             return self.real.result(**kwargs)
 
-    monkeypatch.setattr(centers.dqskin, "CentersJob", Held)
+    monkeypatch.setattr(centers.dqskin, "centers_of_rotation_job", Held)
     return made
 
 

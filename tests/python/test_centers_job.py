@@ -1,63 +1,41 @@
-"""``dqskin.CentersJob``: the centers of rotation computed on a thread of dqskin's own that runs
+"""``dqskin.centers_of_rotation_job``: the centers of rotation computed on a thread of dqskin's own that runs
 no Python (what Blender's add-on uses for large meshes), against ``centers_of_rotation``."""
 
 from __future__ import annotations
 
 import _thread
 import gc
-import os
 import threading
 import time
-from pathlib import Path
 
 import dqskin
 import numpy as np
 import pytest
 from centers_meshes import dense_of, tube
-
-
-def centers_threads() -> int | None:
-    """How many of this process's threads are a CentersJob's (None where /proc is missing)."""
-    tasks = Path(f"/proc/{os.getpid()}/task")
-    if not tasks.is_dir():
-        return None
-    names = []
-    for t in tasks.iterdir():
-        try:
-            names.append((t / "comm").read_text().strip())
-        except OSError:
-            pass  # ended meanwhile
-    return names.count("dqskin centers")
-
-
-def wait_for_no_centers_thread(seconds=5.0) -> None:
-    end = time.monotonic() + seconds
-    while centers_threads() not in (0, None):
-        assert time.monotonic() < end, "a CentersJob thread is still running"
-        time.sleep(0.01)
+from native_threads import threads_named, wait_until_none_named
 
 
 def test_the_job_gives_what_centers_of_rotation_gives_bit_for_bit_and_runs_no_python_thread():
     positions, triangles, influences, _ = tube(rings=40, segments=24, bones=6)
     want, want_mask = dqskin.centers_of_rotation(positions, triangles, influences, with_mask=True)
     python_threads = threading.active_count()
-    job = dqskin.CentersJob(positions, triangles, influences)
+    job = dqskin.centers_of_rotation_job(positions, triangles, influences)
     assert threading.active_count() == python_threads
-    assert job.vertices == len(positions)
     assert job.wait(timeout=30)
     assert job.finished and job.done == job.total > 1
     np.testing.assert_array_equal(job.result(), want)
-    got, mask = job.result(with_mask=True)  # again: the result stays
+    np.testing.assert_array_equal(job.result(), want)  # again: the result stays
+    got, mask = dqskin.centers_of_rotation_job(positions, triangles, influences, with_mask=True).result()
     np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(mask, want_mask)
-    wait_for_no_centers_thread()
+    wait_until_none_named("dqskin centers")
 
 
 def test_the_inputs_are_copied_at_the_start():
     positions, triangles, influences, _ = tube(rings=30, segments=16, bones=5)
     want = dqskin.centers_of_rotation(positions, triangles, influences)
     mine = positions.copy()
-    job = dqskin.CentersJob(mine, triangles.copy(), influences, 0.1)
+    job = dqskin.centers_of_rotation_job(mine, triangles.copy(), influences, 0.1)
     mine[:] = 0.0  # the caller's array changes while the job runs
     np.testing.assert_array_equal(job.result(), want)
 
@@ -74,8 +52,8 @@ def test_an_update_equals_the_full_computation_and_keeps_its_sums_for_the_next()
         after = dqskin.Influences.from_dense(np.tile(np.arange(8), (len(positions), 1)), painted.astype(np.float32), 8)
         full = dqskin.centers_of_rotation(positions, tris, after, with_mask=True)
         bare = after.nbytes
-        job = dqskin.CentersJob(positions, tris, after, previous=(influences, centers))
-        got = job.result(with_mask=True)
+        job = dqskin.centers_of_rotation_job(positions, tris, after, with_mask=True, previous=(influences, centers))
+        got = job.result()
         np.testing.assert_array_equal(got[0], full[0], err_msg=f"stroke {stroke}")
         np.testing.assert_array_equal(got[1], full[1], err_msg=f"stroke {stroke}")
         assert after.nbytes > bare  # result() handed what the update kept to the new weights
@@ -84,29 +62,29 @@ def test_an_update_equals_the_full_computation_and_keeps_its_sums_for_the_next()
 
 def test_cancel_stops_the_thread_at_once_and_result_says_so():
     positions, triangles, influences, _ = tube(rings=700, segments=48, bones=30, seed=2, length=30.0)
-    job = dqskin.CentersJob(positions, triangles, influences)
+    job = dqskin.centers_of_rotation_job(positions, triangles, influences)
     job.cancel()
     start = time.perf_counter()
     assert job.wait(timeout=10)
     assert time.perf_counter() - start < 1.0
     with pytest.raises(dqskin.Cancelled, match="cancelled"):
         job.result()
-    wait_for_no_centers_thread()
+    wait_until_none_named("dqskin centers")
 
 
 def test_a_job_dropped_while_running_stops_its_thread():
     positions, triangles, influences, _ = tube(rings=700, segments=48, bones=30, seed=2, length=30.0)
-    job = dqskin.CentersJob(positions, triangles, influences)
+    job = dqskin.centers_of_rotation_job(positions, triangles, influences)
     del job
     gc.collect()
-    wait_for_no_centers_thread(seconds=2.0)
+    wait_until_none_named("dqskin centers", 2.0)
     small = tube(rings=10, segments=8, bones=3)
-    assert dqskin.CentersJob(*small[:3]).result().shape == (80, 3)  # and the next one works
+    assert dqskin.centers_of_rotation_job(*small[:3]).result().shape == (80, 3)  # and the next one works
 
 
 def test_ctrl_c_stops_the_wait_not_the_job():
     positions, triangles, influences, _ = tube(rings=700, segments=48, bones=30, seed=2, length=30.0)
-    job = dqskin.CentersJob(positions, triangles, influences)
+    job = dqskin.centers_of_rotation_job(positions, triangles, influences)
     timer = threading.Timer(0.05, _thread.interrupt_main)
     timer.start()
     try:
@@ -126,6 +104,7 @@ def test_ctrl_c_stops_the_wait_not_the_job():
         (dict(sigma=0.0), ValueError, ["sigma"]),
         (dict(sigma=float("nan")), ValueError, ["sigma"]),
         (dict(sigma="wide"), TypeError, ["sigma"]),
+        (dict(with_mask=1), TypeError, ["with_mask"]),
         (dict(triangles=np.array([[0, 1, 999]])), ValueError, ["triangles[0]", "999"]),
         (dict(triangles=np.array([[0, 1, -1]])), ValueError, ["triangles"]),
         (dict(triangles=np.zeros((2, 3), np.float32)), TypeError, ["triangles"]),
@@ -141,12 +120,13 @@ def test_bad_input_is_refused_at_the_start(kwargs, error, words):
     positions, triangles, influences, _ = tube(rings=10, segments=8, bones=3)
     args = dict(positions=positions, triangles=triangles, influences=influences)
     args.update(kwargs)
-    before = centers_threads()
+    wait_until_none_named("dqskin centers")  # the threads of earlier tests' jobs have ended
+    before = threads_named("dqskin centers")
     with pytest.raises(error) as e:
-        dqskin.CentersJob(**args)
+        dqskin.centers_of_rotation_job(**args)
     for w in words:
         assert w in str(e.value), str(e.value)
-    assert centers_threads() == before  # no thread started
+    assert threads_named("dqskin centers") == before  # no thread started
 
 
 def test_previous_of_other_vertices_is_refused_at_the_start():
@@ -154,12 +134,12 @@ def test_previous_of_other_vertices_is_refused_at_the_start():
     other = tube(rings=12, segments=8, bones=3)
     centers = dqskin.centers_of_rotation(*other[:3])
     with pytest.raises(ValueError, match="previous"):
-        dqskin.CentersJob(positions, triangles, influences, previous=(other[2], centers))
+        dqskin.centers_of_rotation_job(positions, triangles, influences, previous=(other[2], centers))
 
 
 @pytest.mark.parametrize("timeout, error", [(-1.0, ValueError), (float("nan"), ValueError), (float("inf"), ValueError), ("1", TypeError)])
 def test_bad_timeouts_are_refused(timeout, error):
-    job = dqskin.CentersJob(*tube(rings=10, segments=8, bones=3)[:3])
+    job = dqskin.centers_of_rotation_job(*tube(rings=10, segments=8, bones=3)[:3])
     with pytest.raises(error, match="timeout"):
         job.wait(timeout)
     assert job.wait(timeout=30)

@@ -113,13 +113,12 @@ def catalogue():
             lambda: dict(positions=POS, triangles=TRI, influences=INF, sigma=0.1, with_mask=True),
             [],
         ),
-        "CentersJob": (
-            lambda **kw: dqskin.CentersJob(**kw).result(),  # waits: no thread outlives its example
-            lambda: dict(positions=POS, triangles=TRI, influences=INF, sigma=0.1),
+        "centers_of_rotation_job": (
+            lambda **kw: dqskin.centers_of_rotation_job(**kw).result(),  # waits: no thread outlives its example
+            lambda: dict(positions=POS, triangles=TRI, influences=INF, sigma=0.1, with_mask=True),
             [],
         ),
-        "CentersJob.wait": (lambda **kw: dqskin.CentersJob(POS, TRI, INF).wait(**kw), lambda: dict(timeout=5.0), []),
-        "CentersJob.result": (lambda **kw: dqskin.CentersJob(POS, TRI, INF).result(**kw), lambda: dict(with_mask=True), []),
+        "Job.wait": (lambda **kw: dqskin.centers_of_rotation_job(POS, TRI, INF).wait(**kw), lambda: dict(timeout=5.0), []),
         "skin_many": (dqskin.skin_many, lambda: dict(jobs=[job(out=out()), job(method="dqs")]), []),
         "SkinJob": (
             dqskin.SkinJob,
@@ -269,11 +268,6 @@ def catalogue():
     # The same computations as jobs on the core's thread (result() waits: no thread outlives its example).
     c["automatic_weights_job"] = (lambda **kw: dqskin.automatic_weights_job(**kw).result(), c["automatic_weights"][1], [])
     c["transfer_weights_job"] = (lambda **kw: dqskin.transfer_weights_job(**kw).result(), c["transfer_weights"][1], [])
-    c["WeightsJob.wait"] = (
-        lambda **kw: dqskin.transfer_weights_job(**c["transfer_weights"][1]()).wait(**kw),
-        lambda: dict(timeout=5.0),
-        [],
-    )
     return c
 
 

@@ -1,39 +1,17 @@
-"""``dqskin.WeightsJob``: automatic weights and weight transfer on a thread of dqskin's own that
+"""``dqskin.automatic_weights_job`` and ``transfer_weights_job``: automatic weights and weight transfer on a thread of dqskin's own that
 runs no Python (what Blender's add-on uses), against the functions themselves."""
 
 from __future__ import annotations
 
 import gc
-import os
 import threading
 import time
-from pathlib import Path
 
 import dqskin
 import numpy as np
 import pytest
 from centers_meshes import tube
-
-
-def weights_threads() -> int | None:
-    """How many of this process's threads are a WeightsJob's (None where /proc is missing)."""
-    tasks = Path(f"/proc/{os.getpid()}/task")
-    if not tasks.is_dir():
-        return None
-    names = []
-    for t in tasks.iterdir():
-        try:
-            names.append((t / "comm").read_text().strip())
-        except OSError:
-            pass  # ended meanwhile
-    return names.count("dqskin weights")
-
-
-def wait_for_no_weights_thread(seconds=5.0) -> None:
-    end = time.monotonic() + seconds
-    while weights_threads() not in (0, None):
-        assert time.monotonic() < end, "a WeightsJob thread is still running"
-        time.sleep(0.01)
+from native_threads import threads_named, wait_until_none_named
 
 
 def chain(bones=4, length=3.0):
@@ -63,7 +41,7 @@ def test_automatic_weights_job_gives_what_the_function_gives_and_runs_no_python_
     assert job.wait(timeout=60) and job.finished and job.done == job.total
     same_result(job.result(), want)
     same_result(job.result(), want)  # again: the result stays
-    wait_for_no_weights_thread()
+    wait_until_none_named("dqskin weights")
 
 
 def test_transfer_weights_job_gives_what_the_function_gives():
@@ -94,7 +72,7 @@ def test_cancel_stops_the_thread_and_result_says_so():
     assert time.perf_counter() - start < 2.0
     with pytest.raises(dqskin.Cancelled, match="automatic_weights was cancelled"):
         job.result()
-    wait_for_no_weights_thread()
+    wait_until_none_named("dqskin weights")
 
 
 def test_a_job_dropped_while_running_stops_its_thread():
@@ -103,20 +81,21 @@ def test_a_job_dropped_while_running_stops_its_thread():
     job = dqskin.automatic_weights_job(positions, triangles, heads, tails, resolution=512)
     del job
     gc.collect()
-    wait_for_no_weights_thread(seconds=5.0)
+    wait_until_none_named("dqskin weights", 5.0)
 
 
 def test_bad_types_are_refused_at_the_start_and_what_the_computation_refuses_by_result():
     positions, triangles, _, _ = tube(rings=10, segments=8)
     heads, tails = chain()
-    before = weights_threads()
+    wait_until_none_named("dqskin weights")  # the threads of earlier tests' jobs have ended
+    before = threads_named("dqskin weights")
     with pytest.raises(TypeError, match="positions"):
         dqskin.automatic_weights_job(positions.astype(np.float64), triangles, heads, tails)
     with pytest.raises(ValueError, match="resolution"):
         dqskin.automatic_weights_job(positions, triangles, heads, tails, resolution=4)
     with pytest.raises(TypeError, match="body_influences"):
         dqskin.transfer_weights_job(positions, triangles, "weights", positions, triangles)
-    assert weights_threads() == before  # no thread started
+    assert threads_named("dqskin weights") == before  # no thread started
     bad = triangles.copy()
     bad[0, 0] = 10_000
     with pytest.raises(ValueError, match="triangles") as direct:

@@ -8,7 +8,7 @@ digest of exactly what they depend on:
   (nothing is written into the user's file or mesh).
 
 Small meshes are computed on the spot. Large ones, in an interactive session, on a thread of
-the core's own (`dqskin.CentersJob`: no Python runs there, since Blender runs its operators and
+the core's own (`dqskin.centers_of_rotation_job`: no Python runs there, since Blender runs its operators and
 evaluation with the GIL released and a Python thread running then is a hazard), one at a time,
 while the modifier says so and Blender's own deformation stands in; Blender's thread collects
 the result (the timer, or whoever asks next); the panel shows the progress and can cancel. In
@@ -54,7 +54,7 @@ class Cancelled(Exception):
 
 
 class Job:
-    """A computation on the core's thread (`native`, a `dqskin.CentersJob`), or queued until
+    """A computation on the core's thread (`native`, a `dqskin.centers_of_rotation_job`), or queued until
     another one ends (`native` None); its result is collected in Blender's thread, by the
     first of the timer or a caller asking whether it has `finished`."""
 
@@ -297,7 +297,7 @@ class Centers:
         positions, triangles, influences, previous = job.inputs
         job.inputs = None
         try:
-            job.native = dqskin.CentersJob(positions, triangles, influences, SIGMA, previous=previous)
+            job.native = dqskin.centers_of_rotation_job(positions, triangles, influences, SIGMA, previous=previous)
         except (ValueError, TypeError, RuntimeError) as e:  # reported on the modifier
             job.error, job.collected = f"{type(e).__name__}: {e}", True
 

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Operators whose work takes seconds: Blender data is read first, the computation runs as
-`dqskin` jobs on the core's own thread (`dqskin.WeightsJob`: no Python runs there, since
+`dqskin` jobs on the core's own thread (a `dqskin.Job`: no Python runs there, since
 Blender runs its operators, evaluation and UI with the GIL released and a Python thread running
 beside them is a hazard) while the UI polls their progress and Esc cancels them, and Blender
 data is written only once they have finished. Cancelled or failed, nothing is changed. From

@@ -1,5 +1,5 @@
 //! Long computations on a thread of dqskin's own that never runs Python nor holds the GIL
-//! (`CentersJob`, `AutomaticWeightsJob`, `TransferWeightsJob`). A host such as Blender runs its
+//! (`dqskin.Job`: the centers of rotation, automatic weights, weight transfer). A host such as Blender runs its
 //! own code (operators, evaluation, the UI) with the GIL released; a Python thread running then
 //! is a hazard there, so the work, its progress and its cancellation live in Rust and the
 //! caller polls from its own thread.
@@ -150,4 +150,110 @@ impl<T: Send> Task<T> {
             None => unreachable!("wait returned before the thread ended"),
         }
     }
+}
+
+/// How a finished task's result becomes Python objects (one per kind of job).
+pub(crate) trait Finish: Send + Sync {
+    type Output: Send + 'static;
+    fn task(&self) -> &Task<Self::Output>;
+    /// What cancelling is called in its message (``automatic_weights``, ...).
+    fn what(&self) -> &str;
+    fn convert<'py>(&self, py: Python<'py>, result: &Self::Output) -> PyResult<Bound<'py, PyAny>>;
+}
+
+/// A [`Finish`] with its output type hidden, as the one Python class holds it.
+trait AnyJob: Send + Sync {
+    fn done(&self) -> usize;
+    fn total(&self) -> usize;
+    fn finished(&self) -> bool;
+    fn cancel(&self);
+    fn wait(&self, py: Python<'_>, timeout: Option<&Bound<'_, PyAny>>) -> PyResult<bool>;
+    fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>>;
+}
+
+impl<F: Finish> AnyJob for F {
+    fn done(&self) -> usize {
+        self.task().done()
+    }
+    fn total(&self) -> usize {
+        self.task().total()
+    }
+    fn finished(&self) -> bool {
+        self.task().finished()
+    }
+    fn cancel(&self) {
+        self.task().cancel()
+    }
+    fn wait(&self, py: Python<'_>, timeout: Option<&Bound<'_, PyAny>>) -> PyResult<bool> {
+        self.task().wait(py, timeout)
+    }
+    fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.task().with_result(py, self.what(), |r| self.convert(py, r))
+    }
+}
+
+/// A long computation running on a thread of dqskin's own that never runs Python nor holds
+/// the GIL, started by :func:`centers_of_rotation_job`, :func:`automatic_weights_job` or
+/// :func:`transfer_weights_job` (for hosts such as Blender, where a Python thread running
+/// beside the host's own code is a hazard). Read ``done``/``total``, ``cancel()``, ``wait()``,
+/// and take what the function would have returned with ``result()``. Dropping a running job
+/// cancels it.
+#[pyclass(name = "Job", module = "dqskin", frozen)]
+pub struct PyJob(Box<dyn AnyJob>);
+
+impl PyJob {
+    pub(crate) fn new(finish: impl Finish + 'static) -> Self {
+        Self(Box::new(finish))
+    }
+}
+
+impl Drop for PyJob {
+    fn drop(&mut self) {
+        self.0.cancel();
+    }
+}
+
+#[pymethods]
+impl PyJob {
+    /// Units of work done so far (of ``total``).
+    #[getter]
+    fn done(&self) -> usize {
+        self.0.done()
+    }
+
+    /// Units of work in all (1 until the work has counted them).
+    #[getter]
+    fn total(&self) -> usize {
+        self.0.total()
+    }
+
+    /// Whether the thread has ended (with a result, an error, or cancelled).
+    #[getter]
+    fn finished(&self) -> bool {
+        self.0.finished()
+    }
+
+    /// Asks the thread to stop at its next step (within a fraction of a second); ``result()``
+    /// then raises :class:`Cancelled` unless the work was already complete.
+    fn cancel(&self) {
+        self.0.cancel()
+    }
+
+    /// Waits (the GIL released) until the thread ends or ``timeout`` seconds pass (None: no
+    /// limit); returns ``finished``. Ctrl-C stops the wait (``KeyboardInterrupt``), not the job.
+    #[pyo3(signature = (timeout = None))]
+    fn wait(&self, py: Python<'_>, timeout: Option<&Bound<'_, PyAny>>) -> PyResult<bool> {
+        crate::guard(|| self.0.wait(py, timeout))
+    }
+
+    /// What the function would have returned, the same bit for bit (waits for the thread if it
+    /// is still running). Raises :class:`Cancelled` if the job was cancelled, ``ValueError`` if
+    /// its inputs could not give a result.
+    fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::guard(|| self.0.result(py))
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyJob>()
 }

@@ -79,7 +79,12 @@ fn given<'py>(obj: Option<&Bound<'py, PyAny>>) -> Option<Bound<'py, PyAny>> {
 
 /// `checked`, with a refused shape of an array whose rows follow the influences also saying how
 /// many the influences have (they may be the argument that is wrong).
-fn sized_by_influences<T>(obj: &Bound<'_, PyAny>, rows: usize, what: &str, checked: PyResult<T>) -> PyResult<T> {
+pub(crate) fn sized_by_influences<T>(
+    obj: &Bound<'_, PyAny>,
+    rows: usize,
+    what: &str,
+    checked: PyResult<T>,
+) -> PyResult<T> {
     checked.map_err(|e| {
         let py = obj.py();
         let first = obj.cast::<PyUntypedArray>().ok().and_then(|a| a.shape().first().copied());

@@ -81,6 +81,7 @@ fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     armature::register(m)?;
     skinning::register(m)?;
     centers_job::register(m)?;
+    background::register(m)?;
     job::register(m)?;
     rigs::register(m)?;
     tracks::register(m)?;

@@ -370,7 +370,12 @@ fn centers_of_rotation<'py>(
         let after = infl.get();
         let infl = &after.0;
         let v = infl.vertex_count();
-        let pos = arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"])?;
+        let pos = crate::job::sized_by_influences(
+            positions,
+            v,
+            "vertices",
+            arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"]),
+        )?;
         let tris = triangle_indices(triangles)?;
         let points = as_points(pos.as_slice()?);
         let mut previous = match previous {

@@ -12,7 +12,7 @@ use pyo3::types::{PyDict, PyString, PyTuple};
 
 use crate::args;
 use crate::arrays;
-use crate::background::{Outcome, Task};
+use crate::background::{Finish, Outcome, PyJob, Task};
 use crate::guard;
 use crate::skinning::{as_points, named_triangle_indices, triangle_indices, Cancelled, PyInfluences};
 
@@ -351,95 +351,49 @@ fn transfer_output<'py>(py: Python<'py>, result: &Transferred) -> PyResult<Bound
     PyTuple::new(py, [influences.into_any(), report.into_any()])
 }
 
-/// What a weights job computes: the result of `automatic_weights` or of `transfer_weights`.
-enum WeightsResult {
-    Automatic(AutoWeights),
-    Transfer(Transferred),
-}
-
-/// :func:`automatic_weights` or :func:`transfer_weights` on a thread of dqskin's own, started
-/// at once, that never runs Python nor holds the GIL (for hosts such as Blender, where a Python
-/// thread running beside the host's own code is a hazard): made by :func:`automatic_weights_job`
-/// and :func:`transfer_weights_job`, with the same arguments but ``progress``. The arguments'
-/// types and shapes are checked at once and the arrays copied; what the computation itself
-/// refuses (a triangle out of range, a resolution that needs too much memory) is raised by
-/// ``result()``. Read ``done``/``total``, ``cancel()``, and take ``(influences, report)`` with
-/// ``result()`` once ``finished``. Dropping a running job cancels it.
-#[pyclass(name = "WeightsJob", module = "dqskin", frozen)]
-pub struct PyWeightsJob {
-    task: Arc<Task<WeightsResult>>,
+/// A weights job's result and how it becomes Python objects.
+struct WeightsFinish<T: Send + 'static> {
+    task: Arc<Task<T>>,
     what: &'static str,
+    convert: for<'py> fn(Python<'py>, &T) -> PyResult<Bound<'py, PyTuple>>,
 }
 
-impl Drop for PyWeightsJob {
-    fn drop(&mut self) {
-        self.task.cancel();
+impl<T: Send + Sync + 'static> Finish for WeightsFinish<T> {
+    type Output = T;
+
+    fn task(&self) -> &Task<T> {
+        &self.task
+    }
+
+    fn what(&self) -> &str {
+        self.what
+    }
+
+    fn convert<'py>(&self, py: Python<'py>, result: &T) -> PyResult<Bound<'py, PyAny>> {
+        (self.convert)(py, result).map(Bound::into_any)
     }
 }
 
-impl PyWeightsJob {
-    fn start(
-        what: &'static str,
-        run: impl FnOnce(&mut dyn FnMut(usize, usize) -> bool) -> Result<WeightsResult, WeightsError> + Send + 'static,
-    ) -> PyResult<Self> {
-        let task = Task::spawn("dqskin weights", move |reports| {
-            match run(&mut |done, total| reports.progress(done, total)) {
-                Ok(result) => Outcome::Done(result),
-                Err(WeightsError::Cancelled) => Outcome::Cancelled,
-                Err(e) => Outcome::Failed(e.to_string()),
-            }
+/// Starts `run` as a job named `what` whose result `convert` turns into the function's tuple.
+fn weights_job<T: Send + Sync + 'static>(
+    what: &'static str,
+    run: impl FnOnce(&mut dyn FnMut(usize, usize) -> bool) -> Result<T, WeightsError> + Send + 'static,
+    convert: for<'py> fn(Python<'py>, &T) -> PyResult<Bound<'py, PyTuple>>,
+) -> PyResult<PyJob> {
+    let task =
+        Task::spawn("dqskin weights", move |reports| match run(&mut |done, total| reports.progress(done, total)) {
+            Ok(result) => Outcome::Done(result),
+            Err(WeightsError::Cancelled) => Outcome::Cancelled,
+            Err(e) => Outcome::Failed(e.to_string()),
         })?;
-        Ok(Self { task, what })
-    }
+    Ok(PyJob::new(WeightsFinish { task, what, convert }))
 }
 
-#[pymethods]
-impl PyWeightsJob {
-    /// Units of work done so far (of ``total``).
-    #[getter]
-    fn done(&self) -> usize {
-        self.task.done()
-    }
-
-    /// Units of work in all.
-    #[getter]
-    fn total(&self) -> usize {
-        self.task.total()
-    }
-
-    /// Whether the thread has ended (with the weights, an error, or cancelled).
-    #[getter]
-    fn finished(&self) -> bool {
-        self.task.finished()
-    }
-
-    /// Asks the thread to stop at its next step; ``result()`` then raises :class:`Cancelled`
-    /// unless the weights were already complete.
-    fn cancel(&self) {
-        self.task.cancel();
-    }
-
-    /// Waits (the GIL released) until the thread ends or ``timeout`` seconds pass; returns
-    /// ``finished``. Ctrl-C stops the wait (``KeyboardInterrupt``), not the job.
-    #[pyo3(signature = (timeout = None))]
-    fn wait(&self, py: Python<'_>, timeout: Option<&Bound<'_, PyAny>>) -> PyResult<bool> {
-        guard(|| self.task.wait(py, timeout))
-    }
-
-    /// ``(influences, report)`` as the function returns them (waits for the thread if it is
-    /// still running). Raises :class:`Cancelled` if it was cancelled, ``ValueError`` if the
-    /// inputs could not give weights.
-    fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
-        guard(|| {
-            self.task.with_result(py, self.what, |result| match result {
-                WeightsResult::Automatic(r) => auto_output(py, r),
-                WeightsResult::Transfer(r) => transfer_output(py, r),
-            })
-        })
-    }
-}
-
-/// :func:`automatic_weights` as a :class:`WeightsJob` (the same arguments but ``progress``).
+/// :func:`automatic_weights` as a :class:`Job` (the same arguments but ``progress``), started
+/// at once on a thread of dqskin's own that never runs Python nor holds the GIL. The arguments'
+/// types and shapes are checked now and the arrays copied; what the computation itself refuses
+/// (a triangle out of range, a resolution that needs too much memory) is raised by ``result()``,
+/// as the function raises it.
 #[pyfunction]
 #[pyo3(signature = (positions, triangles, heads, tails, *, resolution = None, falloff = None, max_influences = None,
     smoothing = None, mirror = None))]
@@ -454,7 +408,7 @@ fn automatic_weights_job(
     max_influences: Option<&Bound<'_, PyAny>>,
     smoothing: Option<&Bound<'_, PyAny>>,
     mirror: Option<&Bound<'_, PyAny>>,
-) -> PyResult<PyWeightsJob> {
+) -> PyResult<PyJob> {
     guard(|| {
         let request = AutoRequest::new(
             positions,
@@ -467,11 +421,12 @@ fn automatic_weights_job(
             smoothing,
             mirror,
         )?;
-        PyWeightsJob::start("automatic_weights", move |p| request.run(p).map(WeightsResult::Automatic))
+        weights_job("automatic_weights", move |p| request.run(p), auto_output)
     })
 }
 
-/// :func:`transfer_weights` as a :class:`WeightsJob` (the same arguments but ``progress``).
+/// :func:`transfer_weights` as a :class:`Job` (the same arguments but ``progress``), as
+/// :func:`automatic_weights_job` is to :func:`automatic_weights`.
 #[pyfunction]
 #[pyo3(signature = (body_positions, body_triangles, body_influences, cloth_positions, cloth_triangles, *,
     max_distance = None, max_angle = None, flipped_normals = None, smoothing = None, max_influences = None))]
@@ -487,7 +442,7 @@ fn transfer_weights_job(
     flipped_normals: Option<&Bound<'_, PyAny>>,
     smoothing: Option<&Bound<'_, PyAny>>,
     max_influences: Option<&Bound<'_, PyAny>>,
-) -> PyResult<PyWeightsJob> {
+) -> PyResult<PyJob> {
     guard(|| {
         let request = TransferRequest::new(
             body_positions,
@@ -501,7 +456,7 @@ fn transfer_weights_job(
             smoothing,
             max_influences,
         )?;
-        PyWeightsJob::start("transfer_weights", move |p| request.run(p).map(WeightsResult::Transfer))
+        weights_job("transfer_weights", move |p| request.run(p), transfer_output)
     })
 }
 
@@ -517,7 +472,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(transfer_weights, m)?)?;
     m.add_function(wrap_pyfunction!(automatic_weights_job, m)?)?;
     m.add_function(wrap_pyfunction!(transfer_weights_job, m)?)?;
-    m.add_class::<PyWeightsJob>()?;
     m.add_function(wrap_pyfunction!(mirrored_bone_name, m)?)?;
     Ok(())
 }

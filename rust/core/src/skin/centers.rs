@@ -203,7 +203,7 @@ fn update(
 
 /// The errors the centers' computation would return on these inputs (lengths, σ, non-finite
 /// positions, triangles out of range, `previous` of other vertices), found before any work: a
-/// caller that runs the computation elsewhere (the Python module's `CentersJob`) refuses bad
+/// caller that runs the computation elsewhere (the Python module's `centers_of_rotation_job`) refuses bad
 /// input at once.
 pub fn check_centers_inputs(
     positions: &[[f32; 3]],

@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -66,6 +67,17 @@ def empty_scene(dq_skin):
     """A fresh, empty factory scene for every test (the extension stays enabled)."""
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     yield
+
+
+@pytest.fixture(autouse=True)
+def no_python_thread(dq_skin):
+    """No test leaves a Python thread running: one running Python beside Blender's operators
+    crashes the bpy module within seconds (docs/architecture.md), so DQ Skin runs none (its
+    long work runs on the core's own threads, `dqskin.Job`)."""
+    before = set(threading.enumerate())
+    yield
+    started = [t.name for t in set(threading.enumerate()) - before if t.is_alive()]
+    assert not started, f"Python threads left running: {started}"
 
 
 def node_route_for_every_size(dq_skin, monkeypatch) -> None:

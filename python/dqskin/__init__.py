@@ -37,6 +37,7 @@ from ._dqskin import (  # noqa: F401
     TwistCylinder,
     __version__,
     _panic_for_tests,  # noqa: F401  (tests check panics become RuntimeError)
+    _panicking_job_for_tests,  # noqa: F401  (and in a job's thread too)
     angular_speeds,
     armature_spaces,
     automatic_weights,

@@ -512,6 +512,7 @@ def curvature_energy(rotations: ArrayLike) -> float:
     """Summed squared discrete curvature of evenly spaced rotations."""
 
 def _panic_for_tests() -> None: ...
+def _panicking_job_for_tests() -> Job: ...
 def influences_from_deform_groups(
     offsets: npt.NDArray[np.uint32],
     groups: npt.NDArray[np.uint32],

@@ -222,6 +222,21 @@ def test_the_worker_runs_the_steps_in_order_and_reports_progress(dq_skin):
     assert seen == sorted(seen) and all(0.0 <= f <= 1.0 for f in seen) and worker.fraction() == 1.0
 
 
+def test_an_internal_error_in_a_job_is_reported_and_stops_the_plan(dq_skin):
+    background = dq_skin.ops.background
+    started = []
+    plan = background.Plan(
+        [(dq_skin.dqskin._panicking_job_for_tests, 1), (lambda: started.append(1), 1)], lambda context, results: "", "test"
+    )
+    worker = background.Worker(plan)
+    end = time.monotonic() + 30
+    while not worker.advance():  # raises nothing: the operator reports it
+        assert time.monotonic() < end
+        worker.job.wait(0.05)
+    assert isinstance(worker.error, RuntimeError) and "deliberate panic" in str(worker.error)
+    assert not started and worker.results == []
+
+
 class FakeWindowManager:
     """What the modal operator calls on `context.window_manager` (no window in the bpy module)."""
 

@@ -143,3 +143,14 @@ def test_bad_timeouts_are_refused(timeout, error):
     with pytest.raises(error, match="timeout"):
         job.wait(timeout)
     assert job.wait(timeout=30)
+
+
+def test_a_panic_in_a_jobs_thread_is_a_runtime_error_from_result():
+    job = dqskin._panicking_job_for_tests()
+    assert job.wait(timeout=30) and job.finished
+    with pytest.raises(BaseException) as info:
+        job.result()
+    exc = info.value
+    assert isinstance(exc, RuntimeError) and type(exc).__name__ != "PanicException", type(exc).__mro__
+    assert "internal error in dqskin" in str(exc) and "deliberate panic" in str(exc)
+    assert dqskin.centers_of_rotation_job(*tube(rings=10, segments=8, bones=3)[:3]).result().shape == (80, 3)

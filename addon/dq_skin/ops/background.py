@@ -54,7 +54,7 @@ class Worker:
                     return False
                 try:
                     self.results.append(self.job.result())
-                except (ValueError, TypeError, dqskin.Cancelled) as e:
+                except (ValueError, TypeError, RuntimeError, dqskin.Cancelled) as e:  # RuntimeError: dqskin's internal error
                     self.error = e
                 self.job = None
                 if self.error is not None:
@@ -66,7 +66,7 @@ class Worker:
                 return True
             try:
                 self.job = self.plan.steps[len(self.results)][0]()
-            except (ValueError, TypeError) as e:
+            except (ValueError, TypeError, RuntimeError) as e:
                 self.error = e
                 return True
 

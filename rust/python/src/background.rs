@@ -65,14 +65,8 @@ impl<T: Send + 'static> Task<T> {
             .name(name.into())
             .spawn(move || {
                 let reports = Reports { task: &theirs };
-                let outcome = catch_unwind(AssertUnwindSafe(|| work(&reports))).unwrap_or_else(|payload| {
-                    let msg = payload
-                        .downcast_ref::<&str>()
-                        .map(|s| s.to_string())
-                        .or_else(|| payload.downcast_ref::<String>().cloned())
-                        .unwrap_or_else(|| "unknown panic".into());
-                    Outcome::Panicked(msg)
-                });
+                let outcome = catch_unwind(AssertUnwindSafe(|| work(&reports)))
+                    .unwrap_or_else(|payload| Outcome::Panicked(crate::panic_message(payload.as_ref())));
                 *theirs.outcome() = Some(outcome);
                 theirs.ended.notify_all();
             })
@@ -144,9 +138,7 @@ impl<T: Send> Task<T> {
             Some(Outcome::Done(result)) => read(result),
             Some(Outcome::Cancelled) => Err(Cancelled::new_err(format!("{what} was cancelled"))),
             Some(Outcome::Failed(e)) => Err(PyValueError::new_err(e.clone())),
-            Some(Outcome::Panicked(msg)) => {
-                Err(PyRuntimeError::new_err(format!("internal error in dqskin (please report it): {msg}")))
-            }
+            Some(Outcome::Panicked(msg)) => Err(crate::internal_error(msg)),
             None => unreachable!("wait returned before the thread ended"),
         }
     }
@@ -254,6 +246,32 @@ impl PyJob {
     }
 }
 
+/// A job whose work panics (tests check that the panic becomes a `RuntimeError` from
+/// `result()`, never a `PanicException` nor a dead process).
+struct PanickingJob(Arc<Task<()>>);
+
+impl Finish for PanickingJob {
+    type Output = ();
+
+    fn task(&self) -> &Task<()> {
+        &self.0
+    }
+
+    fn what(&self) -> &str {
+        "_panicking_job_for_tests"
+    }
+
+    fn convert<'py>(&self, py: Python<'py>, _: &()) -> PyResult<Bound<'py, PyAny>> {
+        Ok(py.None().into_bound(py))
+    }
+}
+
+#[pyfunction]
+fn _panicking_job_for_tests() -> PyResult<PyJob> {
+    crate::guard(|| Ok(PyJob::new(PanickingJob(Task::spawn("dqskin test", |_| panic!("deliberate panic"))?))))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<PyJob>()
+    m.add_class::<PyJob>()?;
+    m.add_function(wrap_pyfunction!(_panicking_job_for_tests, m)?)
 }

@@ -30,17 +30,21 @@ use pyo3::prelude::*;
 
 /// Runs `f`, converting a panic into a `RuntimeError` (a bug in dqskin, never bad input).
 pub(crate) fn guard<T>(f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
-    match catch_unwind(AssertUnwindSafe(f)) {
-        Ok(r) => r,
-        Err(payload) => {
-            let msg = payload
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".into());
-            Err(PyRuntimeError::new_err(format!("internal error in dqskin (please report it): {msg}")))
-        }
-    }
+    catch_unwind(AssertUnwindSafe(f)).unwrap_or_else(|payload| Err(internal_error(&panic_message(payload.as_ref()))))
+}
+
+/// What a panic said (its payload, when it is text).
+pub(crate) fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".into())
+}
+
+/// The `RuntimeError` a panic becomes.
+pub(crate) fn internal_error(msg: &str) -> PyErr {
+    PyRuntimeError::new_err(format!("internal error in dqskin (please report it): {msg}"))
 }
 
 /// Sets the number of worker threads the kernels use: at least 1, at most 4 per core (at least

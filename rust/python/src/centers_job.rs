@@ -4,13 +4,11 @@
 use std::sync::{Arc, Mutex};
 
 use dqskin_core::{CenterSums, Centers, Influences, PreviousCenters, SkinError};
-use numpy::{PyArray1, PyArrayMethods};
-use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 
 use crate::background::{Finish, Outcome, PyJob, Reports, Task};
-use crate::skinning::{as_points, previous_centers, skin_error, triangle_indices, PyInfluences};
-use crate::{args, arrays, guard};
+use crate::guard;
+use crate::skinning::{as_points, centers_output, previous_centers, skin_error, CentersArgs, PyInfluences};
 
 /// The inputs the thread owns (copied from the caller's arrays at the start).
 struct Inputs {
@@ -65,7 +63,6 @@ struct CentersFinish {
     kept: Arc<Mutex<Option<CenterSums>>>,
     /// The weights the centers are for.
     influences: Py<PyInfluences>,
-    vertices: usize,
     with_mask: bool,
 }
 
@@ -84,14 +81,7 @@ impl Finish for CentersFinish {
         if let Some(sums) = self.kept.lock().unwrap_or_else(|p| p.into_inner()).take() {
             self.influences.bind(py).get().keep_center_sums(sums);
         }
-        let flat: Vec<f32> = centers.centers.iter().flatten().copied().collect();
-        let array = PyArray1::from_vec(py, flat).reshape([self.vertices, 3])?.into_any();
-        if self.with_mask {
-            let mask = PyArray1::from_vec(py, centers.has_center.clone()).into_any();
-            Ok(pyo3::types::PyTuple::new(py, [array, mask])?.into_any())
-        } else {
-            Ok(array)
-        }
+        centers_output(py, centers, self.with_mask)
     }
 }
 
@@ -111,20 +101,9 @@ fn centers_of_rotation_job(
     previous: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyJob> {
     guard(|| {
-        let sigma = args::or(sigma, dqskin_core::skin::DEFAULT_SIGMA, |o| args::float(o, "sigma"))?;
-        let with_mask = args::or(with_mask, false, |o| args::boolean(o, "with_mask"))?;
-        let infl = influences.cast::<PyInfluences>().map_err(|_| {
-            PyTypeError::new_err("influences must be a dqskin.Influences (the weights of the same vertices)")
-        })?;
-        let v = infl.get().0.vertex_count();
-        let pos = crate::job::sized_by_influences(
-            positions,
-            v,
-            "vertices",
-            arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"]),
-        )?;
+        let CentersArgs { sigma, with_mask, influences: infl, positions: pos, triangles: tris } =
+            CentersArgs::read(positions, triangles, influences, sigma, with_mask)?;
         let points = as_points(pos.as_slice()?).to_vec();
-        let tris = triangle_indices(triangles)?;
         let previous = match previous {
             Some(p) if !p.is_none() => Some(previous_centers(p, &points)?),
             _ => None,
@@ -136,7 +115,7 @@ fn centers_of_rotation_job(
         let kept = Arc::new(Mutex::new(None));
         let theirs = Arc::clone(&kept);
         let task = Task::spawn("dqskin centers", move |reports| inputs.run(reports, &theirs))?;
-        Ok(PyJob::new(CentersFinish { task, kept, influences: infl.clone().unbind(), vertices: v, with_mask }))
+        Ok(PyJob::new(CentersFinish { task, kept, influences: infl.unbind(), with_mask }))
     })
 }
 

@@ -362,21 +362,10 @@ fn centers_of_rotation<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     guard(|| {
         let py = positions.py();
-        let sigma = args::or(sigma, dqskin_core::skin::DEFAULT_SIGMA, |o| args::float(o, "sigma"))?;
-        let with_mask = args::or(with_mask, false, |o| args::boolean(o, "with_mask"))?;
-        let infl = influences.cast::<PyInfluences>().map_err(|_| {
-            PyTypeError::new_err("influences must be a dqskin.Influences (the weights of the same vertices)")
-        })?;
-        let after = infl.get();
+        let CentersArgs { sigma, with_mask, influences, positions: pos, triangles: tris } =
+            CentersArgs::read(positions, triangles, influences, sigma, with_mask)?;
+        let after = influences.get();
         let infl = &after.0;
-        let v = infl.vertex_count();
-        let pos = crate::job::sized_by_influences(
-            positions,
-            v,
-            "vertices",
-            arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"]),
-        )?;
-        let tris = triangle_indices(triangles)?;
         let points = as_points(pos.as_slice()?);
         let mut previous = match previous {
             Some(p) if !p.is_none() => Some(previous_centers(p, points)?),
@@ -445,16 +434,56 @@ fn centers_of_rotation<'py>(
         if let Some(e) = stopped.into_inner().unwrap_or_else(|p| p.into_inner()) {
             return Err(e);
         }
-        let centers = result.map_err(skin_error)?;
-        let flat: Vec<f32> = centers.centers.iter().flatten().copied().collect();
-        let array = PyArray1::from_vec(py, flat).reshape([v, 3])?.into_any();
-        if with_mask {
-            let mask = PyArray1::from_vec(py, centers.has_center).into_any();
-            Ok(pyo3::types::PyTuple::new(py, [array, mask])?.into_any())
-        } else {
-            Ok(array)
-        }
+        centers_output(py, &result.map_err(skin_error)?, with_mask)
     })
+}
+
+/// The arguments `centers_of_rotation` and `centers_of_rotation_job` share, read and checked.
+pub(crate) struct CentersArgs<'py> {
+    pub sigma: f32,
+    pub with_mask: bool,
+    pub influences: Bound<'py, PyInfluences>,
+    /// `(V, 3)` float32, one row per vertex of `influences`.
+    pub positions: numpy::PyReadonlyArrayDyn<'py, f32>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl<'py> CentersArgs<'py> {
+    pub(crate) fn read(
+        positions: &Bound<'py, PyAny>,
+        triangles: &Bound<'py, PyAny>,
+        influences: &Bound<'py, PyAny>,
+        sigma: Option<&Bound<'py, PyAny>>,
+        with_mask: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Self> {
+        let sigma = args::or(sigma, dqskin_core::skin::DEFAULT_SIGMA, |o| args::float(o, "sigma"))?;
+        let with_mask = args::or(with_mask, false, |o| args::boolean(o, "with_mask"))?;
+        let influences = influences.cast::<PyInfluences>().map_err(|_| {
+            PyTypeError::new_err("influences must be a dqskin.Influences (the weights of the same vertices)")
+        })?;
+        let v = influences.get().0.vertex_count();
+        let positions = crate::job::sized_by_influences(
+            positions,
+            v,
+            "vertices",
+            arrays::readonly::<f32>(positions, "positions", &[Some(v), Some(3)], &["V"]),
+        )?;
+        let triangles = triangle_indices(triangles)?;
+        Ok(Self { sigma, with_mask, influences: influences.clone(), positions, triangles })
+    }
+}
+
+/// The centers as `centers_of_rotation` returns them: a `(V, 3)` float32 array, with the `(V,)`
+/// bool mask if `with_mask`.
+pub(crate) fn centers_output<'py>(py: Python<'py>, centers: &Centers, with_mask: bool) -> PyResult<Bound<'py, PyAny>> {
+    let flat: Vec<f32> = centers.centers.iter().flatten().copied().collect();
+    let array = PyArray1::from_vec(py, flat).reshape([centers.centers.len(), 3])?.into_any();
+    if with_mask {
+        let mask = PyArray1::from_vec(py, centers.has_center.clone()).into_any();
+        Ok(pyo3::types::PyTuple::new(py, [array, mask])?.into_any())
+    } else {
+        Ok(array)
+    }
 }
 
 /// `previous=(influences, centers)` read: the influences and the centers (with their mask, or

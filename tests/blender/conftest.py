@@ -15,6 +15,7 @@ them can pick up another copy. test_packaging.py checks which file was imported.
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import sys
@@ -64,8 +65,14 @@ def dq_skin():
 
 @pytest.fixture(autouse=True)
 def empty_scene(dq_skin):
-    """A fresh, empty factory scene for every test (the extension stays enabled)."""
+    """A fresh, empty factory scene for every test (the extension stays enabled).
+
+    The collection afterwards finalizes the previous test's garbage here rather than inside
+    some import of this test: on CPython 3.11 an import that a finalizer starts in the middle of
+    another import can fail with `KeyError` in importlib (python/cpython#91351, fixed in 3.12);
+    Cycles' `CyclesRender.__del__` imports, and did so once inside the glTF importer (bpy 4.5)."""
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    gc.collect()
     yield
 
 

@@ -503,13 +503,19 @@ def test_files_hold_nothing_of_it_and_removing_dq_skin_removes_it(dq_skin, tmp_p
     assert_same(obj, reference, "after DQ Skin was removed")
 
 
-def test_a_node_group_saved_by_an_earlier_version_is_brought_up_to_date(dq_skin, tmp_path, route):
-    """A file whose DQ Skin node group an earlier version saved (its version's tag, outputs that
-    are not today's: here none at all) plays as today's once opened: the group's outputs are
-    rebuilt in place, and its modifiers keep their settings."""
+@pytest.mark.parametrize("earlier", ["version", "outputs"])
+def test_a_node_group_saved_by_an_earlier_version_is_brought_up_to_date(dq_skin, tmp_path, route, earlier):
+    """A file whose DQ Skin node group an earlier version saved (its version's tag, or today's
+    version with outputs of before (`nodes.OUTPUTS`), and outputs that are not today's: here none
+    at all) plays as today's once opened: the group's outputs are rebuilt in place, and its
+    modifiers keep their settings."""
+    nodes = dq_skin.blender.nodes
     obj, _arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
     group = dq_skin_mods(obj)[0].node_group
-    group[dq_skin.blender.nodes.GROUP_TAG] = 4
+    if earlier == "version":
+        group[nodes.GROUP_TAG] = 4
+    else:
+        del group[nodes.OUTPUTS_TAG]
     for link in [k for k in group.links if k.to_node.bl_idname == "NodeGroupOutput"]:
         group.links.remove(link)
     names = obj.name, reference.name, group.name
@@ -517,7 +523,7 @@ def test_a_node_group_saved_by_an_earlier_version_is_brought_up_to_date(dq_skin,
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     obj, reference, group = bpy.data.objects[names[0]], bpy.data.objects[names[1]], bpy.data.node_groups[names[2]]
-    assert dq_skin.blender.nodes.version_of(group) == dq_skin.blender.nodes.VERSION
+    assert nodes.version_of(group) == nodes.VERSION and group[nodes.OUTPUTS_TAG] == nodes.OUTPUTS
     assert [k for k in group.links if k.to_node.bl_idname == "NodeGroupOutput"], "the outputs were not rebuilt"
     for f in (4, 9):
         bpy.context.scene.frame_set(f)

@@ -482,9 +482,24 @@ def test_undo_and_redo_stay_exact_and_leave_no_orphans(dq_skin, method, rig):
 # -- Apply, remove, several DQ Skins ------------------------------------------------------------
 
 
+# How Apply is called: as the modifier panel and Ctrl+A do (Blender's window manager registers
+# the operator, as `undo=True` makes the bpy module do) or by a script (not registered).
+APPLIED_FROM = ["user interface", "script"]
+
+
+def apply_modifier(obj, name: str, applied_from: str) -> None:
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        if applied_from == "user interface":
+            assert bpy.ops.object.modifier_apply("EXEC_DEFAULT", True, modifier=name) == {"FINISHED"}
+            assert bpy.context.window_manager.operators[-1].bl_idname == "OBJECT_OT_modifier_apply"
+        else:
+            assert bpy.ops.object.modifier_apply(modifier=name) == {"FINISHED"}
+
+
+@pytest.mark.parametrize("applied_from", APPLIED_FROM)
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
-def test_apply_gives_the_builtin_applied_mesh_and_leaves_nothing_behind(dq_skin, method, rig):
+def test_apply_gives_the_builtin_applied_mesh_and_leaves_nothing_behind(dq_skin, method, rig, applied_from):
     obj, arm, _ = animated_tube(rig=rig)
     obj.modifiers.new("Subdivision", "SUBSURF")
     ref = obj.copy()
@@ -495,16 +510,44 @@ def test_apply_gives_the_builtin_applied_mesh_and_leaves_nothing_behind(dq_skin,
     if rig != "vertex groups":
         assert_fed(dq_skin, obj)
     bpy.context.scene.frame_set(13)
-    with bpy.context.temp_override(object=obj, active_object=obj):
-        assert bpy.ops.object.modifier_apply(modifier=mod.name) == {"FINISHED"}
-    with bpy.context.temp_override(object=ref, active_object=ref):
-        assert bpy.ops.object.modifier_apply(modifier="Armature") == {"FINISHED"}
+    apply_modifier(obj, mod.name, applied_from)
+    apply_modifier(ref, "Armature", "script")
     bpy.context.view_layer.update()
     a, b = (np.array([v.co for v in o.data.vertices], np.float32) for o in (obj, ref))
     assert deviation(a, b) <= REL_TOL
     assert [m.type for m in obj.modifiers] == [m.type for m in ref.modifiers] == ["SUBSURF"]
     assert not [x for x in obj.data.attributes if x.name.startswith("dq_skin")]
     assert not [o for o in bpy.data.objects if o.get("dq_skin_result")]
+    assert not [k for k in obj.keys() if k.startswith("dq_skin")]
+
+
+@pytest.mark.parametrize("applied_from", APPLIED_FROM)
+@pytest.mark.parametrize("method", METHODS)
+def test_apply_where_blender_deforms_keeps_what_was_shown(dq_skin, method, applied_from):
+    """A DQ Skin handed over to its companion (Corrective Smooth after it magnifies the last
+    bits) passes the mesh through, so Blender's Apply of it changes no position: the companion
+    is applied in its place, and the mesh is Blender's applied Armature modifier's, the stack the
+    same. (Once the companion was removed instead, or put back as before `dq_skin_add` where a
+    script applied it: the character showed its rest pose, or its deformation changed.)"""
+    obj, arm, _ = animated_tube()
+    obj.modifiers.new("Corrective Smooth", "CORRECTIVE_SMOOTH")
+    ref = obj.copy()
+    ref.data = obj.data.copy()
+    bpy.context.scene.collection.objects.link(ref)
+    ref.modifiers["Armature"].use_deform_preserve_volume = method == "DUAL_QUATERNION"
+    mod = add_dq_skin(obj, method)
+    bpy.context.scene.frame_set(13)
+    assert status(dq_skin, obj).mode.name == "HANDED_OVER"
+    assert deviation(evaluated_positions(obj), evaluated_positions(ref)) <= REL_TOL
+    apply_modifier(obj, mod.name, applied_from)
+    apply_modifier(ref, "Armature", "script")
+    bpy.context.view_layer.update()
+    a, b = (np.array([v.co for v in o.data.vertices], np.float32) for o in (obj, ref))
+    assert deviation(a, b) <= REL_TOL, "the mesh takes the deformation that was shown"
+    assert stack(obj) == stack(ref) == ["CORRECTIVE_SMOOTH"]
+    assert deviation(evaluated_positions(obj), evaluated_positions(ref)) <= REL_TOL
+    assert moved(obj) == 0.0, "nothing deforms the applied mesh any more"
+    assert not [x for x in obj.data.attributes if x.name.startswith(("dq_skin", ".dq_skin"))]
     assert not [k for k in obj.keys() if k.startswith("dq_skin")]
 
 

@@ -113,3 +113,13 @@ def restore(arm_mod, original: dict) -> None:
             _set(arm_mod, name, value)
         except (TypeError, ValueError, AttributeError):
             pass  # e.g. the armature object was deleted since
+
+
+def apply(obj, arm_mod) -> bool:
+    """Blender's own Apply of the companion: the mesh takes the deformation it shows, bit for
+    bit as Blender gives it. False where Blender refused (the companion is left as it is)."""
+    try:
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            return bpy.ops.object.modifier_apply(modifier=arm_mod.name) == {"FINISHED"}
+    except (RuntimeError, TypeError):
+        return False

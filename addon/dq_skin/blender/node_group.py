@@ -8,10 +8,23 @@ from __future__ import annotations
 import bpy
 
 from . import compat
-from .nodes import FIELDS, GROUP_NAME, GROUP_TAG, METHODS, SETTINGS, UPGRADABLE, VERSION, WARNING, store_ids, version_of
+from .nodes import (
+    FIELDS,
+    GROUP_NAME,
+    GROUP_TAG,
+    METHODS,
+    OUTPUTS,
+    OUTPUTS_TAG,
+    SETTINGS,
+    UPGRADABLE,
+    VERSION,
+    WARNING,
+    store_ids,
+    version_of,
+)
 
 MENU_NODE = "Method Items"
-OUTPUT_MARK = ".dq_skin_output"  # the point attribute DQ Skin's output has where it deforms
+OUTPUT_MARK = ".dq_skin_output"  # the point attribute every output of DQ Skin has (Apply is told from removal by it)
 
 
 def ensure_group():
@@ -48,8 +61,9 @@ def build_group():
 
 def upgrade(group) -> None:
     """A group saved by an earlier DQ Skin 0.x (`UPGRADABLE`) brought up to date in place: the
-    newer inputs and methods, the current descriptions and warning, and, from an older version,
-    the output nodes rebuilt (the method menu's items keep their stored values)."""
+    newer inputs and methods, the current descriptions and warning, and, from an older version or
+    older outputs (`OUTPUTS`), the output nodes rebuilt (the method menu's items keep their stored
+    values)."""
     if group.library is not None or version_of(group) not in UPGRADABLE:
         return
     _add_missing_inputs(group)
@@ -59,7 +73,7 @@ def upgrade(group) -> None:
         if getattr(item, "item_type", "") == "SOCKET" and item.in_out == "INPUT" and item.name in descriptions:
             if item.description != descriptions[item.name]:
                 item.description = descriptions[item.name]
-    if version_of(group) != VERSION:
+    if version_of(group) != VERSION or group.get(OUTPUTS_TAG, 1) < OUTPUTS:
         _build_outputs(group)
         group[GROUP_TAG] = VERSION
     warning = next((n for n in group.nodes if n.bl_idname == "GeometryNodeWarning"), None)
@@ -148,17 +162,23 @@ def _build_outputs(group) -> None:
     links.new(captured, set_position.inputs["Geometry"])
     links.new(sample.outputs["Value"], set_position.inputs["Position"])
 
-    passed = captured
+    # Every output is marked, so that a mesh this modifier was applied to says so, also where
+    # Apply changes no position (Blender evaluates the modifier alone): the mesh carried (its
+    # positions came through a carrier before the modifier) or passed to the companion, which
+    # deforms where DQ Skin does not (and is then applied in its place, `removal`).
+    marked = node("GeometryNodeStoreNamedAttribute", data_type="BOOLEAN", domain="POINT")
+    links.new(captured, marked.inputs["Geometry"])
+    marked.inputs["Name"].default_value = OUTPUT_MARK
+    marked.inputs["Value"].default_value = True
+    passed = marked.outputs["Geometry"]
     if compat.HAS_WARNING_NODE:
         # Reached only when DQ Skin is not deforming; a Warning node shows when its output is used.
         warning = node("GeometryNodeWarning", warning_type="WARNING")
         warning.inputs["Show"].default_value = True
         warning.inputs["Message"].default_value = WARNING
-        passed = geometry_switch(node, links, warning.outputs["Show"], captured, captured)
-    # Where DQ Skin deforms, its output is marked, so that a mesh this modifier was applied to
-    # says so (a carried one's Apply changes no position: Blender evaluates the modifier alone).
-    # A whole-mesh result carries the mark in its own mesh (`results.copy_mesh`), stored once
-    # rather than for every point of every frame; the positions are marked here.
+        passed = geometry_switch(node, links, warning.outputs["Show"], passed, passed)
+    # The positions given are marked here; a whole-mesh result carries the mark in its own mesh
+    # (`results.copy_mesh`), stored once rather than for every point of every frame.
     mark = node("GeometryNodeStoreNamedAttribute", data_type="BOOLEAN", domain="POINT")
     links.new(set_position.outputs["Geometry"], mark.inputs["Geometry"])
     mark.inputs["Name"].default_value = OUTPUT_MARK
@@ -171,12 +191,9 @@ def _build_outputs(group) -> None:
     # captured if asked, marked, and nothing else evaluated (switches are lazy; this is every
     # frame's path on the Mesh Cache route, where each node evaluated costs every character
     # every frame).
-    carried = node("GeometryNodeStoreNamedAttribute", data_type="BOOLEAN", domain="POINT")
-    links.new(captured, carried.inputs["Geometry"])
-    carried.inputs["Name"].default_value = OUTPUT_MARK
-    carried.inputs["Value"].default_value = True
-    out = geometry_switch(node, links, quiet, out, carried.outputs["Geometry"])
+    out = geometry_switch(node, links, quiet, out, marked.outputs["Geometry"])
     links.new(out, g_out.inputs["Geometry"])
+    group[OUTPUTS_TAG] = OUTPUTS
     for i, n in enumerate(nodes):
         n.location = (180 * (i % 8), -200 * (i // 8))
 

@@ -33,6 +33,11 @@ GROUP_NAME = "DQ Skin"
 GROUP_TAG = "dq_skin_version"
 VERSION = 5
 UPGRADABLE = (2, 3, 4, 5)  # group versions brought up to this one in place (`node_group.upgrade`)
+# What the group's output nodes are within a version (its settings and modes do not change with
+# it, so modifiers of linked groups saved before keep working): 2 marks the mesh it passes to its
+# companion too. A local group with older outputs has them rebuilt (`node_group.upgrade`).
+OUTPUTS_TAG = "dq_skin_outputs"
+OUTPUTS = 2
 
 # The Mode input's values (see above).
 MODE_PASS_WARN = 0

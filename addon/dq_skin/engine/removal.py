@@ -30,14 +30,24 @@ def info_of(mod) -> ModInfo:
 
 
 def forget_modifier(session, obj, uid: str, info: ModInfo, applied: bool) -> None:
-    """Everything of a DQ Skin modifier that is gone: its companion (removed too when the
-    modifier was applied, since the mesh keeps the deformation, or when `dq_skin_add` made it;
-    else put back as it was before `dq_skin_add`), the parent type `dq_skin_add` changed, what
-    the node group stored in the mesh, its results and its state."""
+    """Everything of a DQ Skin modifier that is gone: its companion (applied in its place when
+    the modifier was applied where the companion was the one deforming; removed when it was
+    applied where DQ Skin deformed, since the mesh keeps the deformation, or when `dq_skin_add`
+    made it; else put back as it was before `dq_skin_add`), the parent type `dq_skin_add`
+    changed, what the node group stored in the mesh, its results and its state."""
     st = session.states.pop(ModKey(obj.session_uid, uid))
     c = obj.modifiers.get(info.companion.get("name", "")) if info.companion.get("name") else None
     if c is not None and c.type == "ARMATURE":
-        if applied or info.companion.get("created"):
+        if applied and c.show_viewport:
+            # DQ Skin was not deforming (handed over, an error): the companion showed the
+            # deformation, and applying DQ Skin's pass-through changed no position. The companion
+            # is applied in its place, so the mesh keeps what was shown; where Blender refuses,
+            # it stays and keeps deforming.
+            if not companion.apply(obj, c):
+                print(
+                    f"DQ Skin: {obj.name!r}: the Armature modifier {c.name!r} deformed it in DQ Skin's place and could not be applied: it stays"
+                )
+        elif applied or info.companion.get("created"):
             obj.modifiers.remove(c)
         else:
             companion.restore(c, info.companion.get("original", {}))
@@ -75,6 +85,6 @@ def was_applied(session, obj, info: ModInfo, st) -> bool:
                 return True
         except (AttributeError, ReferenceError):
             pass
-    # Where DQ Skin deforms its output is marked (`node_group.OUTPUT_MARK`): a mesh it was
-    # applied to has the mark, a removal leaves none.
+    # Every output of DQ Skin's is marked (`node_group.OUTPUT_MARK`), also where it passes the
+    # mesh to its companion: a mesh it was applied to has the mark, a removal leaves none.
     return node_group.OUTPUT_MARK in obj.data.attributes

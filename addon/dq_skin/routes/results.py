@@ -89,7 +89,8 @@ def copy_mesh(result, source_mesh) -> None:
     mesh.name = result.name
     if mesh.shape_keys is not None:
         bpy.data.batch_remove([mesh.shape_keys])
-    # DQ Skin's output mark, which the node group stores only on positions it sets.
+    # DQ Skin's output mark, which the node group stores on every output but a result's whole
+    # mesh (which carries it here).
     mark = mesh.attributes.get(OUTPUT_MARK)
     if mark is not None and (mark.data_type, mark.domain) != ("BOOLEAN", "POINT"):
         mesh.attributes.remove(mark)

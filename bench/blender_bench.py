@@ -103,6 +103,7 @@ def main() -> int:
     if "later" in only:
         for later in ("smooth5", "corrective5"):
             report(cases.case_grid(250_000, "DUAL_QUATERNION", q, later=later, routes_too=False))
+        report(cases.case_crowd(50 if q else 200, q, later="corrective5"))
     if "bbones" in only:
         for method in ("LINEAR", "DUAL_QUATERNION"):
             report(cases.case_bbone_grid(100_000, method, q))

@@ -62,12 +62,16 @@ def case_cesium(method: str, quick: bool) -> dict:
     }
 
 
-def case_crowd(count: int, quick: bool) -> dict:
+def case_crowd(count: int, quick: bool, later: str = "") -> dict:
+    """`count` CesiumMen, each with its own armature; with `later`, each with that modifier after
+    its skinning (only DQ Skin's chosen route then)."""
     scenes.empty_scene()
     pairs = scenes.crowd(count)
-    row = compare(pairs, "DUAL_QUATERNION", (3, 9, 15, 21), 2 if quick else 4, 5 if quick else 7, floors=True)
+    rounds = (2, 5) if quick else (4, 7)
+    row = compare(pairs, "DUAL_QUATERNION", (3, 9, 15, 21), *rounds, routes_too=not later, floors=not later, later=later)
     n = len(pairs[0][0].data.vertices)
-    return {"case": f"{count} characters x {n} vertices, dual_quaternion", "objects": count, "vertices": n * count, **row}
+    label = f"{count} characters x {n} vertices{' + ' + later if later else ''}, dual_quaternion"
+    return {"case": label, "objects": count, "vertices": n * count, "later": later, **row}
 
 
 def case_rigify(method: str, quick: bool) -> dict:

@@ -406,6 +406,41 @@ def test_corrective_smooth_after_dq_skin(dq_skin, assets, method):
     assert_same(body, ref)  # what reaches Corrective Smooth is exact
 
 
+def test_a_character_handed_over_is_not_evaluated_every_frame_and_follows_changes(dq_skin, monkeypatch):
+    """Handed over to its companion (Corrective Smooth after it), a character needs nothing of
+    DQ Skin's while what decided it stands: its frames run no full evaluation (a crowd with
+    Corrective Smooth paid one per character and frame). What a script changes before the next
+    frame is still followed: the method (the companion follows), the companion edited by hand
+    (set up again), Corrective Smooth switched off (DQ Skin deforms again)."""
+    obj, arm, _ = animated_tube()
+    obj.modifiers.new("Corrective Smooth", "CORRECTIVE_SMOOTH")
+    mod = add_dq_skin(obj, "LINEAR")
+    tw = twin(obj, share_mesh=False)
+    bpy.context.scene.frame_set(2)
+    assert status(dq_skin, obj).mode.name == "HANDED_OVER"
+    pipeline = dq_skin.engine.pipeline
+    evaluated = []
+    real = pipeline._evaluate
+    monkeypatch.setattr(pipeline, "_evaluate", lambda obj, *a: evaluated.append(obj.name) or real(obj, *a))
+    check_frames([(obj, tw)], frames=(3, 8, 14))
+    assert evaluated == [], "frames of a character handed over ran full evaluations"
+    # A script changes the method: the companion follows (Preserve Volume), still handed over.
+    assert dq_skin.blender.nodes.put_method(mod, "Dual Quaternion")
+    next(m for m in tw.modifiers if m.type == "ARMATURE").use_deform_preserve_volume = True
+    check_frames([(obj, tw)], frames=(5, 9))
+    assert evaluated == [obj.name], evaluated
+    assert status(dq_skin, obj).mode.name == "HANDED_OVER"
+    # The companion edited by hand: set up like DQ Skin again.
+    companion = next(m for m in obj.modifiers if m.type == "ARMATURE")
+    companion.use_deform_preserve_volume = False
+    check_frames([(obj, tw)], frames=(6,))
+    assert companion.use_deform_preserve_volume
+    # Corrective Smooth off: DQ Skin deforms again.
+    obj.modifiers["Corrective Smooth"].show_viewport = tw.modifiers["Corrective Smooth"].show_viewport = False
+    check_frames([(obj, tw)], frames=(7, 12))
+    assert status(dq_skin, obj).live
+
+
 # -- failures without tracebacks ------------------------------------------------------------------
 
 

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from .. import dqskin
-from ..blender import consumers, nodes, pose, rig, settings
+from ..blender import companion, consumers, nodes, pose, rig, settings
 from ..model import decisions
 from ..model.keys import FrameKey, PoseKey, Source
 from ..model.methods import Settings
@@ -84,6 +84,7 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: Sourc
         return False
     s = None
     target = Target(obj, mod, st, mod_key(obj, mod))
+    st.handed = None
     try:
         s = st.settings.value if st.settings.value is not None and obj.session_uid in ctx.unchanged else settings.cached(mod, st.settings)
         exporting = ctx.session.exports.active()
@@ -95,7 +96,10 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: Sourc
             message = f"Off in {where}: Blender's Armature modifier deforms the mesh there"
             return _step_aside(ctx, target, s, deforms, Mode.OFF, message)
         if reason:
-            return _step_aside(ctx, target, s, deforms, Mode.HANDED_OVER, reason)
+            _step_aside(ctx, target, s, deforms, Mode.HANDED_OVER, reason)
+            if not ctx.render:
+                st.handed = handed_over_key(obj, mod, st, s, deforms, reason)
+            return False
         if obj.mode == "EDIT" or obj.data.is_editmode:
             return _in_edit_mode(ctx, target, s, deforms)
         plan = _prepare(obj, obj_eval, target, s, ctx, source, previous, force, deforms, start)
@@ -115,6 +119,28 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: Sourc
         return fallback(ctx.session, obj, mod, st, s, str(e), ctx.render)
     except Exception as e:  # never a traceback in the user's face; say what happened
         return fallback(ctx.session, obj, mod, st, s, f"{type(e).__name__}: {e}", ctx.render)
+
+
+def handed_over_key(obj, mod, st: ModifierState, s: Settings, deforms, reason: str) -> tuple:
+    """What a decision to hand over to the companion read and left: the settings, the toggles,
+    where DQ Skin would deform and why not, and the companion as it set it up. While it is the
+    same (`still_handed_over`), evaluating again would change nothing: the companion deforms."""
+    c = companions.companion_of(obj, mod, st)
+    return (s.key(), mod.show_viewport, mod.show_render, deforms, reason, tuple(companion.snapshot(c).values()) if c is not None else None)
+
+
+def still_handed_over(obj, mod, st: ModifierState, ctx: Context) -> bool:
+    """Whether the modifier's last full evaluation handed over to the companion and this one
+    would decide the same (its decision read again, `_where_it_deforms`, without what it
+    writes): then nothing of DQ Skin's needs doing for it."""
+    if st.handed is None or ctx.render or st.decided_structure != ctx.structure:
+        return False
+    exporting = ctx.session.exports.active()
+    if exporting:
+        return False
+    s = settings.cached(mod, st.settings)
+    deforms, reason = _where_it_deforms(obj, mod, s, ctx, exporting)
+    return bool(reason) and handed_over_key(obj, mod, st, s, deforms, reason) == st.handed
 
 
 def _where_it_deforms(obj, mod, s: Settings, ctx: Context, exporting: str) -> tuple[tuple[bool, bool], str]:

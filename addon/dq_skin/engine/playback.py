@@ -5,8 +5,9 @@ evaluation (see `routes.feed` and `fed`); what it could not know is checked here
 from __future__ import annotations
 
 from ..blender import pose, settings
+from ..model.state import Mode
 from ..routes.feed import Feeds
-from . import companions
+from . import companions, pipeline
 from .context import Context, dq_skin_modifiers, mod_key
 
 
@@ -52,3 +53,24 @@ def fed_frame_stands(obj, ctx: Context, bones_changed: bool = False) -> bool:
             return False
         companions.follow_the_user(obj, mod, st, False)
     return all(mod.show_viewport for mod in mods)  # (following the user may have switched one off)
+
+
+def handed_over_stands(obj, ctx: Context) -> bool:
+    """Whether every DQ Skin of `obj` hands over to its companion as at its last full evaluation
+    (`pipeline.still_handed_over`): the companion deforms each frame by itself, and a full
+    evaluation of each frame would only decide the same again (a crowd whose characters have a
+    Corrective Smooth after DQ Skin paid it for every character on every frame)."""
+    if obj.library is not None:
+        return False
+    mods = dq_skin_modifiers(obj)
+    if not mods:
+        return False
+    states = ctx.session.states
+    try:
+        for mod in mods:
+            st = states.find(mod_key(obj, mod))
+            if st is None or st.status.mode is not Mode.HANDED_OVER or not pipeline.still_handed_over(obj, mod, st, ctx):
+                return False
+    except (ReferenceError, AttributeError):  # (the armature was deleted: the full path says so)
+        return False
+    return True

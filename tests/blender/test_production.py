@@ -487,6 +487,18 @@ def test_undo_and_redo_stay_exact_and_leave_no_orphans(dq_skin, method, rig):
 APPLIED_FROM = ["user interface", "script"]
 
 
+def tube_and_reference(method: str, later: str, rig: str = "vertex groups"):
+    """An animated tube with a `later` modifier after its Armature modifier, and a copy with a
+    mesh of its own whose Armature modifier deforms as `method` does (the reference)."""
+    obj, _arm, _ = animated_tube(rig=rig)
+    obj.modifiers.new(later.replace("_", " ").title(), later)
+    ref = obj.copy()
+    ref.data = obj.data.copy()
+    bpy.context.scene.collection.objects.link(ref)
+    ref.modifiers["Armature"].use_deform_preserve_volume = method == "DUAL_QUATERNION"
+    return obj, ref
+
+
 def apply_modifier(obj, name: str, applied_from: str) -> None:
     with bpy.context.temp_override(object=obj, active_object=obj):
         if applied_from == "user interface":
@@ -500,12 +512,7 @@ def apply_modifier(obj, name: str, applied_from: str) -> None:
 @pytest.mark.parametrize("rig", RIGS)
 @pytest.mark.parametrize("method", METHODS)
 def test_apply_gives_the_builtin_applied_mesh_and_leaves_nothing_behind(dq_skin, method, rig, applied_from):
-    obj, arm, _ = animated_tube(rig=rig)
-    obj.modifiers.new("Subdivision", "SUBSURF")
-    ref = obj.copy()
-    ref.data = obj.data.copy()
-    bpy.context.scene.collection.objects.link(ref)
-    ref.modifiers["Armature"].use_deform_preserve_volume = method == "DUAL_QUATERNION"
+    obj, ref = tube_and_reference(method, "SUBSURF", rig=rig)
     mod = add_dq_skin(obj, method)
     if rig != "vertex groups":
         assert_fed(dq_skin, obj)
@@ -529,12 +536,7 @@ def test_apply_where_blender_deforms_keeps_what_was_shown(dq_skin, method, appli
     is applied in its place, and the mesh is Blender's applied Armature modifier's, the stack the
     same. (Once the companion was removed instead, or put back as before `dq_skin_add` where a
     script applied it: the character showed its rest pose, or its deformation changed.)"""
-    obj, arm, _ = animated_tube()
-    obj.modifiers.new("Corrective Smooth", "CORRECTIVE_SMOOTH")
-    ref = obj.copy()
-    ref.data = obj.data.copy()
-    bpy.context.scene.collection.objects.link(ref)
-    ref.modifiers["Armature"].use_deform_preserve_volume = method == "DUAL_QUATERNION"
+    obj, ref = tube_and_reference(method, "CORRECTIVE_SMOOTH")
     mod = add_dq_skin(obj, method)
     bpy.context.scene.frame_set(13)
     assert status(dq_skin, obj).mode.name == "HANDED_OVER"

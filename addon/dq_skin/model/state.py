@@ -140,7 +140,7 @@ class ModifierState:
     needs_effective: bool = False  # envelopes or B-Bones: influences change with the positions
     decided_structure: int = -1  # the registry's structure version at the last full decision
     # The last full evaluation handed over to the companion (viewport): what that decision read
-    # and the companion's toggles it left (`pipeline.handed_over_key`); None otherwise.
+    # and the companion as it left it (`pipeline.handed_over_key`); None otherwise.
     handed: tuple | None = None
 
 

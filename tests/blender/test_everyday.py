@@ -441,6 +441,28 @@ def test_a_character_handed_over_is_not_evaluated_every_frame_and_follows_change
     assert status(dq_skin, obj).live
 
 
+def test_a_character_switched_off_is_not_evaluated_every_frame(dq_skin, monkeypatch):
+    """DQ Skin switched off in the viewport (to compare with Blender's deformation): the
+    companion deforms, and the frames run no full evaluation of DQ Skin's until it is switched
+    on again, when it deforms at once."""
+    obj, arm, _ = animated_tube()
+    mod = add_dq_skin(obj, "DUAL_QUATERNION")
+    tw = twin(obj, share_mesh=False)
+    mod.show_viewport = False
+    for f in (2, 3):  # (switching off takes the carrier out: the next frame sees the stack change)
+        bpy.context.scene.frame_set(f)
+    assert status(dq_skin, obj).mode.name == "OFF"
+    pipeline = dq_skin.engine.pipeline
+    evaluated = []
+    real = pipeline._evaluate
+    monkeypatch.setattr(pipeline, "_evaluate", lambda obj, *a: evaluated.append(obj.name) or real(obj, *a))
+    check_frames([(obj, tw)], frames=(4, 8, 14))
+    assert evaluated == [], "frames of a character switched off ran full evaluations"
+    mod.show_viewport = True
+    check_frames([(obj, tw)], frames=(5, 9))
+    assert status(dq_skin, obj).live and evaluated
+
+
 # -- failures without tracebacks ------------------------------------------------------------------
 
 

@@ -84,7 +84,7 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: Sourc
         return False
     s = None
     target = Target(obj, mod, st, mod_key(obj, mod))
-    st.handed = None
+    st.stepped_aside = None
     try:
         s = st.settings.value if st.settings.value is not None and obj.session_uid in ctx.unchanged else settings.cached(mod, st.settings)
         exporting = ctx.session.exports.active()
@@ -94,12 +94,9 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: Sourc
         if not (mod.show_render if ctx.render else mod.show_viewport):
             where = "renders" if ctx.render else "the viewport"
             message = f"Off in {where}: Blender's Armature modifier deforms the mesh there"
-            return _step_aside(ctx, target, s, deforms, Mode.OFF, message)
+            return _step_aside(ctx, target, s, deforms, Mode.OFF, message, reason)
         if reason:
-            _step_aside(ctx, target, s, deforms, Mode.HANDED_OVER, reason)
-            if not ctx.render:
-                st.handed = handed_over_key(obj, mod, st, s, deforms, reason)
-            return False
+            return _step_aside(ctx, target, s, deforms, Mode.HANDED_OVER, reason, reason)
         if obj.mode == "EDIT" or obj.data.is_editmode:
             return _in_edit_mode(ctx, target, s, deforms)
         plan = _prepare(obj, obj_eval, target, s, ctx, source, previous, force, deforms, start)
@@ -121,26 +118,27 @@ def _evaluate(obj, obj_eval, mod, st: ModifierState, ctx: Context, source: Sourc
         return fallback(ctx.session, obj, mod, st, s, f"{type(e).__name__}: {e}", ctx.render)
 
 
-def handed_over_key(obj, mod, st: ModifierState, s: Settings, deforms, reason: str) -> tuple:
-    """What a decision to hand over to the companion read and left: the settings, the toggles,
-    where DQ Skin would deform and why not, and the companion as it set it up. While it is the
-    same (`still_handed_over`), evaluating again would change nothing: the companion deforms."""
+def step_aside_key(obj, mod, st: ModifierState, s: Settings, deforms, reason: str) -> tuple:
+    """What a decision to leave the deforming to the companion (switched off, handed over) read
+    and left: the settings, the toggles, where DQ Skin would deform and why not, and the
+    companion as it set it up. While it is the same (`still_steps_aside`), evaluating again
+    would change nothing: the companion deforms."""
     c = companions.companion_of(obj, mod, st)
     return (s.key(), mod.show_viewport, mod.show_render, deforms, reason, tuple(companion.snapshot(c).values()) if c is not None else None)
 
 
-def still_handed_over(obj, mod, st: ModifierState, ctx: Context) -> bool:
-    """Whether the modifier's last full evaluation handed over to the companion and this one
-    would decide the same (its decision read again, `_where_it_deforms`, without what it
+def still_steps_aside(obj, mod, st: ModifierState, ctx: Context) -> bool:
+    """Whether the modifier's last full evaluation left the deforming to the companion and this
+    one would decide the same (its decision read again, `_where_it_deforms`, without what it
     writes): then nothing of DQ Skin's needs doing for it."""
-    if st.handed is None or ctx.render or st.decided_structure != ctx.structure:
+    if st.stepped_aside is None or ctx.render or st.decided_structure != ctx.structure:
         return False
     exporting = ctx.session.exports.active()
     if exporting:
         return False
     s = settings.cached(mod, st.settings)
     deforms, reason = _where_it_deforms(obj, mod, s, ctx, exporting)
-    return bool(reason) and handed_over_key(obj, mod, st, s, deforms, reason) == st.handed
+    return step_aside_key(obj, mod, st, s, deforms, reason) == st.stepped_aside
 
 
 def _where_it_deforms(obj, mod, s: Settings, ctx: Context, exporting: str) -> tuple[tuple[bool, bool], str]:
@@ -185,9 +183,10 @@ def _in_edit_mode(ctx: Context, target: Target, s: Settings, deforms) -> bool:
     return False
 
 
-def _step_aside(ctx: Context, target: Target, s, deforms, mode: Mode, message: str) -> bool:
+def _step_aside(ctx: Context, target: Target, s, deforms, mode: Mode, message: str, reason: str) -> bool:
     """DQ Skin does not deform in this evaluation: the mesh passes through, the companion
-    deforms (where the user has not switched it off)."""
+    deforms (where the user has not switched it off). What decided it is kept for the frames
+    after (`still_steps_aside`); `reason`: why DQ Skin would hand over ("" if it would not)."""
     obj, mod, st = target.obj, target.mod, target.st
     if obj.library is None:
         ctx.session.routes.pass_through(target)
@@ -195,6 +194,8 @@ def _step_aside(ctx: Context, target: Target, s, deforms, mode: Mode, message: s
     report(st, mode, message)
     if mode is Mode.OFF and not companions.companion_of(obj, mod, st):
         st.status.message = "Off: no Armature modifier after it, the mesh is not deformed"
+    if not ctx.render and obj.library is None:
+        st.stepped_aside = step_aside_key(obj, mod, st, s, deforms, reason)
     return False
 
 

@@ -55,11 +55,12 @@ def fed_frame_stands(obj, ctx: Context, bones_changed: bool = False) -> bool:
     return all(mod.show_viewport for mod in mods)  # (following the user may have switched one off)
 
 
-def handed_over_stands(obj, ctx: Context) -> bool:
-    """Whether every DQ Skin of `obj` hands over to its companion as at its last full evaluation
-    (`pipeline.still_handed_over`): the companion deforms each frame by itself, and a full
-    evaluation of each frame would only decide the same again (a crowd whose characters have a
-    Corrective Smooth after DQ Skin paid it for every character on every frame)."""
+def stepped_aside_stands(obj, ctx: Context) -> bool:
+    """Whether every DQ Skin of `obj` leaves the deforming to its companion (switched off or
+    handed over) as at its last full evaluation (`pipeline.still_steps_aside`): the companion
+    deforms each frame by itself, and a full evaluation of each frame would only decide the same
+    again (a crowd whose characters have a Corrective Smooth after DQ Skin, or DQ Skin switched
+    off to compare, paid it for every character on every frame)."""
     if obj.library is not None:
         return False
     mods = dq_skin_modifiers(obj)
@@ -69,8 +70,11 @@ def handed_over_stands(obj, ctx: Context) -> bool:
     try:
         for mod in mods:
             st = states.find(mod_key(obj, mod))
-            if st is None or st.status.mode is not Mode.HANDED_OVER or not pipeline.still_handed_over(obj, mod, st, ctx):
+            if st is None or st.status.mode not in STEPPED_ASIDE or not pipeline.still_steps_aside(obj, mod, st, ctx):
                 return False
     except (ReferenceError, AttributeError):  # (the armature was deleted: the full path says so)
         return False
     return True
+
+
+STEPPED_ASIDE = (Mode.OFF, Mode.HANDED_OVER)

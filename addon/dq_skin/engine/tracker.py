@@ -343,7 +343,7 @@ class Tracker:
             bones, rec.bones_changed = rec.bones_changed, False
             if not forced and playback.fed_frame_stands(rec.obj, ctx, bones):
                 continue  # the feed made this frame inside Blender's evaluation
-            if not forced and not bones and playback.handed_over_stands(rec.obj, ctx):
+            if not forced and not bones and playback.stepped_aside_stands(rec.obj, ctx):
                 continue  # Blender's Armature modifier deforms it, as it did
             self.evaluate(rec, depsgraph, forced, ctx)
         pipeline.run_batch(self.session, ctx.batch)

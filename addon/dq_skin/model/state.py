@@ -139,9 +139,10 @@ class ModifierState:
     capture_on: bool | None = None  # whether the node group stores the incoming positions
     needs_effective: bool = False  # envelopes or B-Bones: influences change with the positions
     decided_structure: int = -1  # the registry's structure version at the last full decision
-    # The last full evaluation handed over to the companion (viewport): what that decision read
-    # and the companion as it left it (`pipeline.handed_over_key`); None otherwise.
-    handed: tuple | None = None
+    # The last full evaluation left the deforming to the companion (viewport; switched off or
+    # handed over): what that decision read and the companion as it left it
+    # (`pipeline.step_aside_key`); None otherwise.
+    stepped_aside: tuple | None = None
 
 
 class States:

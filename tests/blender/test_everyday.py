@@ -406,6 +406,16 @@ def test_corrective_smooth_after_dq_skin(dq_skin, assets, method):
     assert_same(body, ref)  # what reaches Corrective Smooth is exact
 
 
+def full_evaluations(dq_skin, monkeypatch) -> list:
+    """The names of the objects DQ Skin evaluates in full from now on, in order (a list that
+    grows as they are)."""
+    pipeline = dq_skin.engine.pipeline
+    evaluated = []
+    real = pipeline._evaluate
+    monkeypatch.setattr(pipeline, "_evaluate", lambda obj, *a: evaluated.append(obj.name) or real(obj, *a))
+    return evaluated
+
+
 def test_a_character_handed_over_is_not_evaluated_every_frame_and_follows_changes(dq_skin, monkeypatch):
     """Handed over to its companion (Corrective Smooth after it), a character needs nothing of
     DQ Skin's while what decided it stands: its frames run no full evaluation (a crowd with
@@ -418,10 +428,7 @@ def test_a_character_handed_over_is_not_evaluated_every_frame_and_follows_change
     tw = twin(obj, share_mesh=False)
     bpy.context.scene.frame_set(2)
     assert status(dq_skin, obj).mode.name == "HANDED_OVER"
-    pipeline = dq_skin.engine.pipeline
-    evaluated = []
-    real = pipeline._evaluate
-    monkeypatch.setattr(pipeline, "_evaluate", lambda obj, *a: evaluated.append(obj.name) or real(obj, *a))
+    evaluated = full_evaluations(dq_skin, monkeypatch)
     check_frames([(obj, tw)], frames=(3, 8, 14))
     assert evaluated == [], "frames of a character handed over ran full evaluations"
     # A script changes the method: the companion follows (Preserve Volume), still handed over.
@@ -452,10 +459,7 @@ def test_a_character_switched_off_is_not_evaluated_every_frame(dq_skin, monkeypa
     for f in (2, 3):  # (switching off takes the carrier out: the next frame sees the stack change)
         bpy.context.scene.frame_set(f)
     assert status(dq_skin, obj).mode.name == "OFF"
-    pipeline = dq_skin.engine.pipeline
-    evaluated = []
-    real = pipeline._evaluate
-    monkeypatch.setattr(pipeline, "_evaluate", lambda obj, *a: evaluated.append(obj.name) or real(obj, *a))
+    evaluated = full_evaluations(dq_skin, monkeypatch)
     check_frames([(obj, tw)], frames=(4, 8, 14))
     assert evaluated == [], "frames of a character switched off ran full evaluations"
     mod.show_viewport = True

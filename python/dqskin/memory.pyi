@@ -33,3 +33,13 @@ class PoseMemory:
         """The pose of a ``bpy.types.Object`` of type ``'ARMATURE'`` (evaluated for this frame)."""
     def channel_matrices(self, armature: object) -> npt.NDArray[np.float32]:
         """``(N, 4, 4)`` row-major: every pose bone's ``matrix_channel``, in ``pose.bones`` order."""
+
+class ObjectStateMemory:
+    """Reads what decides whether a DQ Skin object's fed frame stands from Blender's memory (the layout from ``blend_file``'s SDNA)."""
+    def __init__(self, blend_file: bytes) -> None: ...
+    def digest(self, obj: object) -> bytes:
+        """16 bytes that change whenever the state of a ``bpy.types.Object`` does (its modes, modifier stack, inputs, vertex-group names)."""
+    def unchanged(self, obj: object, previous: bytes) -> bool:
+        """Whether the state of ``obj`` still has the digest ``previous``."""
+    def describe(self, obj: object) -> dict[str, object]:
+        """The same reads as values, for checking them against Blender's Python API."""

@@ -263,6 +263,7 @@ def catalogue():
         "armature_spaces": (dqskin.armature_spaces, lambda: dict(object_world=DEF[0], armature_world=DEF[1]), []),
         "memory.MeshMemory": (dqskin.memory.MeshMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
         "memory.PoseMemory": (dqskin.memory.PoseMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
+        "memory.ObjectStateMemory": (dqskin.memory.ObjectStateMemory, lambda: dict(blend_file=b"BLENDER-v402" + b"\0" * 64), []),
         "memory.positions_digest": (dqskin.memory.positions_digest, lambda: dict(positions=POS), []),
     }
     # The same computations as jobs on the core's thread (result() waits: no thread outlives its example).
@@ -475,7 +476,11 @@ def test_every_argument_refuses_each_kind_of_bad_value_naming_it(name, replaced)
 def test_every_public_function_survives_any_argument(name):
     fn, valid, outs = CATALOGUE[name]
     params = list(valid())
-    if name not in ("memory.MeshMemory", "memory.PoseMemory"):  # their valid input is a .blend written by Blender (tested there)
+    if name not in (
+        "memory.MeshMemory",
+        "memory.PoseMemory",
+        "memory.ObjectStateMemory",
+    ):  # their valid input is a .blend written by Blender (tested there)
         fn(**valid())
 
     @seed(SEED + sum(map(ord, name)))

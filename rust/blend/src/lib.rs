@@ -20,12 +20,15 @@
 //!   modifier deforms with them (channel matrices, bones' rest data and envelopes, and the
 //!   runtime B-Bone cache), into `dqskin-core`'s [`PoseChannel`](dqskin_core::skin::PoseChannel)s;
 //!   [`read_channel_matrices`]: only the channel matrices, for rigs without B-Bones or envelopes.
+//! - [`ObjectStateLayout`] and [`read_object_state`]: what decides whether a DQ Skin object's fed
+//!   frame stands (its modes, modifier stack, inputs, vertex-group names), as bytes to compare.
 //!
 //! No Python and no Blender headers: the only unsafe code is the raw reads in
-//! [`read_deform_verts`] and [`read_pose`], whose callers guarantee the pointer.
+//! [`read_deform_verts`], [`read_pose`] and [`read_object_state`], whose callers guarantee the pointer.
 
 mod memory;
 mod mesh;
+mod object_state;
 mod pose;
 mod sdna;
 #[cfg(test)]
@@ -33,5 +36,8 @@ mod test_dna;
 
 pub use memory::ReadError;
 pub use mesh::{positions_in_memory, read_deform_verts, read_positions, DeformVerts, MeshLayout};
+pub use object_state::{
+    describe_object, read_object_state, ModifierSummary, ObjectStateLayout, ObjectSummary, PropertyValue,
+};
 pub use pose::{read_channel_matrices, read_pose, PoseLayout, MAX_CHANNELS};
 pub use sdna::{DnaError, Field, Sdna};

@@ -190,12 +190,8 @@ fn positions_digest<'py>(py: Python<'py>, positions: &Bound<'py, PyAny>) -> PyRe
 
 /// Two SipHash-1-3 sums with different keys over the values' bits and their count.
 fn digest_of(values: &[f32]) -> [u8; 16] {
-    let mut out = [0u8; 16];
     let mut bytes = [0u8; 4096];
-    for (key, part) in out.chunks_exact_mut(8).enumerate() {
-        let mut h = std::hash::DefaultHasher::new();
-        h.write_u64(key as u64);
-        h.write_usize(values.len());
+    two_sums(values.len(), |h| {
         for chunk in values.chunks(bytes.len() / 4) {
             let used = &mut bytes[..chunk.len() * 4];
             for (b, v) in used.chunks_exact_mut(4).zip(chunk) {
@@ -203,6 +199,22 @@ fn digest_of(values: &[f32]) -> [u8; 16] {
             }
             h.write(used);
         }
+    })
+}
+
+/// Two SipHash-1-3 sums with different keys over `bytes` and their count.
+pub(crate) fn digest_of_bytes(bytes: &[u8]) -> [u8; 16] {
+    two_sums(bytes.len(), |h| h.write(bytes))
+}
+
+/// 16 bytes: two SipHash-1-3 sums, keyed 0 and 1, of `len` and what `feed` writes.
+fn two_sums(len: usize, mut feed: impl FnMut(&mut std::hash::DefaultHasher)) -> [u8; 16] {
+    let mut out = [0u8; 16];
+    for (key, part) in out.chunks_exact_mut(8).enumerate() {
+        let mut h = std::hash::DefaultHasher::new();
+        h.write_u64(key as u64);
+        h.write_usize(len);
+        feed(&mut h);
         part.copy_from_slice(&h.finish().to_le_bytes());
     }
     out

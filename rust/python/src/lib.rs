@@ -18,6 +18,7 @@ mod centers_job;
 mod dual_quat;
 mod job;
 mod method;
+mod object_state;
 mod rigs;
 mod skinning;
 mod tracks;
@@ -83,6 +84,7 @@ fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     blending::register(m)?;
     blender::register(m)?;
     armature::register(m)?;
+    object_state::register(m)?;
     skinning::register(m)?;
     centers_job::register(m)?;
     background::register(m)?;

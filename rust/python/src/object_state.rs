@@ -1,0 +1,124 @@
+//! `dqskin.memory.ObjectStateMemory`: what decides whether a DQ Skin object's fed frame stands,
+//! read from Blender's memory in one call (`dqskin_blend::read_object_state`).
+
+use std::cell::RefCell;
+
+use dqskin_blend::{describe_object, read_object_state, ObjectStateLayout, PropertyValue};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict, PyList};
+
+use crate::blender::{digest_of_bytes, require_bpy_type, sdna_of};
+use crate::guard;
+
+thread_local! {
+    /// The buffer a state is read into (no allocation per call once it has grown).
+    static SCRATCH: RefCell<Vec<u8>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Reads, for a ``bpy.types.Object``, its mode, its modifier stack (each modifier's type,
+/// switches, flags, id and name; a Geometry Nodes modifier's node group and inputs; an
+/// Armature modifier's settings), the mode of the objects those point to, and its mesh's
+/// vertex-group names: a state of a few kilobytes a character, kept as its 16-byte digest (as
+/// `positions_digest` keeps positions) and only compared with an earlier one of the same object.
+///
+/// Built from the bytes of any uncompressed ``.blend`` file that this Blender wrote (its SDNA
+/// describes the structs in memory). Internal to the DQ Skin extension.
+#[pyclass(name = "ObjectStateMemory", module = "dqskin.memory", frozen)]
+pub struct PyObjectStateMemory(ObjectStateLayout);
+
+#[pymethods]
+impl PyObjectStateMemory {
+    #[new]
+    fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
+        guard(|| {
+            ObjectStateLayout::new(&sdna_of(blend_file)?)
+                .map(Self)
+                .map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
+        })
+    }
+
+    /// The digest of the state of ``obj`` (a ``bpy.types.Object``): 16 bytes.
+    fn digest<'py>(&self, obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyBytes>> {
+        guard(|| Ok(PyBytes::new(obj.py(), &self.read(obj)?)))
+    }
+
+    /// Whether the state of ``obj`` has the digest ``previous`` (from :meth:`digest`).
+    fn unchanged(&self, obj: &Bound<'_, PyAny>, previous: &[u8]) -> PyResult<bool> {
+        guard(|| Ok(self.read(obj)?.as_slice() == previous))
+    }
+
+    /// The same reads as values, for the check against Blender's Python API: ``{"mode": int,
+    /// "vertex_groups": [str], "modifiers": [{"type": int, "mode": int, "name": str,
+    /// "node_group": int, "inputs": {name: value}, "object": int}]}`` (addresses as ints; an
+    /// input that is a group or an array gives its length).
+    fn describe<'py>(&self, obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+        guard(|| {
+            let py = obj.py();
+            let ptr = object_pointer(obj)?;
+            // SAFETY: as in `read`.
+            let s = unsafe { describe_object(&self.0, ptr) }.map_err(|e| PyValueError::new_err(format!("obj: {e}")))?;
+            let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+            let modifiers = PyList::empty(py);
+            for m in &s.modifiers {
+                let inputs = PyDict::new(py);
+                for (name, value) in &m.inputs {
+                    let v: Bound<'_, PyAny> = match value {
+                        PropertyValue::Int(i) => i.into_pyobject(py)?.into_any(),
+                        PropertyValue::Float(f) => f.into_pyobject(py)?.into_any(),
+                        PropertyValue::Double(f) => f.into_pyobject(py)?.into_any(),
+                        PropertyValue::Bool(b) => b.into_pyobject(py)?.to_owned().into_any(),
+                        PropertyValue::String(b) => {
+                            text(b.strip_suffix(&[0]).unwrap_or(b)).into_pyobject(py)?.into_any()
+                        }
+                        PropertyValue::Id(p) | PropertyValue::Group(p) | PropertyValue::Array(p) => {
+                            p.into_pyobject(py)?.into_any()
+                        }
+                    };
+                    inputs.set_item(text(name), v)?;
+                }
+                let d = PyDict::new(py);
+                d.set_item("type", m.kind)?;
+                d.set_item("mode", m.mode)?;
+                d.set_item("name", text(&m.name))?;
+                d.set_item("node_group", m.node_group)?;
+                d.set_item("inputs", inputs)?;
+                d.set_item("object", m.object)?;
+                modifiers.append(d)?;
+            }
+            let out = PyDict::new(py);
+            out.set_item("mode", s.mode)?;
+            out.set_item("vertex_groups", s.vertex_groups.iter().map(|g| text(g)).collect::<Vec<_>>())?;
+            out.set_item("modifiers", modifiers)?;
+            Ok(out)
+        })
+    }
+}
+
+impl PyObjectStateMemory {
+    /// The digest of the state of `obj`.
+    fn read(&self, obj: &Bound<'_, PyAny>) -> PyResult<[u8; 16]> {
+        let ptr = object_pointer(obj)?;
+        SCRATCH.with_borrow_mut(|state| {
+            // SAFETY: the address is `Object.as_pointer()` of a live object (checked above to be
+            // a `bpy.types.Object`; a removed one raises there). The extension reads it from its
+            // frame handler, while Blender does not evaluate or edit anything; every pointer
+            // followed is one Blender keeps valid (its lists, and ID pointers, which it clears
+            // or remaps when the data-block goes). The extension checks the first read of a
+            // session against Blender's own data (`blender.memory_check`).
+            unsafe { read_object_state(&self.0, ptr, state) }
+                .map_err(|e| PyValueError::new_err(format!("obj: {e}")))?;
+            Ok(digest_of_bytes(state))
+        })
+    }
+}
+
+/// The address of ``obj``, checked to be a ``bpy.types.Object``.
+fn object_pointer(obj: &Bound<'_, PyAny>) -> PyResult<usize> {
+    require_bpy_type(obj.py(), obj, "Object", "obj")?;
+    obj.call_method0("as_pointer")?.extract()
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyObjectStateMemory>()
+}

@@ -605,3 +605,156 @@ def test_the_result_route_keeps_no_buffer_between_fed_frames(dq_skin, monkeypatc
     stored = np.empty(len(obj.data.vertices) * 3, np.float32)
     obj.data.shape_keys.key_blocks[-1].data.foreach_get("co", stored)
     assert deviation(stored.reshape(-1, 3), shown) <= 1e-6
+
+
+def checks_through_python(dq_skin, monkeypatch) -> list:
+    """The objects whose fed frame is checked through Blender's Python API from now on (not
+    from their state in memory, `playback.FedCheck`), one name per check."""
+    playback = dq_skin.engine.playback
+    checked = []
+    real = playback._fed_frame_stands
+    monkeypatch.setattr(playback, "_fed_frame_stands", lambda obj, *a: checked.append(obj.name) or real(obj, *a))
+    return checked
+
+
+def _swap_armature(dq_skin, obj, reference, mod, arm):
+    other = arm.copy()  # (the same animation, one unit away: the mesh follows it)
+    bpy.context.scene.collection.objects.link(other)
+    other.location.x += 1.0
+    dq_skin.blender.nodes.put(mod, "Armature", other)
+    next(m for m in reference.modifiers if m.type == "ARMATURE").object = other
+
+
+def _reference_modifier(reference):
+    return next(m for m in reference.modifiers if m.type == "ARMATURE")
+
+
+# What a script may change between two frames of playback, each on the character and on its
+# reference so that the two stay equal: (DQ Skin's modifier, the reference's Armature modifier).
+SCRIPT_CHANGES = {
+    "a vertex group renamed": lambda dq, obj, ref, mod, arm: [o.vertex_groups["Bone1"].__setattr__("name", "Renamed") for o in (obj, ref)],
+    "the method": lambda dq, obj, ref, mod, arm: (
+        dq.blender.nodes.put_method(mod, "Linear"),
+        setattr(_reference_modifier(ref), "use_deform_preserve_volume", False),
+    ),
+    "bone envelopes on": lambda dq, obj, ref, mod, arm: (
+        dq.blender.nodes.put(mod, "Use Envelopes", True),
+        setattr(_reference_modifier(ref), "use_bone_envelopes", True),
+    ),
+    "a mask vertex group": lambda dq, obj, ref, mod, arm: (
+        dq.blender.nodes.put_attribute(mod, "Mask", "Bone2"),
+        setattr(_reference_modifier(ref), "vertex_group", "Bone2"),
+    ),
+    "another armature": _swap_armature,
+    "the companion shown": lambda dq, obj, ref, mod, arm: setattr(
+        obj.modifiers[dq.blender.nodes.get_companion(mod)["name"]], "show_viewport", True
+    ),
+    "DQ Skin hidden": lambda dq, obj, ref, mod, arm: setattr(mod, "show_viewport", False),
+}
+
+
+@pytest.mark.parametrize("change", sorted(SCRIPT_CHANGES))
+def test_fed_frames_are_checked_from_memory_and_every_change_is_seen(dq_skin, monkeypatch, route, change):
+    """While nothing but the pose changes, the frame handler checks a fed frame from the
+    object's state in Blender's memory (one read), not through the Python API (dozens of calls a
+    character and frame); what a script changes before the next frame is seen there and
+    followed at once (the frame equals the Armature modifier set up the same way)."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = bpy.context.scene
+    for f in (4, 5):
+        scene.frame_set(f)
+    checked = checks_through_python(dq_skin, monkeypatch)
+    for f in (6, 7, 8):
+        scene.frame_set(f)
+        assert_same(obj, reference, f"frame {f}")
+    assert checked == [], "frames where only the pose changed were checked through the Python API"
+    assert dq_skin.SESSION.readers.object_state_checked
+    SCRIPT_CHANGES[change](dq_skin, obj, reference, dq_skin_mods(obj)[0], arm)
+    scene.frame_set(9)
+    assert_same(obj, reference, f"after {change}")
+    scene.frame_set(10)
+    assert_same(obj, reference, f"the frame after {change}")
+
+
+def test_the_object_state_reader_is_checked_on_its_first_read(dq_skin, monkeypatch):
+    """The object-state reader's first read in a session is compared with what Blender's
+    Python API gives (`memory_check.object_state_differs`): it agrees on a character, catches
+    another object's state, and a reader that disagrees is refused for the session with the
+    reason; the Python path then checks every frame, still equal to the Armature modifier."""
+    check = dq_skin.blender.memory_check
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    other, _, _ = bbone_rig()
+    readers = dq_skin.SESSION.readers
+    raw = readers._object_state
+    assert raw is not None, readers.object_state_error
+    assert check.object_state_differs(raw.describe(obj), obj) == ""
+    assert check.object_state_differs(raw.describe(obj), other) != ""
+    described = raw.describe(obj)
+    described["modifiers"][-1]["mode"] ^= check.SHOWN_IN_VIEWPORT
+    assert "shown in the viewport" in check.object_state_differs(described, obj)
+    monkeypatch.setattr(readers, "object_state_checked", False)
+    monkeypatch.setattr(readers, "_object_state", raw)  # (put back after the test)
+    monkeypatch.setattr(check, "object_state_differs", lambda *_: "the object's mode (made up by the test)")
+    checked = checks_through_python(dq_skin, monkeypatch)
+    for f in (4, 5, 6):
+        bpy.context.scene.frame_set(f)
+        assert_same(obj, reference, f"frame {f}")
+    assert readers.object_state is None and "disagrees with Blender's data" in readers.object_state_error
+    assert len(checked) == 3, checked
+
+
+def _in_mode(obj, mode: str) -> None:
+    select_only(obj)
+    bpy.ops.object.mode_set(mode=mode)
+
+
+def _companion(dq, obj, mod):
+    return obj.modifiers[dq.blender.nodes.get_companion(mod)["name"]]
+
+
+# What else a script or the interface may change, that the object's state must show.
+STATE_CHANGES = {
+    **SCRIPT_CHANGES,
+    "the object in Edit Mode": lambda dq, obj, ref, mod, arm: _in_mode(obj, "EDIT"),
+    "the armature in Edit Mode": lambda dq, obj, ref, mod, arm: _in_mode(arm, "EDIT"),
+    "the companion renamed": lambda dq, obj, ref, mod, arm: setattr(_companion(dq, obj, mod), "name", "Renamed"),
+    "the companion's render switch": lambda dq, obj, ref, mod, arm: setattr(_companion(dq, obj, mod), "show_render", True),
+    "the companion moved": lambda dq, obj, ref, mod, arm: obj.modifiers.move(len(obj.modifiers) - 1, 0),
+    "a vertex group added": lambda dq, obj, ref, mod, arm: obj.vertex_groups.new(name="Extra"),
+    "a modifier added": lambda dq, obj, ref, mod, arm: obj.modifiers.new("Smooth", "SMOOTH"),
+    "the armature's input cleared": lambda dq, obj, ref, mod, arm: dq.blender.nodes.put(mod, "Armature", None),
+}
+
+
+@pytest.mark.parametrize("change", sorted(STATE_CHANGES))
+def test_the_object_state_read_from_memory_shows_every_change(dq_skin, change):
+    """The state the fast check compares (`ObjectStateMemory`, read from Blender's memory)
+    stays the same while only the frame changes, and differs after each change a script or the
+    interface can make to what the frame handler's check reads, whether or not Blender reports
+    it as an update."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    reader = dq_skin.SESSION.readers.object_state
+    assert reader is not None, dq_skin.SESSION.readers.object_state_error
+    before = reader.digest(obj)
+    bpy.context.scene.frame_set(7)
+    assert reader.digest(obj) == before, "the frame alone changed the state"
+    STATE_CHANGES[change](dq_skin, obj, reference, dq_skin_mods(obj)[0], arm)
+    assert reader.digest(obj) != before
+
+
+def test_the_object_state_reader_refuses_what_is_not_an_object(dq_skin):
+    """Addresses come from Blender itself: anything but a `bpy.types.Object` is refused with a
+    clear error before any memory is read; a digest of another length is never unchanged."""
+    obj, _arm, _ref = fed_character(dq_skin, "DUAL_QUATERNION")
+    raw = dq_skin.SESSION.readers._object_state
+    for wrong in (obj.data, "Tube", 12345, None):
+        for call in (raw.digest, raw.describe, lambda o: raw.unchanged(o, b"")):
+            with pytest.raises(TypeError, match="obj must be a bpy.types.Object"):
+                call(wrong)
+    assert len(raw.digest(obj)) == 16
+    assert not raw.unchanged(obj, b"") and not raw.unchanged(obj, raw.digest(obj)[:8])
+    assert raw.unchanged(obj, raw.digest(obj))
+    with pytest.raises(TypeError, match="blend_file must be the bytes of a .blend file"):
+        dq_skin.dqskin.memory.ObjectStateMemory("file.blend")
+    with pytest.raises(ValueError, match="blend_file"):
+        dq_skin.dqskin.memory.ObjectStateMemory(b"BLENDER-v402" + b"\0" * 64)

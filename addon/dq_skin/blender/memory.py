@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The readers of Blender's memory (`dqskin.memory.MeshMemory` for vertex-group weights and positions,
-`dqskin.memory.PoseMemory` for armature poses), built once per session from the SDNA of a tiny .blend
+`dqskin.memory.PoseMemory` for armature poses, `dqskin.memory.ObjectStateMemory` for what decides
+whether an object's fed frame stands), built once per session from the SDNA of a tiny .blend
 this Blender writes: the file describes the structs in memory whatever the version. Each reader's
 first read in the session is checked against Blender's own data (`memory_check`). If a reader
 cannot be built or its check fails, its error says why and the callers take their slow, safe
@@ -25,8 +26,10 @@ class Readers:
         self._built = False
         self._mesh = None
         self._pose = None
+        self._object_state = None
         self.mesh_error = ""
         self.pose_error = ""
+        self.object_state_error = ""
         # Whether each reader's first read agreed with Blender's data (`memory_check`).
         self.mesh_checked = False
         self.positions_checked = False
@@ -34,6 +37,7 @@ class Readers:
         self.positions_error = ""
         self.pose_checked = False
         self.channels_checked = False
+        self.object_state_checked = False
 
     def _build(self) -> None:
         if self._built:
@@ -46,7 +50,7 @@ class Readers:
             with open(path, "rb") as f:
                 blend_file = f.read()
         except Exception as e:  # any failure: both readers fall back to the slow, safe path
-            self.mesh_error = self.pose_error = f"{type(e).__name__}: {e}"
+            self.mesh_error = self.pose_error = self.object_state_error = f"{type(e).__name__}: {e}"
             return
         finally:
             try:
@@ -61,6 +65,10 @@ class Readers:
             self._pose = dqskin.memory.PoseMemory(blend_file)
         except Exception as e:
             self.pose_error = f"{type(e).__name__}: {e}"
+        try:
+            self._object_state = dqskin.memory.ObjectStateMemory(blend_file)
+        except Exception as e:
+            self.object_state_error = f"{type(e).__name__}: {e}"
 
     @property
     def mesh(self):
@@ -74,11 +82,19 @@ class Readers:
         self._build()
         return self._pose if self._pose is None else CheckedPose(self)
 
+    @property
+    def object_state(self):
+        """The object-state reader for this Blender, or None (then `object_state_error` says why)."""
+        self._build()
+        return self._object_state if self._object_state is None else CheckedObjectState(self)
+
     def refuse(self, which: str, what: str) -> None:
         """A reader that disagreed with Blender's data: gone for the session, with the reason."""
         message = f"the memory reader disagrees with Blender's data ({what}): the Python path reads instead"
         if which == "mesh":
             self._mesh, self.mesh_error = None, message
+        elif which == "object_state":
+            self._object_state, self.object_state_error = None, message
         else:
             self._pose, self.pose_error = None, message
 
@@ -161,3 +177,37 @@ class CheckedPose:
                 raise ValueError(readers.pose_error)
             setattr(readers, checked, True)
         return got
+
+
+class CheckedObjectState:
+    """`ObjectStateMemory` whose first digest in the session is checked
+    (`memory_check.object_state_differs`)."""
+
+    def __init__(self, readers: Readers):
+        self.readers = readers
+
+    def digest(self, obj) -> bytes | None:
+        """The digest of `obj`'s state, or None: the reader is refused (the caller checks through
+        the Python API)."""
+        readers = self.readers
+        reader = readers._object_state
+        if reader is None:
+            return None
+        try:
+            got = reader.digest(obj)
+            if not readers.object_state_checked:
+                what = memory_check.object_state_differs(reader.describe(obj), obj)
+                if what:
+                    readers.refuse("object_state", what)
+                    return None
+                readers.object_state_checked = True
+        except ValueError:  # (memory it refuses to read: this object takes the Python path)
+            return None
+        return got
+
+    def unchanged(self, obj, digest: bytes) -> bool:
+        reader = self.readers._object_state
+        try:
+            return reader is not None and reader.unchanged(obj, digest)
+        except ValueError:
+            return False

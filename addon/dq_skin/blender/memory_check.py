@@ -7,9 +7,14 @@ else what differs."""
 
 from __future__ import annotations
 
+from types import MappingProxyType
+
 import numpy as np
 
+import bpy
+
 from .. import dqskin
+from . import compat
 
 SAMPLE_VERTICES = 256  # vertices compared on a mesh's first read (evenly spread)
 SAMPLE_BBONES = 4  # B-Bones whose joints are compared on an armature's first read
@@ -101,3 +106,66 @@ def _sample(n: int) -> list[int]:
     if n <= SAMPLE_VERTICES:
         return list(range(n))
     return sorted(set(np.linspace(0, n - 1, SAMPLE_VERTICES).astype(int).tolist()))
+
+
+# `eModifierType` values (stored in files, so they never change) and `eModifierMode_Realtime`.
+MODIFIER_TYPES = MappingProxyType({"ARMATURE": 8, "NODES": 57})
+SHOWN_IN_VIEWPORT = 1
+
+
+def object_state_differs(found: dict, obj) -> str:
+    """What the object's state read from memory (`ObjectStateMemory.describe`) gets wrong about
+    `obj`: its mode, its modifiers (order, names, types, switches, node groups, the inputs'
+    names and values, an Armature modifier's object) and its vertex-group names."""
+    if (found["mode"] == 0) != (obj.mode == "OBJECT"):
+        return "the object's mode"
+    if found["vertex_groups"] != list(obj.vertex_groups.keys()):
+        return "the vertex-group names"
+    mods = list(obj.modifiers)
+    if [m["name"] for m in found["modifiers"]] != [m.name for m in mods]:
+        return "the modifiers' names and order"
+    for got, mod in zip(found["modifiers"], mods):
+        want = MODIFIER_TYPES.get(mod.type)
+        if (want is not None and got["type"] != want) or (want is None and got["type"] in MODIFIER_TYPES.values()):
+            return f"the type of modifier {mod.name}"
+        if bool(got["mode"] & SHOWN_IN_VIEWPORT) != mod.show_viewport:
+            return f"whether modifier {mod.name} is shown in the viewport"
+        if mod.type == "ARMATURE" and got["object"] != _address(mod.object):
+            return f"the object of modifier {mod.name}"
+        if mod.type == "NODES":
+            what = _inputs_differ(got, mod)
+            if what:
+                return f"{what} of modifier {mod.name}"
+    return ""
+
+
+def _inputs_differ(got: dict, mod) -> str:
+    group = mod.node_group
+    if got["node_group"] != _address(group):
+        return "the node group"
+    if group is None:
+        return ""
+    inputs = got["inputs"]
+    for item in group.interface.items_tree:
+        if item.item_type != "SOCKET" or item.in_out != "INPUT" or item.socket_type == "NodeSocketGeometry":
+            continue
+        if item.identifier not in inputs:
+            return f"input {item.name}"
+        want = compat.get_input(mod, item.identifier)
+        value = inputs[item.identifier]
+        if isinstance(want, bpy.types.ID) or want is None:
+            if item.socket_type in (
+                "NodeSocketObject",
+                "NodeSocketCollection",
+                "NodeSocketMaterial",
+                "NodeSocketImage",
+            ) and value != _address(want):
+                return f"input {item.name}"
+        elif isinstance(want, (bool, int, float, str)) and item.socket_type != "NodeSocketMenu" and value != want:
+            if not (isinstance(want, float) and np.float32(want) == np.float32(value)):
+                return f"input {item.name}"
+    return ""
+
+
+def _address(data) -> int:
+    return data.as_pointer() if data is not None else 0

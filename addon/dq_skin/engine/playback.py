@@ -4,6 +4,8 @@ evaluation (see `routes.feed` and `fed`); what it could not know is checked here
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from ..blender import pose, settings
 from ..model.state import Mode
 from ..routes.feed import Feeds
@@ -11,23 +13,91 @@ from . import companions, pipeline
 from .context import Context, dq_skin_modifiers, mod_key
 
 
-def fed_frame_stands(obj, ctx: Context, bones_changed: bool = False) -> bool:
-    """Whether the frame the feed skinned for every DQ Skin of `obj` in this evaluation is what
-    the full path would publish, checked cheaply (a Rigify character's full path reads the whole
-    pose again). The driver read the pose, the transforms and the shape keys, and skinned
+@dataclass(frozen=True)
+class FedCheck:
+    """What the last check of an object's fed frame that stood saw (`fed_frame_stands`): the
+    digest of its state in Blender's memory (`dqskin.memory.ObjectStateMemory`: its modes,
+    modifier stack, inputs, companion and vertex-group names) and, for each DQ Skin, what the
+    check compared on the add-on's side."""
+
+    digest: bytes
+    mods: tuple  # (key, state, written settings, mesh version, companion (shown, deforms)) each
+
+
+def fed_frame_stands(rec, ctx: Context, bones_changed: bool = False) -> bool:
+    """Whether the frame the feed skinned for every DQ Skin of `rec.obj` in this evaluation is
+    what the full path would publish, checked cheaply (a Rigify character's full path reads the
+    whole pose again). The driver read the pose, the transforms and the shape keys, and skinned
     only where the bones' binding signature and the mesh were the last full evaluation's;
     checked here is what it could not know: the settings, the mesh and its vertex groups, the
     scene's structure, exports, the toggles and the companion; with `bones_changed` (the
-    armature's data was updated), also the bones' binding signature."""
-    if ctx.render or obj.mode == "EDIT":
+    armature's data was updated), also the bones' binding signature.
+
+    Where none of what Blender holds of it changed since the last time this check stood (one
+    read of its state from memory, `FedCheck`), only the add-on's side is compared again: about
+    a tenth of the check through Blender's Python API, which a crowd paid for every character
+    on every frame."""
+    obj = rec.obj
+    if ctx.render or ctx.session.exports.active():
+        rec.fed_check = None
+        return False
+    if not bones_changed and _stands_as_checked(rec, ctx):
+        return True
+    rec.fed_check = None
+    if not _fed_frame_stands(obj, ctx, bones_changed):
+        return False
+    reader = ctx.session.readers.object_state
+    digest = reader.digest(obj) if reader is not None else None
+    if digest is not None:
+        states = ctx.session.states
+        mods = []
+        for mod in dq_skin_modifiers(obj):
+            key = mod_key(obj, mod)
+            st = states.find(key)
+            written = st.output.written
+            mods.append((key, st, written.settings, written.mesh_version, (st.companion.shown, st.companion.deforms)))
+        rec.fed_check = FedCheck(digest, tuple(mods))
+    return True
+
+
+def _stands_as_checked(rec, ctx: Context) -> bool:
+    """Whether the fed frame stands for what `rec.fed_check` saw: Blender's side unchanged (one
+    read of the object's state), the add-on's side compared as `_fed_frame_stands` does."""
+    check: FedCheck | None = rec.fed_check
+    if check is None:
+        return False
+    obj, session = rec.obj, ctx.session
+    data = session.meshes.peek(obj)  # (None where Blender said the mesh may have changed)
+    if data is None:
+        return False
+    feeds, states = session.routes.feeds, session.states
+    for key, st, settings_key, mesh_version, companion in check.mods:
+        written = st.output.written
+        if (
+            not feeds.skinned_with(key, ctx.fed_stamp)
+            or states.find(key) is not st
+            or written is None
+            or written.settings != settings_key
+            or written.mesh_version != mesh_version
+            or data.version != mesh_version[0]
+            or (written.result and session.meshes.revision(obj.data) != mesh_version[1])
+            or st.decided_structure != ctx.structure
+            or (st.companion.shown, st.companion.deforms) != companion
+        ):
+            return False
+    reader = session.readers.object_state
+    return reader is not None and reader.unchanged(obj, check.digest)
+
+
+def _fed_frame_stands(obj, ctx: Context, bones_changed: bool) -> bool:
+    """`fed_frame_stands` through Blender's Python API."""
+    if obj.mode == "EDIT":
         return False
     mods = dq_skin_modifiers(obj)
     if not mods:
         return False
     session = ctx.session
     feeds: Feeds = session.routes.feeds
-    if session.exports.active():
-        return False
     states = []
     for mod in mods:
         key = mod_key(obj, mod)

@@ -36,6 +36,7 @@ class Record:
     pending: bool = False  # evaluate fully at the next frame
     bones_changed: bool = False  # its armature's data was updated: the bones' binding is compared
     modifier_count: int = 0
+    fed_check: object = None  # what the last check of its fed frame that stood saw (`playback.FedCheck`)
 
 
 class Tracker:
@@ -341,7 +342,7 @@ class Tracker:
                 continue
             forced, rec.pending = rec.pending, False
             bones, rec.bones_changed = rec.bones_changed, False
-            if not forced and playback.fed_frame_stands(rec.obj, ctx, bones):
+            if not forced and playback.fed_frame_stands(rec, ctx, bones):
                 continue  # the feed made this frame inside Blender's evaluation
             if not forced and not bones and playback.stepped_aside_stands(rec.obj, ctx):
                 continue  # Blender's Armature modifier deforms it, as it did

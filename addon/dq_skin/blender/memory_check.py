@@ -146,6 +146,8 @@ def _inputs_differ(got: dict, mod) -> str:
     if group is None:
         return ""
     inputs = got["inputs"]
+    if compat.RNA_INPUTS:  # (5.2: the system properties' group "inputs", each input a group with its value)
+        inputs = {k: v.get("value") for k, v in inputs.get("inputs", {}).items() if isinstance(v, dict)}
     for item in group.interface.items_tree:
         if item.item_type != "SOCKET" or item.in_out != "INPUT" or item.socket_type == "NodeSocketGeometry":
             continue

@@ -3,8 +3,8 @@
 //!
 //! Read: the object's mode and data; its modifier stack in order, each modifier's type,
 //! switches (`mode`), flags, persistent id and name; a Geometry Nodes modifier's node group and
-//! its input values (`settings.properties`, an ID property
-//! group); an Armature modifier's settings; the mode of every object an input points to (the
+//! its input values (ID property groups: `settings.properties` up to Blender 5.1, the
+//! modifier's `system_properties` from 5.2); an Armature modifier's settings; the mode of every object an input points to (the
 //! armature); and the mesh's vertex-group names. [`read_object_state`] writes it as bytes that
 //! are only ever compared with an earlier read of the same object: equal bytes say that none of
 //! it changed. [`describe_object`] reads the same as values, for the check against Blender's
@@ -53,6 +53,8 @@ pub struct ObjectStateLayout {
     modifier_name: (usize, usize),
     nodes_group: usize,
     nodes_properties: usize,
+    /// `ModifierData.system_properties` (5.2+), where a Geometry Nodes modifier's inputs went.
+    modifier_system_properties: Option<usize>,
     armature_deformflag: usize,
     armature_multi: usize,
     armature_object: usize,
@@ -103,6 +105,7 @@ impl ObjectStateLayout {
             modifier_name: chars("ModifierData", "name")?,
             nodes_group: sdna.pointer("NodesModifierData", &["node_group"])?,
             nodes_properties: settings + sdna.pointer("NodesModifierSettings", &["properties"])?,
+            modifier_system_properties: sdna.pointer("ModifierData", &["system_properties"]).ok(),
             armature_deformflag: sdna.number("ArmatureModifierData", &["deformflag"], 2)?,
             armature_multi: sdna.number("ArmatureModifierData", &["multi"], 2)?,
             armature_object: sdna.pointer("ArmatureModifierData", &["object"])?,
@@ -122,7 +125,7 @@ impl ObjectStateLayout {
     }
 }
 
-/// A value of an ID property, as [`describe_object`] gives it (groups and arrays by size only).
+/// A value of an ID property, as [`describe_object`] gives it (arrays by length only).
 #[derive(Clone, Debug, PartialEq)]
 pub enum PropertyValue {
     Int(i32),
@@ -132,7 +135,8 @@ pub enum PropertyValue {
     String(Vec<u8>),
     /// The address of the data-block (0: none).
     Id(usize),
-    Group(usize),
+    /// The group's properties (name, value), in order.
+    Group(Vec<(Vec<u8>, PropertyValue)>),
     Array(usize),
 }
 
@@ -195,10 +199,9 @@ pub unsafe fn describe_object(layout: &ObjectStateLayout, object: usize) -> Resu
             };
             if kind == MODIFIER_NODES {
                 m.node_group = read(md + l.nodes_group);
-                let group: usize = read(md + l.nodes_properties);
-                if group != 0 {
-                    for p in list(read(group + l.property_group), l.property_next, MAX_PROPERTIES)? {
-                        m.inputs.push((chars(p + l.property_name.0, l.property_name.1).to_vec(), value(l, p)?));
+                for group in input_groups(l, md) {
+                    if group != 0 {
+                        m.inputs.extend(properties(l, group, 0)?);
                     }
                 }
             } else if kind == MODIFIER_ARMATURE {
@@ -208,6 +211,16 @@ pub unsafe fn describe_object(layout: &ObjectStateLayout, object: usize) -> Resu
         }
         Ok(ObjectSummary { mode: read(object + l.object_mode), modifiers, vertex_groups: vertex_groups(l, object)? })
     }
+}
+
+/// The ID property groups that hold the inputs of the Geometry Nodes modifier at `md`: its
+/// settings' (up to Blender 5.1) and its system properties (from 5.2), 0 where there is none.
+///
+/// # Safety
+/// `md` must be a live `NodesModifierData`.
+unsafe fn input_groups(l: &ObjectStateLayout, md: usize) -> [usize; 2] {
+    // SAFETY: the caller's guarantee.
+    unsafe { [read(md + l.nodes_properties), l.modifier_system_properties.map_or(0, |o| read(md + o))] }
 }
 
 /// The bytes of `size` at `address` up to the first NUL (a fixed-size C string).
@@ -261,11 +274,33 @@ unsafe fn vertex_groups(l: &ObjectStateLayout, object: usize) -> Result<Vec<Vec<
     }
 }
 
-/// The value of the ID property at `p`.
+/// The properties (name, value) of the ID property group at `group`, `depth` groups down.
+///
+/// # Safety
+/// `group` must be a live `IDProperty` of type group.
+unsafe fn properties(
+    l: &ObjectStateLayout,
+    group: usize,
+    depth: usize,
+) -> Result<Vec<(Vec<u8>, PropertyValue)>, ReadError> {
+    if depth == MAX_DEPTH {
+        return Err(ReadError::Implausible("ID property depth"));
+    }
+    // SAFETY: the caller's guarantee.
+    unsafe {
+        let children = list(read(group + l.property_group), l.property_next, MAX_PROPERTIES)?;
+        children
+            .into_iter()
+            .map(|p| Ok((chars(p + l.property_name.0, l.property_name.1).to_vec(), value(l, p, depth)?)))
+            .collect()
+    }
+}
+
+/// The value of the ID property at `p`, `depth` groups down.
 ///
 /// # Safety
 /// `p` must be a live `IDProperty`.
-unsafe fn value(l: &ObjectStateLayout, p: usize) -> Result<PropertyValue, ReadError> {
+unsafe fn value(l: &ObjectStateLayout, p: usize, depth: usize) -> Result<PropertyValue, ReadError> {
     // SAFETY: the caller's guarantee; a string's bytes are bounded by its length (checked).
     unsafe {
         let len: i32 = read(p + l.property_len);
@@ -276,7 +311,7 @@ unsafe fn value(l: &ObjectStateLayout, p: usize) -> Result<PropertyValue, ReadEr
             IDP_BOOLEAN => PropertyValue::Bool(read::<i32>(p + l.property_val) != 0),
             IDP_ID => PropertyValue::Id(read(p + l.property_pointer)),
             IDP_STRING => PropertyValue::String(string(l, p)?.to_vec()),
-            IDP_GROUP => PropertyValue::Group(list(read(p + l.property_group), l.property_next, MAX_PROPERTIES)?.len()),
+            IDP_GROUP => PropertyValue::Group(properties(l, p, depth + 1)?),
             IDP_ARRAY => {
                 PropertyValue::Array(usize::try_from(len).map_err(|_| ReadError::Implausible("array length"))?)
             }
@@ -350,7 +385,9 @@ impl Walk<'_> {
                     // (The group's own ID properties, the extension's tags, change only when
                     // the extension rebuilds the group, which it then evaluates fully.)
                     self.int(read::<usize>(md + l.nodes_group) as i64);
-                    self.group(read(md + l.nodes_properties), 0)?;
+                    for group in input_groups(l, md) {
+                        self.group(group, 0)?;
+                    }
                 } else if kind == MODIFIER_ARMATURE {
                     self.int(read::<i16>(md + l.armature_deformflag).into());
                     self.int(read::<i16>(md + l.armature_multi).into());

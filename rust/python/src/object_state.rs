@@ -50,39 +50,22 @@ impl PyObjectStateMemory {
 
     /// The same reads as values, for the check against Blender's Python API: ``{"mode": int,
     /// "vertex_groups": [str], "modifiers": [{"type": int, "mode": int, "name": str,
-    /// "node_group": int, "inputs": {name: value}, "object": int}]}`` (addresses as ints; an
-    /// input that is a group or an array gives its length).
+    /// "node_group": int, "inputs": {name: value}, "object": int}]}`` (addresses as ints; a
+    /// group of properties as a dict; an array by its length).
     fn describe<'py>(&self, obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
         guard(|| {
             let py = obj.py();
             let ptr = object_pointer(obj)?;
             // SAFETY: as in `read`.
             let s = unsafe { describe_object(&self.0, ptr) }.map_err(|e| PyValueError::new_err(format!("obj: {e}")))?;
-            let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
             let modifiers = PyList::empty(py);
             for m in &s.modifiers {
-                let inputs = PyDict::new(py);
-                for (name, value) in &m.inputs {
-                    let v: Bound<'_, PyAny> = match value {
-                        PropertyValue::Int(i) => i.into_pyobject(py)?.into_any(),
-                        PropertyValue::Float(f) => f.into_pyobject(py)?.into_any(),
-                        PropertyValue::Double(f) => f.into_pyobject(py)?.into_any(),
-                        PropertyValue::Bool(b) => b.into_pyobject(py)?.to_owned().into_any(),
-                        PropertyValue::String(b) => {
-                            text(b.strip_suffix(&[0]).unwrap_or(b)).into_pyobject(py)?.into_any()
-                        }
-                        PropertyValue::Id(p) | PropertyValue::Group(p) | PropertyValue::Array(p) => {
-                            p.into_pyobject(py)?.into_any()
-                        }
-                    };
-                    inputs.set_item(text(name), v)?;
-                }
                 let d = PyDict::new(py);
+                d.set_item("inputs", properties(py, &m.inputs)?)?;
                 d.set_item("type", m.kind)?;
                 d.set_item("mode", m.mode)?;
                 d.set_item("name", text(&m.name))?;
                 d.set_item("node_group", m.node_group)?;
-                d.set_item("inputs", inputs)?;
                 d.set_item("object", m.object)?;
                 modifiers.append(d)?;
             }
@@ -93,6 +76,28 @@ impl PyObjectStateMemory {
             Ok(out)
         })
     }
+}
+
+/// ID properties as a dict (a group as a dict of its own).
+fn properties<'py>(py: Python<'py>, props: &[(Vec<u8>, PropertyValue)]) -> PyResult<Bound<'py, PyDict>> {
+    let out = PyDict::new(py);
+    for (name, value) in props {
+        let v: Bound<'_, PyAny> = match value {
+            PropertyValue::Int(i) => i.into_pyobject(py)?.into_any(),
+            PropertyValue::Float(f) => f.into_pyobject(py)?.into_any(),
+            PropertyValue::Double(f) => f.into_pyobject(py)?.into_any(),
+            PropertyValue::Bool(b) => b.into_pyobject(py)?.to_owned().into_any(),
+            PropertyValue::String(b) => text(b.strip_suffix(&[0]).unwrap_or(b)).into_pyobject(py)?.into_any(),
+            PropertyValue::Id(p) | PropertyValue::Array(p) => p.into_pyobject(py)?.into_any(),
+            PropertyValue::Group(inner) => properties(py, inner)?.into_any(),
+        };
+        out.set_item(text(name), v)?;
+    }
+    Ok(out)
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
 }
 
 impl PyObjectStateMemory {

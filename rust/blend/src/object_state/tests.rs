@@ -3,8 +3,9 @@ use crate::test_dna::Dna;
 use core::ptr::null;
 
 /// An SDNA with the structs the reader needs, in the shape Blender's have (other fields left
-/// out or folded into padding).
-fn state_sdna() -> Sdna {
+/// out or folded into padding); `system`: as from Blender 5.2, whose modifiers have system
+/// properties (where a Geometry Nodes modifier's inputs went).
+fn state_sdna(system: bool) -> Sdna {
     let mut dna = Dna::new();
     dna.strukt("ListBase", &[("void", "*first"), ("void", "*last")]);
     dna.strukt("ID", &[("char", "name[66]"), ("char", "_pad[6]"), ("IDProperty", "*properties")]);
@@ -30,6 +31,7 @@ fn state_sdna() -> Sdna {
             ("char", "_pad[2]"),
             ("int", "persistent_uid"),
             ("char", "name[64]"),
+            if system { ("IDProperty", "*system_properties") } else { ("char", "_pad3[8]") },
         ],
     );
     dna.strukt("NodesModifierSettings", &[("IDProperty", "*properties")]);
@@ -95,6 +97,7 @@ struct FakeModifier {
     pad: [u8; 2],
     uid: i32,
     name: [u8; 64],
+    system: *const FakeProperty,
 }
 #[repr(C)]
 struct FakeNodes {
@@ -152,7 +155,7 @@ fn id(s: &str) -> FakeId {
 }
 
 fn modifier(ty: i32, n: &str, uid: i32) -> FakeModifier {
-    FakeModifier { next: null(), prev: null(), ty, mode: 3, flag: 0, pad: [0; 2], uid, name: name(n) }
+    FakeModifier { next: null(), prev: null(), ty, mode: 3, flag: 0, pad: [0; 2], uid, name: name(n), system: null() }
 }
 
 fn property(ty: u8, n: &str) -> FakeProperty {
@@ -288,26 +291,31 @@ fn fixture() -> Box<Fixture> {
 }
 
 fn layout() -> ObjectStateLayout {
-    ObjectStateLayout::new(&state_sdna()).unwrap()
+    ObjectStateLayout::new(&state_sdna(false)).unwrap()
 }
 
 fn state(f: &Fixture) -> Result<Vec<u8>, ReadError> {
+    state_with(f, &layout())
+}
+
+fn state_with(f: &Fixture, layout: &ObjectStateLayout) -> Result<Vec<u8>, ReadError> {
     let mut out = vec![1, 2, 3]; // (cleared by the read)
-    unsafe { read_object_state(&layout(), &f.object as *const FakeObject as usize, &mut out) }.map(|()| out)
+    unsafe { read_object_state(layout, &f.object as *const FakeObject as usize, &mut out) }.map(|()| out)
 }
 
 #[test]
 fn layout_matches_the_c_structs() {
     assert_eq!(core::mem::size_of::<FakeObject>(), 112);
-    assert_eq!(core::mem::size_of::<FakeModifier>(), 96);
-    assert_eq!(core::mem::size_of::<FakeArmatureModifier>(), 176);
+    assert_eq!(core::mem::size_of::<FakeModifier>(), 104);
+    assert_eq!(core::mem::size_of::<FakeArmatureModifier>(), 184);
     assert_eq!(core::mem::size_of::<FakeProperty>(), 128);
     let l = layout();
     assert_eq!((l.object_mode, l.object_data, l.object_modifiers), (84, 88, 96));
     assert_eq!((l.modifier_uid, l.modifier_name), (Some(28), (32, 64)));
-    assert_eq!((l.nodes_group, l.nodes_properties), (96, 104));
+    assert_eq!((l.nodes_group, l.nodes_properties, l.modifier_system_properties), (104, 112, None));
+    assert_eq!(ObjectStateLayout::new(&state_sdna(true)).unwrap().modifier_system_properties, Some(96));
     assert_eq!((l.property_pointer, l.property_group, l.property_val, l.property_len), (88, 96, 112, 120));
-    assert_eq!((l.armature_object, l.armature_group), (104, (112, 64)));
+    assert_eq!((l.armature_object, l.armature_group), (112, (120, 64)));
     assert_eq!(l.mesh_groups, 80);
 }
 
@@ -332,7 +340,13 @@ fn reads_what_the_fast_check_compares() {
             (b"Socket_1".to_vec(), PropertyValue::Int(2)),
             (b"Socket_2".to_vec(), PropertyValue::Float(0.5)),
             (b"Socket_3".to_vec(), PropertyValue::String(b"{\"name\": \"A\"}\0".to_vec())),
-            (b"Nested".to_vec(), PropertyValue::Group(2)),
+            (
+                b"Nested".to_vec(),
+                PropertyValue::Group(vec![
+                    (b"Double".to_vec(), PropertyValue::Double(0.25)),
+                    (b"Flags".to_vec(), PropertyValue::Array(3)),
+                ]),
+            ),
         ]
     );
     assert_eq!(s.modifiers[1].object, armature);
@@ -405,4 +419,22 @@ fn implausible_memory_is_refused() {
         spoil(&mut f);
         assert_eq!(state(&f), Err(ReadError::Implausible(what)), "{what}");
     }
+}
+
+#[test]
+fn inputs_in_system_properties_are_read_as_from_blender_5_2() {
+    // Blender 5.2 keeps a Geometry Nodes modifier's inputs in its system properties.
+    let system = ObjectStateLayout::new(&state_sdna(true)).unwrap();
+    let describe = |f: &Fixture, l: &ObjectStateLayout| {
+        unsafe { describe_object(l, &f.object as *const FakeObject as usize) }.unwrap()
+    };
+    let mut moved = fixture();
+    let expected = describe(&moved, &layout());
+    moved.nodes.modifier.system = moved.nodes.properties;
+    moved.nodes.properties = null();
+    assert_eq!(describe(&moved, &system), expected);
+    assert!(describe(&moved, &layout()).modifiers[0].inputs.is_empty(), "(an older Blender has no such field)");
+    let before = state_with(&moved, &system).unwrap();
+    moved.input[1].val = 1;
+    assert_ne!(state_with(&moved, &system).unwrap(), before, "an input in the system properties");
 }

@@ -34,9 +34,8 @@ def fed_frame_stands(rec, ctx: Context, bones_changed: bool = False) -> bool:
     armature's data was updated), also the bones' binding signature.
 
     Where none of what Blender holds of it changed since the last time this check stood (one
-    read of its state from memory, `FedCheck`), only the add-on's side is compared again: about
-    a tenth of the check through Blender's Python API, which a crowd paid for every character
-    on every frame."""
+    read of its state from memory, `FedCheck`), only the add-on's side is compared again, in
+    place of dozens of calls through Blender's Python API for every character and frame."""
     obj = rec.obj
     if ctx.render or ctx.session.exports.active():
         rec.fed_check = None

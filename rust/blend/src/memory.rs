@@ -44,3 +44,14 @@ pub(crate) unsafe fn read<T: Copy>(address: usize) -> T {
     // SAFETY: the caller's guarantee.
     unsafe { core::ptr::read_unaligned(address as *const T) }
 }
+
+/// The bytes of a NUL-terminated name in a `char[size]` field.
+///
+/// # Safety
+/// The field is `size` bytes inside a live struct.
+pub(crate) unsafe fn name_bytes<'a>(address: usize, size: usize) -> &'a [u8] {
+    // SAFETY: the caller's.
+    let bytes = unsafe { core::slice::from_raw_parts(address as *const u8, size) };
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(size);
+    &bytes[..end]
+}

@@ -13,7 +13,7 @@
 //! Every count and length read is bounded before it is used; anything out of range is
 //! [`ReadError::Implausible`] (the caller then takes its Python path).
 
-use crate::memory::{read, ReadError};
+use crate::memory::{name_bytes, read, ReadError};
 use crate::sdna::{DnaError, Sdna};
 
 /// `eModifierType` values (stored in files, so they never change).
@@ -74,13 +74,6 @@ pub struct ObjectStateLayout {
 
 impl ObjectStateLayout {
     pub fn new(sdna: &Sdna) -> Result<Self, DnaError> {
-        let chars = |s: &str, name: &str| -> Result<(usize, usize), DnaError> {
-            let f = sdna.field(s, &[name])?;
-            if f.pointer || f.size == 0 {
-                return Err(DnaError::Inconsistent(format!("{s}.{name} is not a character array")));
-            }
-            Ok((f.offset, f.size))
-        };
         let first = sdna.pointer("ListBase", &["first"])?;
         let list = |s: &str, name: &str| sdna.embedded(s, &[name], "ListBase").map(|o| o + first);
         let data = sdna.embedded("IDProperty", &["data"], "IDPropertyData")?;
@@ -92,7 +85,7 @@ impl ObjectStateLayout {
             return Err(DnaError::Inconsistent("IDPropertyData.val2 does not follow val".into()));
         }
         Ok(Self {
-            id_name: chars("ID", "name")?.0,
+            id_name: sdna.chars("ID", "name")?.0,
             object_type: sdna.number("Object", &["type"], 2)?,
             object_mode: sdna.number("Object", &["mode"], 4)?,
             object_data: sdna.pointer("Object", &["data"])?,
@@ -102,25 +95,25 @@ impl ObjectStateLayout {
             modifier_mode: sdna.number("ModifierData", &["mode"], 4)?,
             modifier_flag: sdna.number("ModifierData", &["flag"], 2)?,
             modifier_uid: sdna.number("ModifierData", &["persistent_uid"], 4).ok(),
-            modifier_name: chars("ModifierData", "name")?,
+            modifier_name: sdna.chars("ModifierData", "name")?,
             nodes_group: sdna.pointer("NodesModifierData", &["node_group"])?,
             nodes_properties: settings + sdna.pointer("NodesModifierSettings", &["properties"])?,
             modifier_system_properties: sdna.pointer("ModifierData", &["system_properties"]).ok(),
             armature_deformflag: sdna.number("ArmatureModifierData", &["deformflag"], 2)?,
             armature_multi: sdna.number("ArmatureModifierData", &["multi"], 2)?,
             armature_object: sdna.pointer("ArmatureModifierData", &["object"])?,
-            armature_group: chars("ArmatureModifierData", "defgrp_name")?,
+            armature_group: sdna.chars("ArmatureModifierData", "defgrp_name")?,
             property_next: sdna.pointer("IDProperty", &["next"])?,
             property_type: sdna.number("IDProperty", &["type"], 1)?,
             property_subtype: sdna.number("IDProperty", &["subtype"], 1)?,
-            property_name: chars("IDProperty", "name")?,
+            property_name: sdna.chars("IDProperty", "name")?,
             property_pointer: data + sdna.pointer("IDPropertyData", &["pointer"])?,
             property_group: data + sdna.embedded("IDPropertyData", &["group"], "ListBase")? + first,
             property_val: data + val,
             property_len: sdna.number("IDProperty", &["len"], 4)?,
             mesh_groups: list("Mesh", "vertex_group_names")?,
             group_next: sdna.pointer("bDeformGroup", &["next"])?,
-            group_name: chars("bDeformGroup", "name")?,
+            group_name: sdna.chars("bDeformGroup", "name")?,
         })
     }
 }
@@ -192,7 +185,7 @@ pub unsafe fn describe_object(layout: &ObjectStateLayout, object: usize) -> Resu
             let mut m = ModifierSummary {
                 kind,
                 mode: read(md + l.modifier_mode),
-                name: chars(md + l.modifier_name.0, l.modifier_name.1).to_vec(),
+                name: name_bytes(md + l.modifier_name.0, l.modifier_name.1).to_vec(),
                 node_group: 0,
                 inputs: Vec::new(),
                 object: 0,
@@ -221,16 +214,6 @@ pub unsafe fn describe_object(layout: &ObjectStateLayout, object: usize) -> Resu
 unsafe fn input_groups(l: &ObjectStateLayout, md: usize) -> [usize; 2] {
     // SAFETY: the caller's guarantee.
     unsafe { [read(md + l.nodes_properties), l.modifier_system_properties.map_or(0, |o| read(md + o))] }
-}
-
-/// The bytes of `size` at `address` up to the first NUL (a fixed-size C string).
-///
-/// # Safety
-/// `address .. address + size` must be readable.
-unsafe fn chars<'a>(address: usize, size: usize) -> &'a [u8] {
-    // SAFETY: the caller's guarantee.
-    let all = unsafe { core::slice::from_raw_parts(address as *const u8, size) };
-    &all[..all.iter().position(|&b| b == 0).unwrap_or(size)]
 }
 
 /// The addresses of a linked list's items from `first` (`next` at `next_offset`), at most `max`.
@@ -270,7 +253,7 @@ unsafe fn vertex_groups(l: &ObjectStateLayout, object: usize) -> Result<Vec<Vec<
             return Ok(Vec::new());
         }
         let groups = list(read(mesh + l.mesh_groups), l.group_next, MAX_VERTEX_GROUPS)?;
-        Ok(groups.into_iter().map(|g| chars(g + l.group_name.0, l.group_name.1).to_vec()).collect())
+        Ok(groups.into_iter().map(|g| name_bytes(g + l.group_name.0, l.group_name.1).to_vec()).collect())
     }
 }
 
@@ -291,7 +274,7 @@ unsafe fn properties(
         let children = list(read(group + l.property_group), l.property_next, MAX_PROPERTIES)?;
         children
             .into_iter()
-            .map(|p| Ok((chars(p + l.property_name.0, l.property_name.1).to_vec(), value(l, p, depth)?)))
+            .map(|p| Ok((name_bytes(p + l.property_name.0, l.property_name.1).to_vec(), value(l, p, depth)?)))
             .collect()
     }
 }
@@ -380,7 +363,7 @@ impl Walk<'_> {
                 if let Some(uid) = l.modifier_uid {
                     self.int(read::<i32>(md + uid).into());
                 }
-                self.bytes(chars(md + l.modifier_name.0, l.modifier_name.1));
+                self.bytes(name_bytes(md + l.modifier_name.0, l.modifier_name.1));
                 if kind == MODIFIER_NODES {
                     // (The group's own ID properties, the extension's tags, change only when
                     // the extension rebuilds the group, which it then evaluates fully.)
@@ -392,7 +375,7 @@ impl Walk<'_> {
                     self.int(read::<i16>(md + l.armature_deformflag).into());
                     self.int(read::<i16>(md + l.armature_multi).into());
                     self.id(read(md + l.armature_object));
-                    self.bytes(chars(md + l.armature_group.0, l.armature_group.1));
+                    self.bytes(name_bytes(md + l.armature_group.0, l.armature_group.1));
                 }
             }
             self.int(-1); // (the end of the stack: a modifier's fields cannot be taken for what follows)
@@ -413,7 +396,7 @@ impl Walk<'_> {
         let l = self.layout;
         // SAFETY: the caller's guarantee; an ID's name begins with its two-letter type code.
         unsafe {
-            if id != 0 && chars(id + l.id_name, 2) == b"OB" {
+            if id != 0 && name_bytes(id + l.id_name, 2) == b"OB" {
                 self.int(read::<i32>(id + l.object_mode).into());
             }
         }
@@ -444,7 +427,7 @@ impl Walk<'_> {
                 let kind: u8 = read(p + l.property_type);
                 let subtype: u8 = read(p + l.property_subtype);
                 self.int(i64::from(kind) | i64::from(subtype) << 8);
-                self.bytes(chars(p + l.property_name.0, l.property_name.1));
+                self.bytes(name_bytes(p + l.property_name.0, l.property_name.1));
                 match kind {
                     IDP_INT | IDP_FLOAT | IDP_BOOLEAN => self.int(read::<i32>(p + l.property_val).into()),
                     IDP_DOUBLE => self.int(read::<i64>(p + l.property_val)),

@@ -18,7 +18,7 @@ use dqskin_core::skin::{bsp_depth, BBoneCache, Envelope, PoseChannel, SegmentBou
 
 use std::collections::HashMap;
 
-use crate::memory::{read, ReadError};
+use crate::memory::{name_bytes, read, ReadError};
 use crate::sdna::{DnaError, Sdna};
 
 /// `eObjectType::OB_ARMATURE`, unchanged since Blender 2.5.
@@ -85,18 +85,11 @@ impl PoseLayout {
         let float = |s: &str, name: &str| sdna.number(s, &[name], 4);
         let vec3 = |s: &str, name: &str| sdna.number(s, &[name], 12);
         let mat4 = |s: &str, name: &str| sdna.number(s, &[name], MAT4_SIZE);
-        let name_of = |s: &str| -> Result<(usize, usize), DnaError> {
-            let f = sdna.field(s, &["name"])?;
-            if f.pointer || f.size == 0 {
-                return Err(DnaError::Inconsistent(format!("{s}.name is not a character array")));
-            }
-            Ok((f.offset, f.size))
-        };
         let chanbase = sdna.embedded("bPose", &["chanbase"], "ListBase")?;
         let runtime = sdna.embedded("bPoseChannel", &["runtime"], "bPoseChannel_Runtime")?;
         let rt = |name: &str| sdna.pointer("bPoseChannel_Runtime", &[name]).map(|o| runtime + o);
-        let (chan_name, name_size) = name_of("bPoseChannel")?;
-        let (bone_name, bone_name_size) = name_of("Bone")?;
+        let (chan_name, name_size) = sdna.chars("bPoseChannel", "name")?;
+        let (bone_name, bone_name_size) = sdna.chars("Bone", "name")?;
         let first = sdna.pointer("ListBase", &["first"])?;
         let bone_link = match sdna.pointer("bPoseChannel", &["bone"]) {
             Ok(chan_bone) => BoneLink::Pointer { chan_bone },
@@ -411,17 +404,6 @@ unsafe fn read_mat4(address: usize) -> Mat4 {
 unsafe fn read_vec3(address: usize) -> Vec3 {
     // SAFETY: the caller's (see `read`).
     Vec3::from_array(unsafe { read::<[f32; 3]>(address) })
-}
-
-/// The bytes of a NUL-terminated name in a `char[size]` field.
-///
-/// # Safety
-/// The field is `size` bytes inside a live struct.
-unsafe fn name_bytes<'a>(address: usize, size: usize) -> &'a [u8] {
-    // SAFETY: the caller's.
-    let bytes = unsafe { core::slice::from_raw_parts(address as *const u8, size) };
-    let end = bytes.iter().position(|&b| b == 0).unwrap_or(size);
-    &bytes[..end]
 }
 
 #[cfg(test)]

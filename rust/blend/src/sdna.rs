@@ -274,6 +274,16 @@ impl Sdna {
         Ok(f.offset)
     }
 
+    /// Offset and size of the field `name` of `strukt`, checked to be a character array (a
+    /// fixed-size C string).
+    pub fn chars(&self, strukt: &str, name: &str) -> Result<(usize, usize), DnaError> {
+        let f = self.field(strukt, &[name])?;
+        if f.pointer || f.size == 0 {
+            return Err(DnaError::Inconsistent(format!("{strukt}.{name} is not a character array")));
+        }
+        Ok((f.offset, f.size))
+    }
+
     /// Offset of the first of `names` in `strukt`, checked to be one pointer.
     pub fn pointer(&self, strukt: &str, names: &[&str]) -> Result<usize, DnaError> {
         let f = self.field(strukt, names)?;

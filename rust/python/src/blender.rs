@@ -10,6 +10,7 @@ use dqskin_core::{DeformGroups, Influences};
 use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyBytes, PyList, PyTuple};
 
 use crate::args;
@@ -223,16 +224,29 @@ fn two_sums(len: usize, mut feed: impl FnMut(&mut std::hash::DefaultHasher)) -> 
 /// Refuses `obj` (the argument `arg`) unless it is a real `bpy.types.<type_name>`: the memory
 /// readers take addresses from Blender itself, never from the caller.
 pub(crate) fn require_bpy_type(py: Python<'_>, obj: &Bound<'_, PyAny>, type_name: &str, arg: &str) -> PyResult<()> {
-    let wanted = py.import("bpy").and_then(|bpy| bpy.getattr("types")?.getattr(type_name));
-    let is_one = match wanted {
-        Ok(t) => obj.is_instance(&t)?,
-        Err(_) => false, // not inside Blender
+    let is_one = match bpy_types(py) {
+        Some(types) => match types.bind(py).getattr(type_name) {
+            Ok(t) => obj.is_instance(&t)?,
+            Err(_) => false,
+        },
+        None => false, // not inside Blender
     };
     if !is_one {
         let ty = obj.get_type().name().map(|n| n.to_string()).unwrap_or_default();
         return Err(PyTypeError::new_err(format!("{arg} must be a bpy.types.{type_name}, got {ty}")));
     }
     Ok(())
+}
+
+/// `bpy.types`, imported once (the readers check every object they are given, a crowd's
+/// characters on every frame), or None outside Blender.
+fn bpy_types(py: Python<'_>) -> Option<&Py<PyAny>> {
+    static TYPES: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+    if let Some(types) = TYPES.get(py) {
+        return Some(types);
+    }
+    let types = py.import("bpy").and_then(|bpy| bpy.getattr("types")).ok()?;
+    Some(TYPES.get_or_init(py, || types.unbind()))
 }
 
 /// Whether `mesh` (at `ptr`) is the mesh of `bpy.data.meshes` of its name and library.

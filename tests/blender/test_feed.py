@@ -758,3 +758,24 @@ def test_the_object_state_reader_refuses_what_is_not_an_object(dq_skin):
         dq_skin.dqskin.memory.ObjectStateMemory("file.blend")
     with pytest.raises(ValueError, match="blend_file"):
         dq_skin.dqskin.memory.ObjectStateMemory(b"BLENDER-v402" + b"\0" * 64)
+
+
+@pytest.mark.skipif(bpy.app.version >= (5, 2, 0), reason="5.2 has no ID properties on modifiers for a script to write")
+def test_a_setting_written_without_an_update_is_seen_from_memory(dq_skin, route):
+    """A script may write a DQ Skin input as an ID property (`mod[identifier] = value`, up to
+    Blender 5.1) without tagging anything: Blender reports no update, and only the object's
+    state in memory shows the change. The next frame must show it (here: the method made
+    Linear, equal to the Armature modifier without Preserve Volume)."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = bpy.context.scene
+    for f in (4, 5, 6):
+        scene.frame_set(f)
+    nodes = dq_skin.blender.nodes
+    mod = dq_skin_mods(obj)[0]
+    ident = nodes.socket_ids(mod.node_group)["Method"]
+    linear = next(k for k, v in nodes.menu_values(mod.node_group).items() if v == "Linear")
+    mod[ident] = linear  # (no update_tag: nothing reaches the dependency graph)
+    _reference_modifier(reference).use_deform_preserve_volume = False
+    scene.frame_set(7)
+    assert_same(obj, reference, "the frame after the method was written")
+    assert nodes.get_method(mod) == "Linear"

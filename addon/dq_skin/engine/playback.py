@@ -43,19 +43,17 @@ def fed_frame_stands(rec, ctx: Context, bones_changed: bool = False) -> bool:
     if not bones_changed and _stands_as_checked(rec, ctx):
         return True
     rec.fed_check = None
-    if not _fed_frame_stands(obj, ctx, bones_changed):
+    checked = _fed_frame_stands(obj, ctx, bones_changed)
+    if checked is None:
         return False
     reader = ctx.session.readers.object_state
     digest = reader.digest(obj) if reader is not None else None
     if digest is not None:
-        states = ctx.session.states
-        mods = []
-        for mod in dq_skin_modifiers(obj):
-            key = mod_key(obj, mod)
-            st = states.find(key)
-            written = st.output.written
-            mods.append((key, st, written.settings, written.mesh_version, (st.companion.shown, st.companion.deforms)))
-        rec.fed_check = FedCheck(digest, tuple(mods))
+        mods = tuple(
+            (key, st, st.output.written.settings, st.output.written.mesh_version, (st.companion.shown, st.companion.deforms))
+            for key, st in checked
+        )
+        rec.fed_check = FedCheck(digest, mods)
     return True
 
 
@@ -88,40 +86,42 @@ def _stands_as_checked(rec, ctx: Context) -> bool:
     return reader is not None and reader.unchanged(obj, check.digest)
 
 
-def _fed_frame_stands(obj, ctx: Context, bones_changed: bool) -> bool:
-    """`fed_frame_stands` through Blender's Python API."""
+def _fed_frame_stands(obj, ctx: Context, bones_changed: bool) -> list | None:
+    """`fed_frame_stands` through Blender's Python API: the (key, state) of each DQ Skin it
+    checked where the fed frame stands, else None."""
     if obj.mode == "EDIT":
-        return False
+        return None
     mods = dq_skin_modifiers(obj)
     if not mods:
-        return False
+        return None
     session = ctx.session
     feeds: Feeds = session.routes.feeds
-    states = []
+    checked = []
     for mod in mods:
         key = mod_key(obj, mod)
         if not mod.show_viewport or not feeds.skinned_with(key, ctx.fed_stamp):
-            return False
+            return None
         st = session.states.find(key)
-        states.append(st)
+        checked.append((key, st))
         s = settings.cached(mod, st.settings)
         try:
             arm = s.armature
             if s.key() != st.output.written.settings or st.decided_structure != ctx.structure or arm is None or arm.mode == "EDIT":
-                return False
+                return None
             if bones_changed and pose.armature_signature(arm.evaluated_get(ctx.depsgraph), ctx.reads) != st.binding.key.bones:
-                return False
+                return None
         except (ReferenceError, AttributeError):  # (the armature was deleted: the full path says so)
-            return False
+            return None
     data = session.meshes.get(obj, session.readers.mesh)  # (compares the vertex group names)
-    for mod, st in zip(mods, states):
+    for mod, (_key, st) in zip(mods, checked):
         written = st.output.written
         if written is None or data.version != written.mesh_version[0]:
-            return False
+            return None
         if written.result and session.meshes.revision(obj.data) != written.mesh_version[1]:
-            return False
+            return None
         companions.follow_the_user(obj, mod, st, False)
-    return all(mod.show_viewport for mod in mods)  # (following the user may have switched one off)
+    # (Following the user may have switched one off.)
+    return checked if all(mod.show_viewport for mod in mods) else None
 
 
 def stepped_aside_stands(obj, ctx: Context) -> bool:

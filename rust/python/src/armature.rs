@@ -12,7 +12,7 @@ use pyo3::types::PyDict;
 
 use crate::args;
 use crate::arrays::{self, mat4_to_row_major};
-use crate::blender::sdna_of;
+use crate::blender::layout_of;
 use crate::guard;
 use crate::skinning::{matrices, skin_error, space, PyInfluences};
 
@@ -29,11 +29,7 @@ pub struct PyPoseMemory(PoseLayout);
 impl PyPoseMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| {
-            PoseLayout::new(&sdna_of(blend_file)?)
-                .map(Self)
-                .map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
-        })
+        guard(|| layout_of(blend_file, PoseLayout::new).map(Self))
     }
 
     /// The pose of ``armature``, a ``bpy.types.Object`` of type ``'ARMATURE'`` with a pose

@@ -4,7 +4,7 @@
 
 use std::hash::Hasher;
 
-use dqskin_blend::{positions_in_memory, read_deform_verts, read_positions, MeshLayout, Sdna};
+use dqskin_blend::{positions_in_memory, read_deform_verts, read_positions, DnaError, MeshLayout, Sdna};
 use dqskin_core::shape_keys::{self, KeyBlock};
 use dqskin_core::{DeformGroups, Influences};
 use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
@@ -30,11 +30,7 @@ pub struct PyMeshMemory(MeshLayout);
 impl PyMeshMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| {
-            MeshLayout::new(&sdna_of(blend_file)?)
-                .map(Self)
-                .map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
-        })
+        guard(|| layout_of(blend_file, MeshLayout::new).map(Self))
     }
 
     /// ``(V, 3)`` float32: the vertex positions of ``mesh`` (a ``bpy.types.Mesh``), or ``None``
@@ -266,8 +262,17 @@ fn mesh_pointer(py: Python<'_>, mesh: &Bound<'_, PyAny>) -> PyResult<(usize, usi
     Ok((ptr, n))
 }
 
+/// A memory reader's layout, built by `build` from the SDNA of `blend_file` (the bytes of a
+/// `.blend` file this Blender wrote); what is missing or wrong is a `ValueError` naming it.
+pub(crate) fn layout_of<L>(
+    blend_file: &Bound<'_, PyAny>,
+    build: impl FnOnce(&Sdna) -> Result<L, DnaError>,
+) -> PyResult<L> {
+    build(&sdna_of(blend_file)?).map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
+}
+
 /// The SDNA of `blend_file`, the bytes of a `.blend` file.
-pub(crate) fn sdna_of(blend_file: &Bound<'_, PyAny>) -> PyResult<Sdna> {
+fn sdna_of(blend_file: &Bound<'_, PyAny>) -> PyResult<Sdna> {
     let bytes = blend_file.cast::<PyBytes>().map_err(|_| {
         let ty = blend_file.get_type().name().map(|n| n.to_string()).unwrap_or_default();
         PyTypeError::new_err(format!("blend_file must be the bytes of a .blend file, got {ty}"))

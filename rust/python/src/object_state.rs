@@ -8,7 +8,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 
-use crate::blender::{digest_of_bytes, require_bpy_type, sdna_of};
+use crate::blender::{digest_of_bytes, layout_of, require_bpy_type};
 use crate::guard;
 
 thread_local! {
@@ -31,11 +31,7 @@ pub struct PyObjectStateMemory(ObjectStateLayout);
 impl PyObjectStateMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| {
-            ObjectStateLayout::new(&sdna_of(blend_file)?)
-                .map(Self)
-                .map_err(|e| PyValueError::new_err(format!("blend_file: {e}")))
-        })
+        guard(|| layout_of(blend_file, ObjectStateLayout::new).map(Self))
     }
 
     /// The digest of the state of ``obj`` (a ``bpy.types.Object``): 16 bytes.

@@ -2,6 +2,9 @@
 
 use super::SkinError;
 
+mod counts;
+use counts::Counts;
+
 /// The most influences one vertex may have. Sums of weights run in single precision as in
 /// Blender (at most 4096 · 2⁻²⁴ ≈ 2.4e-4 relative error), and the lane layout pads a vertex's
 /// 15 neighbours to its count (96 bytes per influence of the largest), so both stay bounded.
@@ -57,9 +60,9 @@ pub struct Influence {
 /// and non-negative. Weights need not sum to one and may be zero.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Influences {
-    /// Each vertex's number of pairs (at most [`MAX_INFLUENCES_PER_VERTEX`]: 16 bits, half the
-    /// bytes of the CSR offsets they stand for).
-    counts: Vec<u16>,
+    /// Each vertex's number of pairs (at most [`MAX_INFLUENCES_PER_VERTEX`]), packed in as few
+    /// bits as the largest needs (4 on most characters, an eighth of the CSR offsets they stand for).
+    counts: Counts,
     pairs: usize,
     bone_count: usize,
     max_per_vertex: usize,
@@ -130,7 +133,7 @@ impl Influences {
         // Only the lane order is kept: a vertex's pairs are read back from its lane (a crowd
         // keeps one set of influences per character).
         // (Each count fits 16 bits: at most MAX_INFLUENCES_PER_VERTEX, checked above.)
-        let counts = offsets.windows(2).map(|w| (w[1] - w[0]) as u16).collect();
+        let counts = Counts::pack(offsets.windows(2).map(|w| (w[1] - w[0]) as u16), max_per_vertex);
         Ok(Self { counts, pairs: total, bone_count, max_per_vertex, slots, batch_starts })
     }
 
@@ -233,7 +236,7 @@ impl Influences {
     /// The pairs of vertex `v`, in the given order (read from its lane of the kernels' slots).
     #[inline]
     pub fn of_vertex(&self, v: usize) -> impl ExactSizeIterator<Item = Influence> + Clone + '_ {
-        let count = usize::from(self.counts[v]);
+        let count = self.counts.get(v);
         let (start, lane) = (self.batch_starts[v / LANES] as usize, v % LANES);
         self.slots[start..start + count]
             .iter()
@@ -245,8 +248,8 @@ impl Influences {
         let mut offsets = Vec::with_capacity(self.counts.len() + 1);
         offsets.push(0u32);
         let mut at = 0u32;
-        for &c in &self.counts {
-            at += u32::from(c);
+        for v in 0..self.counts.len() {
+            at += self.counts.get(v) as u32;
             offsets.push(at);
         }
         offsets
@@ -266,7 +269,7 @@ impl Influences {
     /// The bytes they hold on the heap (counts, lane-ordered slots, batch starts): for memory
     /// accounting.
     pub fn heap_bytes(&self) -> usize {
-        self.counts.capacity() * 2
+        self.counts.heap_bytes()
             + self.slots.capacity() * core::mem::size_of::<Slot>()
             + self.batch_starts.capacity() * 4
     }

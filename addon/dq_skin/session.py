@@ -5,6 +5,7 @@
 - `tracker`: the DQ Skin objects and what they depend on (`engine.tracker`);
 - `meshes`: what was read of each mesh (`blender.meshdata`);
 - `influences`: the influences bindings share (`engine.binding.SharedInfluences`);
+- `interned`: the bone names, rest matrices and group names characters share (`model.interned`);
 - `readers`: the readers of Blender's memory (`blender.memory`);
 - `scan`: what simulates on what (`blender.consumers`);
 - `routes`: how positions reach Blender, with the feed (`routes`);
@@ -27,6 +28,7 @@ from .engine.centers import Centers
 from .engine.context import mod_key
 from .engine.fed import skin_members
 from .engine.tracker import Tracker
+from .model.interned import Interned
 from .model.runtime import Errors, Exports, Signals
 from .model.state import States
 from .routes.feed import Feeds
@@ -40,7 +42,8 @@ class Session:
         self.commands: list = []  # Blender's handles of the registered command-line commands
         self.exports = Exports()
         self.states = States()
-        self.meshes = MeshCache()
+        self.interned = Interned()
+        self.meshes = MeshCache(self.interned)
         self.influences = SharedInfluences()
         self.readers = Readers()
         self.scan = Scan()
@@ -62,6 +65,7 @@ class Session:
         self.routes.feeds.close()
         self.meshes.forget()
         self.influences.forget()
+        self.interned.forget()
         self.scan.version = -1
 
     def close(self) -> None:

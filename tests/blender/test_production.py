@@ -167,6 +167,49 @@ def test_a_crowd_of_copies_shares_one_influences_until_one_is_painted(dq_skin, m
     assert not np.array_equal(after[2].weights, first[0].weights)
 
 
+@pytest.mark.parametrize("method", METHODS)
+def test_a_crowd_of_copies_keeps_one_of_what_its_rig_gives_alike(dq_skin, method):
+    """Copies of a character on copies of one rig keep one list of bone names, one set of rest
+    matrices, envelope rows and segment counts, one tuple of vertex-group names (a crowd keeps
+    every byte a character once per character), read-only since all share them; a copy whose
+    rig's rest pose is edited gets rest matrices of its own, and every frame of every copy
+    equals the Armature modifier's."""
+    obj, arm, _ = animated_tube()
+    add_dq_skin(obj, method)
+    pairs = [(obj, twin(obj))]
+    for i in range(1, 4):
+        o = _crowd_member(dq_skin, obj, arm, i, own_mesh=True)
+        pairs.append((o, twin(o)))
+
+    def kept():
+        rows = []
+        for o, _ in pairs:
+            cache = dq_skin.SESSION.state_of(o, dq_skin_mods(o)[0]).binding
+            names = dq_skin.SESSION.meshes.peek_any(o).group_names
+            rows.append((cache.binding.bone_names, cache.binding.rest, cache.envelopes, cache.segments, names))
+        return rows
+
+    check_frames(pairs)
+    first = kept()
+    for k, what in enumerate(("bone names", "rest matrices", "envelope rows", "segment counts", "group names")):
+        assert all(row[k] is first[0][k] for row in first), f"copies keep one {what}"
+    for array in first[0][1:4]:
+        assert not array.flags.writeable
+    # One copy's rig gets a rest pose of its own.
+    edited = pairs[2][0].parent
+    edited.data = edited.data.copy()
+    select_only(edited)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bone = edited.data.edit_bones[1]
+    bone.tail = bone.tail + bone.z_axis * 0.3
+    bpy.ops.object.mode_set(mode="OBJECT")
+    check_frames(pairs)
+    after = kept()
+    assert after[2][1] is not first[0][1] and not np.array_equal(after[2][1], first[0][1])
+    assert all(after[k][1] is first[0][1] for k in (0, 1, 3))
+    assert dq_skin.SESSION.interned  # (what the session keeps: forgotten with it)
+
+
 # -- files: append, link, override, without the add-on ------------------------------------------
 
 

@@ -267,9 +267,11 @@ def _same(a: MeshData, b: MeshData) -> bool:
 class MeshCache:
     """What was read of each mesh (by its session uid), kept until Blender says it changed and
     a comparison finds it did (owned by the session). `reader`: the vertex-group memory reader,
-    or None (`memory.Readers.mesh`)."""
+    or None (`memory.Readers.mesh`). `interned`: shares the group names of meshes that have the
+    same (`model.interned.Interned`)."""
 
-    def __init__(self):
+    def __init__(self, interned=None):
+        self._interned = interned
         self._cache: dict[int, MeshData] = {}
         self._stale: set[int] = set()
         self._revisions: dict[int, int] = {}  # mesh uid -> how many times Blender said it changed
@@ -322,7 +324,7 @@ class MeshCache:
         if old is not None and not verify and names == old.group_names:
             return old
         self._version += 1
-        new = _read(mesh, uid, self._version, names, reader)
+        new = _read(mesh, uid, self._version, names if self._interned is None else self._interned(names), reader)
         if old is not None and _same(old, new):
             if _kept_source(old) is not mesh:  # (an array, or a handle of a mesh since replaced)
                 old.source, old.held_positions = new.source, new.held_positions

@@ -25,6 +25,7 @@ mesh.
 from __future__ import annotations
 
 import json
+import sys
 from types import MappingProxyType
 
 from . import compat
@@ -189,9 +190,11 @@ RAW = ("Armature", "Method", "Blend Amount", "Blend Factor", "Use Vertex Groups"
 
 def raw_keys(group) -> tuple:
     """The stored keys of `RAW` in modifiers of `group` (a field input's value, whether it
-    reads an attribute, and which), for `raw_settings` (up to Blender 5.1)."""
+    reads an attribute, and which), for `raw_settings` (up to Blender 5.1). Interned: every
+    character keeps these, and they are the same few names for all."""
     ids = socket_ids(group)
-    return tuple(k for n in RAW for k in ((ids[n], ids[n] + "_use_attribute", ids[n] + "_attribute_name") if n in FIELDS else (ids[n],)))
+    keys = (k for n in RAW for k in ((ids[n], ids[n] + "_use_attribute", ids[n] + "_attribute_name") if n in FIELDS else (ids[n],)))
+    return tuple(sys.intern(k) for k in keys)
 
 
 def raw_settings(mod, keys: tuple | None = None) -> tuple:
@@ -239,8 +242,18 @@ def put_method(mod, item: str) -> bool:
 def get_companion(mod) -> dict:
     """What DQ Skin remembers of its companion Armature modifier: ``{"name": ..., "original":
     {setting: value}}`` (empty if nothing)."""
+    return parse_companion(get_companion_text(mod))
+
+
+def get_companion_text(mod) -> str:
+    """The same as stored (what `parse_companion` reads)."""
+    text = get(mod, "Companion")
+    return text if isinstance(text, str) else ""
+
+
+def parse_companion(text: str) -> dict:
     try:
-        data = json.loads(get(mod, "Companion") or "{}")
+        data = json.loads(text or "{}")
     except (ValueError, TypeError):
         return {}
     return data if isinstance(data, dict) else {}

@@ -39,12 +39,16 @@ class Binding:
     """The binding signature of the last pose from memory whose bones matched these."""
 
 
-def bind(data: MeshData, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True, shared=None) -> Binding:
+def bind(
+    data: MeshData, armature, mask_group: str = "", invert_mask: bool = False, use_vertex_groups: bool = True, shared=None, interned=None
+) -> Binding:
     """Influences of a mesh's vertex groups (`data`) on `armature`'s deforming bones. The bone
     indices run over every deforming pose bone in Blender's order (what envelopes need too);
     zero weights are kept, since a vertex with any group mapped to a bone never uses envelopes.
     `data`: the mesh's `meshdata.MeshData`. `shared(key, make)`: the influences of that key if
-    another binding made them (the same weights on bones mapped the same way), else `make()`'s."""
+    another binding made them (the same weights on bones mapped the same way), else `make()`'s;
+    `interned(value)`: the bone names and rest matrices of the same content another binding
+    keeps (`model.interned.Interned`), else these."""
     deform = np.empty(len(armature.data.bones), bool)
     armature.data.bones.foreach_get("use_deform", deform)
     # data.bones and pose.bones share their order.
@@ -81,8 +85,10 @@ def bind(data: MeshData, armature, mask_group: str = "", invert_mask: bool = Fal
         mask = data.group_weights(mask_group)
         if mask is not None and invert_mask:
             mask = (1.0 - mask).astype(np.float32)
-    rest = _pose_matrices(armature.data.bones, "matrix_local")[bone_indices]
-    return Binding(influences, bone_names, bone_indices.astype(np.int64), mask, n, np.ascontiguousarray(rest))
+    rest = np.ascontiguousarray(_pose_matrices(armature.data.bones, "matrix_local")[bone_indices])
+    if interned is not None:
+        bone_names, rest = interned(bone_names), interned(rest)
+    return Binding(influences, bone_names, bone_indices.astype(np.int64), mask, n, rest)
 
 
 def _pose_matrices(collection, prop: str) -> np.ndarray:

@@ -54,11 +54,12 @@ def binding(obj, arm, arm_eval, st: ModifierState, s: Settings, data: MeshData, 
     )
     if cache.binding is None or cache.key != key:
         cache.clear()
-        bound = rig.bind(data, arm, s.mask_group, s.invert_mask, s.use_vertex_groups, shared=ctx.session.influences)
+        interned = ctx.session.interned
+        bound = rig.bind(data, arm, s.mask_group, s.invert_mask, s.use_vertex_groups, shared=ctx.session.influences, interned=interned)
         cache.binding = bound
-        cache.envelopes = rig.envelopes(arm, bound)
+        cache.envelopes = interned(rig.envelopes(arm, bound))
         cache.blend = data.group_weights(s.blend_group) if s.blend_group else None
-        cache.segments = rig.bbone_segments(arm, bound)
+        cache.segments = interned(rig.bbone_segments(arm, bound))
         cache.uses_envelopes = bool(cache.envelopes[:, 10].any())
         cache.uses_bbones = bool(cache.segments.max(initial=0) > 1)
         cache.key = key

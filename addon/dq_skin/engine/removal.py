@@ -20,13 +20,19 @@ class ModInfo:
     """What is needed to clean up after a DQ Skin modifier once it is gone."""
 
     name: str
-    companion: dict
+    companion_text: str
+    """What the modifier stored of its companion (`nodes.get_companion_text`): kept as stored,
+    since every DQ Skin object keeps one of these (the text is a fifth of its decoded dict)."""
     capture: str
+
+    @property
+    def companion(self) -> dict:
+        return nodes.parse_companion(self.companion_text)
 
 
 def info_of(mod) -> ModInfo:
     current = nodes.version_of(mod.node_group) == nodes.VERSION
-    return ModInfo(mod.name, nodes.get_companion(mod) if current else {}, inputs.capture_name(mod))
+    return ModInfo(mod.name, nodes.get_companion_text(mod) if current else "", inputs.capture_name(mod))
 
 
 def forget_modifier(session, obj, uid: str, info: ModInfo, applied: bool) -> None:
@@ -36,7 +42,8 @@ def forget_modifier(session, obj, uid: str, info: ModInfo, applied: bool) -> Non
     made it; else put back as it was before `dq_skin_add`), the parent type `dq_skin_add`
     changed, what the node group stored in the mesh, its results and its state."""
     st = session.states.pop(ModKey(obj.session_uid, uid))
-    c = obj.modifiers.get(info.companion.get("name", "")) if info.companion.get("name") else None
+    known = info.companion
+    c = obj.modifiers.get(known.get("name", "")) if known.get("name") else None
     if c is not None and c.type == "ARMATURE":
         if applied and c.show_viewport:
             # DQ Skin was not deforming (handed over, an error): the companion showed the
@@ -47,12 +54,12 @@ def forget_modifier(session, obj, uid: str, info: ModInfo, applied: bool) -> Non
                 print(
                     f"DQ Skin: {obj.name!r}: the Armature modifier {c.name!r} deformed it in DQ Skin's place and could not be applied: it stays"
                 )
-        elif applied or info.companion.get("created"):
+        elif applied or known.get("created"):
             obj.modifiers.remove(c)
         else:
-            companion.restore(c, info.companion.get("original", {}))
-    if not applied and info.companion.get("parent_type") and obj.parent is not None:
-        obj.parent_type = info.companion["parent_type"]
+            companion.restore(c, known.get("original", {}))
+    if not applied and known.get("parent_type") and obj.parent is not None:
+        obj.parent_type = known["parent_type"]
     for name in (info.capture, node_group.OUTPUT_MARK):
         attr = obj.data.attributes.get(name)
         if attr is not None:

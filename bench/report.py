@@ -126,8 +126,8 @@ def floors_table(rows: list) -> str:
 
 def memory_table(rows: list) -> str:
     out = [
-        "| Case | Route | Payload | DQ Skin adds: median (range; each process's median) | Ratio | Held by DQ Skin: influences, rest positions copy, output buffers, point-cache files |",
-        "|---|---|---|---|---|---|",
+        "| Case | Route | Payload | DQ Skin adds: median (range; each process's median) | Ratio | Of it file-backed (code paged in) | Held by DQ Skin: influences, rest positions copy, output buffers, point-cache files |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         if not r.get("case", "").startswith("memory: "):
@@ -135,9 +135,10 @@ def memory_table(rows: list) -> str:
         lo, hi = r["resident_growth_range_bytes"]
         medians = ", ".join(f"{m / 1e6:.1f}" for m in r.get("resident_growth_process_medians_bytes", []))
         held = ", ".join(f"{r[f'held_{k}_bytes'] / 1e6:.2f}" for k in ("influences", "rest_copies", "output_buffers", "cache_files"))
+        file_backed = mb(r["resident_file_growth_bytes"]) if "resident_file_growth_bytes" in r else "not measured"
         out.append(
             f"| {r['case'][len('memory: ') :]} | {ROUTE_NAMES.get(r['route'], r['route'])} | {mb(r['payload_bytes'])} | "
-            f"{mb(r['extra_bytes'])} ({lo / 1e6:.1f}–{hi / 1e6:.1f}; {medians}) | **{ratio(r['extra_per_payload'])}** | {held} MB |"
+            f"{mb(r['extra_bytes'])} ({lo / 1e6:.1f}–{hi / 1e6:.1f}; {medians}) | **{ratio(r['extra_per_payload'])}** | {file_backed} | {held} MB |"
         )
     return "\n".join(out)
 

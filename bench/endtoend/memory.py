@@ -6,7 +6,8 @@ The scene is built with Blender's Armature modifier and evaluated; then DQ Skin 
 Armature modifier's place and plays eighteen frames. DQ Skin's extra memory is the growth of the
 process's resident memory, measured after a garbage collection and `malloc_trim` (so that freed
 memory does not count) after each frame, the median over the frames of every process kept and
-the range reported, plus the bytes
+the range reported (and, of it, the file-backed part: Blender's code paged in for the route's
+modifiers, the same for any number of characters), plus the bytes
 of the point-cache files it keeps in memory-backed storage that are not mapped into the process
 (`/dev/shm` is memory too, though it is no process's). It is set against the payload: the bytes
 of the meshes' positions (12 per vertex) and weights (8 per vertex-group entry). What DQ Skin
@@ -67,6 +68,17 @@ def resident_shared_bytes() -> int:
     return 0
 
 
+def resident_file_bytes() -> int:
+    """The part of the resident memory that is file-backed (code and data of the programs and
+    libraries, paged in as they are first used: Blender's code for the route's modifiers, the
+    same for any number of characters)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("RssFile:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
 def cache_file_bytes() -> int:
     """Bytes this process's point-cache files occupy (allocated blocks, not their length)."""
     folder = addon().routes.pointcache.folder()
@@ -122,13 +134,15 @@ def measure(case: str) -> dict:
     for f in (1, 2):
         bpy.context.scene.frame_set(f)
     before, shared_before, files_before = resident_bytes(), resident_shared_bytes(), cache_file_bytes()
+    file_backed_before = resident_file_bytes()
     add_dq_skin(meshes, method)
     # What stays resident changes from frame to frame (an array of positions freed in one frame
     # and made in the next): measured after each frame, the median is the row's figure.
-    growth = []
+    growth, file_backed = [], []
     for f in FRAMES:
         bpy.context.scene.frame_set(f)
         growth.append(resident_bytes() - before)
+        file_backed.append(resident_file_bytes() - file_backed_before)
     grown = _median(growth)
     held = held_by_dq_skin()
     # The files' bytes that are not already resident in this process as a mapping.
@@ -143,6 +157,7 @@ def measure(case: str) -> dict:
         "resident_growth_bytes": grown,
         "resident_growth_range_bytes": [min(growth), max(growth)],
         "resident_growth_per_frame_bytes": growth,
+        "resident_file_growth_bytes": _median(file_backed),
         "unmapped_file_bytes": unmapped_files,
         "extra_bytes": extra,
         "extra_per_payload": extra / max(payload, 1),
@@ -178,6 +193,7 @@ def run_fresh(case: str) -> dict:
     row["resident_growth_bytes"] = grown
     row["resident_growth_range_bytes"] = [min(pooled), max(pooled)]
     row["resident_growth_process_medians_bytes"] = [r["resident_growth_bytes"] for r in rows]
+    row["resident_file_growth_bytes"] = _median([r["resident_file_growth_bytes"] for r in rows])
     row["extra_bytes"] = grown + row["unmapped_file_bytes"]
     row["extra_per_payload"] = row["extra_bytes"] / max(row["payload_bytes"], 1)
     return row

@@ -61,20 +61,21 @@ def resident_bytes() -> int:
 def resident_shared_bytes() -> int:
     """The part of the resident memory that is mapped shared memory (a mapped file of
     `/dev/shm` counts there, and must not be counted twice)."""
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("RssShmem:"):
-                return int(line.split()[1]) * 1024
-    return 0
+    return _status_bytes("RssShmem")
 
 
 def resident_file_bytes() -> int:
     """The part of the resident memory that is file-backed (code and data of the programs and
     libraries, paged in as they are first used: Blender's code for the route's modifiers, the
     same for any number of characters)."""
+    return _status_bytes("RssFile")
+
+
+def _status_bytes(field: str) -> int:
+    """A size in `/proc/self/status` (Linux), 0 where the kernel does not give it."""
     with open("/proc/self/status") as f:
         for line in f:
-            if line.startswith("RssFile:"):
+            if line.startswith(field + ":"):
                 return int(line.split()[1]) * 1024
     return 0
 

@@ -543,22 +543,25 @@ def test_influences_round_trip_their_arrays():
     assert infl.max_per_vertex == 8 and len(infl) == c["offsets"][-1]
 
 
+@pytest.mark.parametrize("bone_count, slot_bytes", [(300, 96), (257, 96), (256, 80), (7, 80)])
 @pytest.mark.parametrize("most", [3, 15, 16, 255, 256])
-def test_influences_keep_each_vertex_count_in_as_few_bits_as_the_largest_needs(most):
-    """Counts are half a byte a vertex up to 15 influences, a byte up to 255, two above; every
-    vertex's pairs still read back whole and in order at each width."""
+def test_influences_keep_each_vertex_count_and_bone_in_as_few_bits_as_the_largest_needs(most, bone_count, slot_bytes):
+    """Counts are half a byte a vertex up to 15 influences, a byte up to 255, two above; bone
+    indices a byte up to 256 bones, two above (a slot of 16 lanes is 16 weights and 16 indices);
+    every vertex's pairs still read back whole and in order at each width."""
     rng = np.random.default_rng(most)
     counts = rng.integers(0, most + 1, 101)
     counts[7] = most
     offsets = np.concatenate([[0], np.cumsum(counts)])
-    bones = rng.integers(0, 300, offsets[-1])
+    bones = rng.integers(0, bone_count, offsets[-1])
+    bones[offsets[7]] = bone_count - 1  # the largest index each width holds
     weights = rng.random(offsets[-1]).astype(np.float32)
-    infl = dqskin.Influences(offsets, bones, weights, 300)
+    infl = dqskin.Influences(offsets, bones, weights, bone_count)
     np.testing.assert_array_equal(infl.offsets, offsets)
     np.testing.assert_array_equal(infl.bones, bones)
     np.testing.assert_array_equal(infl.weights, weights)
     batches = [counts[b : b + 16].max() for b in range(0, 101, 16)]
-    lanes = 96 * sum(batches) + 4 * (len(batches) + 1)  # the kernels' slots and batch starts
+    lanes = slot_bytes * sum(batches) + 4 * (len(batches) + 1)  # the kernels' slots and batch starts
     per_vertex = {3: 0.5, 15: 0.5, 16: 1, 255: 1, 256: 2}[most]
     assert infl.nbytes == lanes + int(np.ceil(101 * per_vertex))
 

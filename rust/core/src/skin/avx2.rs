@@ -10,7 +10,7 @@
 use core::arch::x86_64::*;
 
 use super::batch::{assert_row_pairs, VectorOps};
-use super::influences::{lane_record, Slot, LANES};
+use super::influences::{lane_record, BoneIndex, Slot, LANES};
 
 /// Proof that the CPU has AVX2 and FMA.
 #[derive(Clone, Copy)]
@@ -124,7 +124,7 @@ impl VectorOps for Avx2 {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [__m256; 4] {
+    unsafe fn load_columns4<T, I: BoneIndex>(self, table: &[T], bones: &[I], offset: usize) -> [__m256; 4] {
         debug_assert!(bones.len() >= 8 && offset + 4 <= core::mem::size_of::<T>() / 4);
         // The four floats of the records of lanes `l` (low half) and `l + 4` (high half).
         let pair = |l: usize| {
@@ -183,9 +183,9 @@ impl VectorOps for Avx2 {
     /// the end, which needs per influence only loads (the bone index, the weight broadcast, the
     /// rows) and FMAs.
     #[inline(always)]
-    unsafe fn window_sums<T, const ROWS: usize>(
+    unsafe fn window_sums<T, I: BoneIndex, const ROWS: usize>(
         self,
-        slots: &[Slot],
+        slots: &[Slot<I>],
         signed: Option<&[[f32; LANES]]>,
         lane0: usize,
         table: &[T],

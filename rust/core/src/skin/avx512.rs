@@ -9,7 +9,7 @@
 use core::arch::x86_64::*;
 
 use super::batch::{assert_row_pairs, VectorOps};
-use super::influences::{lane_record, Slot, LANES};
+use super::influences::{lane_record, BoneIndex, Slot, LANES};
 
 mod kept;
 
@@ -131,8 +131,8 @@ unsafe fn store_points([x, y, z]: [__m512; 3], out: &mut [[f32; 3]; LANES]) {
 /// # Safety
 /// `bones[l]` must name a record of `table` (see [`lane_record`]).
 #[inline(always)]
-unsafe fn scalar_record<T>(table: &[T], bones: &[u16; LANES], l: usize) -> *const f32 {
-    // SAFETY: a valid reference to an initialized u16.
+unsafe fn scalar_record<T, I: BoneIndex>(table: &[T], bones: &[I; LANES], l: usize) -> *const f32 {
+    // SAFETY: a valid reference to an initialized integer.
     let r = unsafe { core::ptr::read_volatile(&bones[l]) };
     // SAFETY: the caller's contract.
     unsafe { lane_record(table, r) }
@@ -240,7 +240,7 @@ impl VectorOps for Avx512 {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [__m512; 4] {
+    unsafe fn load_columns4<T, I: BoneIndex>(self, table: &[T], bones: &[I], offset: usize) -> [__m512; 4] {
         debug_assert!(bones.len() >= 16 && offset + 4 <= core::mem::size_of::<T>() / 4);
         // SAFETY: the caller's contract; AVX-512F as in `instructions512!`.
         unsafe { columns4(table, bones, offset) }
@@ -265,9 +265,9 @@ impl VectorOps for Avx512 {
     /// weight broadcast (a load), one FMA per influence and lane for four rows; the sixteen
     /// lanes' registers are transposed once per batch.
     #[inline(always)]
-    unsafe fn window_sums<T, const ROWS: usize>(
+    unsafe fn window_sums<T, I: BoneIndex, const ROWS: usize>(
         self,
-        slots: &[Slot],
+        slots: &[Slot<I>],
         signed: Option<&[[f32; LANES]]>,
         lane0: usize,
         table: &[T],
@@ -303,8 +303,8 @@ impl VectorOps for Avx512 {
 /// Every bone index of `slots` indexes `table`; both eight-float spans lie inside its records.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn lane_sums<T>(
-    slots: &[Slot],
+unsafe fn lane_sums<T, I: BoneIndex>(
+    slots: &[Slot<I>],
     signed: Option<&[[f32; LANES]]>,
     table: &[T],
     first: usize,
@@ -362,8 +362,8 @@ fn transpose_lanes(r: &[__m512; LANES]) -> [__m512; 16] {
 /// a record.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn columns4<T>(table: &[T], bones: &[u16], offset: usize) -> [__m512; 4] {
-    let bones: &[u16; LANES] = bones[..LANES].try_into().expect("sixteen lanes");
+unsafe fn columns4<T, I: BoneIndex>(table: &[T], bones: &[I], offset: usize) -> [__m512; 4] {
+    let bones: &[I; LANES] = bones[..LANES].try_into().expect("sixteen lanes");
     let mut rows = [_mm512_setzero_ps(); 4];
     for (k, row) in rows.iter_mut().enumerate() {
         // SAFETY: the caller's contract.

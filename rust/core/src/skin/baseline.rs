@@ -6,7 +6,7 @@
 //! instruction (in the x86-64 baseline a fused `mul_add` would be a slow library call).
 
 use super::batch::VectorOps;
-use super::influences::{lane_record, Slot, LANES};
+use super::influences::{lane_record, BoneIndex, Slot, LANES};
 
 mod kept;
 
@@ -119,7 +119,7 @@ impl VectorOps for Baseline {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [F4; 4] {
+    unsafe fn load_columns4<T, I: BoneIndex>(self, table: &[T], bones: &[I], offset: usize) -> [F4; 4] {
         debug_assert!(bones.len() >= 4 && offset + 4 <= core::mem::size_of::<T>() / 4);
         // SAFETY: the caller guarantees the records and the offset are in range.
         let rows: [*const f32; 4] = [0, 1, 2, 3].map(|l| unsafe { lane_record(table, bones[l]).add(offset) });
@@ -142,9 +142,9 @@ impl VectorOps for Baseline {
     /// Lane by lane: each lane's weight times the rows of its record (four floats, one vector
     /// operation), summed in slot order, and transposed once at the end.
     #[inline(always)]
-    unsafe fn window_sums<T, const ROWS: usize>(
+    unsafe fn window_sums<T, I: BoneIndex, const ROWS: usize>(
         self,
-        slots: &[Slot],
+        slots: &[Slot<I>],
         signed: Option<&[[f32; LANES]]>,
         lane0: usize,
         table: &[T],

@@ -27,7 +27,7 @@ use core::mem::offset_of;
 
 use glam::Affine3A;
 
-use super::influences::{Slot, LANES};
+use super::influences::{BoneIndex, Slot, LANES};
 use super::job::{BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
 use super::pose::{CorBone, CorRigidBone, DqBone, LinearBone, PivotBone, PivotDualBone};
 use super::MIN_TOTAL_WEIGHT;
@@ -80,7 +80,7 @@ pub(super) trait VectorOps: Copy {
     /// made of f32 (`repr(C)`) and `offset + 4` floats lie inside it.
     ///
     /// [`lane_record`]: super::influences::lane_record
-    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [Self::F; 4];
+    unsafe fn load_columns4<T, I: BoneIndex>(self, table: &[T], bones: &[I], offset: usize) -> [Self::F; 4];
 
     /// `WIDTH` points `x y z x y z …` split into coordinate vectors.
     fn load_points(self, points: &[[f32; 3]]) -> [Self::F; 3];
@@ -97,9 +97,9 @@ pub(super) trait VectorOps: Copy {
     /// # Safety
     /// Every bone index of those lanes of `slots` indexes `table`; `T` is made of f32 and the
     /// rows lie inside it; `signed`, if given, has one entry per slot.
-    unsafe fn window_sums<T, const ROWS: usize>(
+    unsafe fn window_sums<T, I: BoneIndex, const ROWS: usize>(
         self,
-        slots: &[Slot],
+        slots: &[Slot<I>],
         signed: Option<&[[f32; LANES]]>,
         lane0: usize,
         table: &[T],
@@ -167,10 +167,10 @@ impl Scratch {
 
 /// One full batch: its points and slots and, where the method has them, its mask weights,
 /// blend amounts and centers.
-pub(super) struct FullBatch<'a> {
+pub(super) struct FullBatch<'a, I: BoneIndex> {
     pub positions: &'a [[f32; 3]; LANES],
     pub out: &'a mut [[f32; 3]; LANES],
-    pub slots: &'a [Slot],
+    pub slots: &'a [Slot<I>],
     pub strength: Option<&'a [f32; LANES]>,
     pub blend_amount: Option<&'a [f32; LANES]>,
     pub centers: Option<&'a [[f32; 3]; LANES]>,
@@ -197,17 +197,17 @@ const COR_WINDOW: [usize; 6] = {
 /// Every bone index of the batch's slots indexes the tables of `job` that the method reads
 /// (all of them except for LBS, which reads `linear` only).
 #[inline(always)]
-pub(super) unsafe fn skin_batch<V: VectorOps, const KIND: u8, const SCALED: bool, const PARTS: usize>(
+pub(super) unsafe fn skin_batch<V: VectorOps, I: BoneIndex, const KIND: u8, const SCALED: bool, const PARTS: usize>(
     v: V,
     job: &BatchJob<'_>,
-    mut batch: FullBatch<'_>,
+    mut batch: FullBatch<'_, I>,
     scratch: &mut Scratch,
 ) {
     const { assert!(PARTS * V::WIDTH == LANES) };
     let signed = &mut scratch.signed[..batch.slots.len()];
     for part in 0..PARTS {
         // SAFETY: the caller's contract.
-        unsafe { skin_part::<V, KIND, SCALED>(v, job, &mut batch, part * V::WIDTH, signed) };
+        unsafe { skin_part::<V, I, KIND, SCALED>(v, job, &mut batch, part * V::WIDTH, signed) };
     }
 }
 
@@ -216,10 +216,10 @@ pub(super) unsafe fn skin_batch<V: VectorOps, const KIND: u8, const SCALED: bool
 /// # Safety
 /// As [`skin_batch`].
 #[inline(always)]
-unsafe fn skin_part<V: VectorOps, const KIND: u8, const SCALED: bool>(
+unsafe fn skin_part<V: VectorOps, I: BoneIndex, const KIND: u8, const SCALED: bool>(
     v: V,
     job: &BatchJob<'_>,
-    batch: &mut FullBatch<'_>,
+    batch: &mut FullBatch<'_, I>,
     lane0: usize,
     signed: &mut [[f32; LANES]],
 ) {
@@ -356,9 +356,9 @@ fn signed_weight<V: VectorOps>(v: V, q: &[V::F; 4], real: &[V::F; 4], w: V::F) -
 /// # Safety
 /// Every bone index of the slots indexes `table`, whose records hold the rotation there.
 #[inline(always)]
-unsafe fn sign_pass<V: VectorOps, T>(
+unsafe fn sign_pass<V: VectorOps, T, I: BoneIndex>(
     v: V,
-    slots: &[Slot],
+    slots: &[Slot<I>],
     table: &[T],
     offset: usize,
     lane0: usize,
@@ -384,7 +384,7 @@ unsafe fn sign_pass<V: VectorOps, T>(
 
 /// The total weight of one part's lanes (from `lane0`), summed in slot order.
 #[inline(always)]
-fn total_weight<V: VectorOps>(v: V, slots: &[Slot], lane0: usize) -> V::F {
+fn total_weight<V: VectorOps, I: BoneIndex>(v: V, slots: &[Slot<I>], lane0: usize) -> V::F {
     slots.iter().fold(v.splat(0.0), |sum, slot| v.add(sum, v.load(&slot.weights[lane0..])))
 }
 
@@ -394,9 +394,9 @@ fn total_weight<V: VectorOps>(v: V, slots: &[Slot], lane0: usize) -> V::F {
 /// # Safety
 /// Every bone index of the slots indexes `cor_rigid`.
 #[inline(always)]
-unsafe fn rigid_center_sums<V: VectorOps>(
+unsafe fn rigid_center_sums<V: VectorOps, I: BoneIndex>(
     v: V,
-    slots: &[Slot],
+    slots: &[Slot<I>],
     cor_rigid: &[CorRigidBone],
     lane0: usize,
     c: &[V::F; 3],
@@ -473,7 +473,12 @@ fn rotation_offset<V: VectorOps>(v: V, q: &[V::F; 4], h: &[V::F; 4], c: &[V::F; 
 /// # Safety
 /// Every bone index of the slots indexes `dq`.
 #[inline(always)]
-unsafe fn rigid_sums<V: VectorOps>(v: V, slots: &[Slot], dq: &[DqBone], lane0: usize) -> ([V::F; 4], [V::F; 4], V::F) {
+unsafe fn rigid_sums<V: VectorOps, I: BoneIndex>(
+    v: V,
+    slots: &[Slot<I>],
+    dq: &[DqBone],
+    lane0: usize,
+) -> ([V::F; 4], [V::F; 4], V::F) {
     let zero = v.splat(0.0);
     let (mut real, mut dual, mut contrib) = ([zero; 4], [zero; 4], zero);
     for (k, slot) in slots.iter().enumerate() {

@@ -13,21 +13,117 @@ const _: () = assert!(MAX_INFLUENCES_PER_VERTEX <= u16::MAX as usize);
 
 /// Vertices the kernels process together, one per SIMD lane.
 pub(crate) const LANES: usize = 16;
-const _: () = assert!(core::mem::size_of::<Slot>() == LANES * 6);
+const _: () = assert!(core::mem::size_of::<Slot<u16>>() == LANES * 6);
+const _: () = assert!(core::mem::size_of::<Slot<u8>>() == LANES * 5);
 
-/// The `k`-th influence of each of [`LANES`] consecutive vertices: 96 bytes (a bone index of 16
-/// bits and a weight of 32 per lane; the kernels read them and little else, so every byte less
-/// here is time and memory). Vertices with fewer than `k + 1` influences have bone 0 with weight
-/// 0 there, which adds nothing to any sum.
+/// The `k`-th influence of each of [`LANES`] consecutive vertices: a bone index and a weight of
+/// 32 bits per lane, the index in 8 bits where the bones number at most 256 (80 bytes), else 16
+/// (96). The kernels read them and little else, so every byte less here is time and memory.
+/// Vertices with fewer than `k + 1` influences have bone 0 with weight 0 there, which adds
+/// nothing to any sum.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[repr(C, align(32))]
-pub(crate) struct Slot {
+#[repr(C, align(16))]
+pub(crate) struct Slot<I: BoneIndex> {
     /// Each lane's bone index (its record in a pose table: [`lane_record`]).
-    pub bones: [u16; LANES],
+    pub bones: [I; LANES],
     pub weights: [f32; LANES],
 }
 
-/// The most bones influences can refer to: a slot holds a bone index in 16 bits.
+impl<I: BoneIndex> Slot<I> {
+    const EMPTY: Self = Slot { bones: [I::ZERO; LANES], weights: [0.0; LANES] };
+}
+
+/// The width of the bone indices of [`Slot`]s: `u8` or `u16`. The kernels are compiled for both
+/// (a character's 100 bones or a crowd's need only 8 bits; 16 bits name up to [`MAX_BONES`]).
+pub(crate) trait BoneIndex: Copy + core::fmt::Debug + PartialEq + Send + Sync + 'static {
+    const ZERO: Self;
+    /// How many bones an index of this width can name.
+    const BONES: usize;
+    /// `bone`, below [`BoneIndex::BONES`] (the caller checked).
+    fn narrow(bone: u32) -> Self;
+    fn index(self) -> usize;
+}
+
+impl BoneIndex for u8 {
+    const ZERO: Self = 0;
+    const BONES: usize = 1 << 8;
+    #[inline(always)]
+    fn narrow(bone: u32) -> Self {
+        debug_assert!((bone as usize) < Self::BONES);
+        bone as u8
+    }
+    #[inline(always)]
+    fn index(self) -> usize {
+        usize::from(self)
+    }
+}
+
+impl BoneIndex for u16 {
+    const ZERO: Self = 0;
+    const BONES: usize = 1 << 16;
+    #[inline(always)]
+    fn narrow(bone: u32) -> Self {
+        debug_assert!((bone as usize) < Self::BONES);
+        bone as u16
+    }
+    #[inline(always)]
+    fn index(self) -> usize {
+        usize::from(self)
+    }
+}
+
+/// The lane-ordered slots of a set of influences, in the narrowest index width their bone
+/// count allows.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) enum LaneSlots {
+    Narrow(Vec<Slot<u8>>),
+    Wide(Vec<Slot<u16>>),
+}
+
+impl LaneSlots {
+    fn len(&self) -> usize {
+        match self {
+            LaneSlots::Narrow(s) => s.len(),
+            LaneSlots::Wide(s) => s.len(),
+        }
+    }
+
+    /// Bytes of one slot.
+    fn slot_bytes(&self) -> usize {
+        match self {
+            LaneSlots::Narrow(_) => core::mem::size_of::<Slot<u8>>(),
+            LaneSlots::Wide(_) => core::mem::size_of::<Slot<u16>>(),
+        }
+    }
+
+    fn capacity_bytes(&self) -> usize {
+        match self {
+            LaneSlots::Narrow(s) => s.capacity() * self.slot_bytes(),
+            LaneSlots::Wide(s) => s.capacity() * self.slot_bytes(),
+        }
+    }
+
+    /// Pair `k` of lane `lane`, as `(bone, weight)`.
+    #[inline]
+    fn pair(&self, k: usize, lane: usize) -> Influence {
+        match self {
+            LaneSlots::Narrow(s) => Influence { bone: u32::from(s[k].bones[lane]), weight: s[k].weights[lane] },
+            LaneSlots::Wide(s) => Influence { bone: u32::from(s[k].bones[lane]), weight: s[k].weights[lane] },
+        }
+    }
+
+    fn as_words(&self) -> &[u32] {
+        let (ptr, bytes) = match self {
+            LaneSlots::Narrow(s) => (s.as_ptr().cast::<u32>(), core::mem::size_of_val(s.as_slice())),
+            LaneSlots::Wide(s) => (s.as_ptr().cast::<u32>(), core::mem::size_of_val(s.as_slice())),
+        };
+        // SAFETY: `Slot` is `repr(C)` with only integer and f32 fields and no padding (LANES·5
+        // or LANES·6 bytes, multiples of its 16-byte alignment), so it is a sequence of 32-bit words.
+        unsafe { core::slice::from_raw_parts(ptr, bytes / 4) }
+    }
+}
+
+/// The most bones influences can refer to: a slot holds a bone index in at most 16 bits.
 pub const MAX_BONES: usize = u16::MAX as usize + 1;
 
 /// The first float of the record of `table` that a slot's entry `bone` names.
@@ -36,10 +132,10 @@ pub const MAX_BONES: usize = u16::MAX as usize + 1;
 /// `bone` indexes `table` (true of every slot entry of influences whose bone count is the
 /// table's length: validated when they were built).
 #[inline(always)]
-pub(crate) unsafe fn lane_record<T>(table: &[T], bone: u16) -> *const f32 {
-    debug_assert!(usize::from(bone) < table.len());
+pub(crate) unsafe fn lane_record<T, I: BoneIndex>(table: &[T], bone: I) -> *const f32 {
+    debug_assert!(bone.index() < table.len());
     // SAFETY: the caller's contract: the record lies inside `table`.
-    unsafe { table.as_ptr().add(usize::from(bone)).cast() }
+    unsafe { table.as_ptr().add(bone.index()).cast() }
 }
 
 /// One `(bone, weight)` pair.
@@ -68,7 +164,7 @@ pub struct Influences {
     max_per_vertex: usize,
     /// The same influences in lane order for the kernels: batch `b` (vertices `b·LANES ..`) has
     /// slots `batch_starts[b]..batch_starts[b+1]`, as many as its vertex with the most influences.
-    slots: Vec<Slot>,
+    slots: LaneSlots,
     batch_starts: Vec<u32>,
 }
 
@@ -129,7 +225,13 @@ impl Influences {
         }
         let entries: Vec<Influence> =
             bones.iter().zip(weights).map(|(&bone, &weight)| Influence { bone, weight }).collect();
-        let (slots, batch_starts) = pack_lanes(offsets, &entries)?;
+        let (slots, batch_starts) = if bone_count <= u8::BONES {
+            let (slots, starts) = pack_lanes::<u8>(offsets, &entries)?;
+            (LaneSlots::Narrow(slots), starts)
+        } else {
+            let (slots, starts) = pack_lanes::<u16>(offsets, &entries)?;
+            (LaneSlots::Wide(slots), starts)
+        };
         // Only the lane order is kept: a vertex's pairs are read back from its lane (a crowd
         // keeps one set of influences per character).
         // (Each count fits 16 bits: at most MAX_INFLUENCES_PER_VERTEX, checked above.)
@@ -238,9 +340,7 @@ impl Influences {
     pub fn of_vertex(&self, v: usize) -> impl ExactSizeIterator<Item = Influence> + Clone + '_ {
         let count = self.counts.get(v);
         let (start, lane) = (self.batch_starts[v / LANES] as usize, v % LANES);
-        self.slots[start..start + count]
-            .iter()
-            .map(move |s| Influence { bone: u32::from(s.bones[lane]), weight: s.weights[lane] })
+        (start..start + count).map(move |k| self.slots.pair(k, lane))
     }
 
     /// The CSR offsets (`V+1`, a copy: only each vertex's count is kept).
@@ -263,15 +363,13 @@ impl Influences {
     /// Bytes the kernels read per call for the influences (the lane-ordered slots and their
     /// batch starts).
     pub fn byte_size(&self) -> usize {
-        self.slots.len() * core::mem::size_of::<Slot>() + self.batch_starts.len() * 4
+        self.slots.len() * self.slots.slot_bytes() + self.batch_starts.len() * 4
     }
 
     /// The bytes they hold on the heap (counts, lane-ordered slots, batch starts): for memory
     /// accounting.
     pub fn heap_bytes(&self) -> usize {
-        self.counts.heap_bytes()
-            + self.slots.capacity() * core::mem::size_of::<Slot>()
-            + self.batch_starts.capacity() * 4
+        self.counts.heap_bytes() + self.slots.capacity_bytes() + self.batch_starts.capacity() * 4
     }
 
     /// The lane-ordered layout the kernels read, as 32-bit words: `(batch starts, slots, words
@@ -279,22 +377,25 @@ impl Influences {
     /// For benchmarks that need to touch exactly the kernels' bytes.
     #[doc(hidden)]
     pub fn kernel_words(&self) -> (&[u32], &[u32], usize) {
-        let words = core::mem::size_of::<Slot>() / 4;
-        // SAFETY: `Slot` is `repr(C)` with only u16 and f32 fields and no padding (LANES·6
-        // bytes, a multiple of its 32-byte alignment), so it is a sequence of 32-bit words.
-        let slots = unsafe { core::slice::from_raw_parts(self.slots.as_ptr() as *const u32, self.slots.len() * words) };
-        (&self.batch_starts, slots, words)
+        (&self.batch_starts, self.slots.as_words(), self.slots.slot_bytes() / 4)
     }
 
-    /// The slots of batch `b` (vertices `b·LANES .. (b+1)·LANES`).
+    /// The lane-ordered slots, in their index width.
     #[inline]
-    pub(crate) fn batch(&self, b: usize) -> &[Slot] {
-        &self.slots[self.batch_starts[b] as usize..self.batch_starts[b + 1] as usize]
+    pub(crate) fn lane_slots(&self) -> &LaneSlots {
+        &self.slots
+    }
+
+    /// The slots of batch `b` (vertices `b·LANES .. (b+1)·LANES`) of `slots`, the slots of
+    /// [`Influences::lane_slots`].
+    #[inline]
+    pub(crate) fn batch<'a, I: BoneIndex>(&self, slots: &'a [Slot<I>], b: usize) -> &'a [Slot<I>] {
+        &slots[self.batch_starts[b] as usize..self.batch_starts[b + 1] as usize]
     }
 }
 
 /// Transposes CSR influences into lane order, padding each batch to its longest vertex.
-fn pack_lanes(offsets: &[u32], entries: &[Influence]) -> Result<(Vec<Slot>, Vec<u32>), SkinError> {
+fn pack_lanes<I: BoneIndex>(offsets: &[u32], entries: &[Influence]) -> Result<(Vec<Slot<I>>, Vec<u32>), SkinError> {
     let vertices = offsets.len() - 1;
     let batches = vertices.div_ceil(LANES);
     let longest = |b: usize| {
@@ -311,13 +412,13 @@ fn pack_lanes(offsets: &[u32], entries: &[Influence]) -> Result<(Vec<Slot>, Vec<
         let last = (first + LANES).min(vertices);
         let longest = longest(b);
         let base = slots.len();
-        slots.resize(base + longest, Slot { bones: [0; LANES], weights: [0.0; LANES] });
+        slots.resize(base + longest, Slot::EMPTY);
         for v in first..last {
             let lane = v - first;
             let list = &entries[offsets[v] as usize..offsets[v + 1] as usize];
             for (k, e) in list.iter().enumerate() {
-                // Below MAX_BONES = 2¹⁶ (validated).
-                slots[base + k].bones[lane] = e.bone as u16;
+                // Below the bone count, which the width `I` was chosen for (validated).
+                slots[base + k].bones[lane] = I::narrow(e.bone);
                 slots[base + k].weights[lane] = e.weight;
             }
         }

@@ -14,7 +14,7 @@ use glam::Affine3A;
 use rayon::prelude::*;
 
 use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
-use super::influences::{Slot, LANES};
+use super::influences::{BoneIndex, LaneSlots, Slot, LANES};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
 use super::pose::{CorRigidBone, DqBone, LinearBone};
@@ -125,22 +125,38 @@ unsafe fn chunk_neon(job: &Job<'_>, folded: Folded<'_>, start: usize, out: &mut 
 
 #[inline(always)]
 fn chunk<const ISA: u8>(job: &Job<'_>, folded: Folded<'_>, start: usize, out: &mut [[f32; 3]]) {
+    match job.influences().lane_slots() {
+        LaneSlots::Narrow(slots) => methods::<ISA, u8>(job, folded, slots, start, out),
+        LaneSlots::Wide(slots) => methods::<ISA, u16>(job, folded, slots, start, out),
+    }
+}
+
+/// [`chunk`] for the influences' slots `slots`, whose bone indices are `I`.
+#[inline(always)]
+fn methods<const ISA: u8, I: BoneIndex>(
+    job: &Job<'_>,
+    folded: Folded<'_>,
+    slots: &[Slot<I>],
+    start: usize,
+    out: &mut [[f32; 3]],
+) {
     match (job.kind(), job.pose().any_scaled()) {
-        (Kind::Linear, _) => batches::<ISA, LINEAR, false>(job, folded, start, out),
-        (Kind::DualQuaternion, false) => batches::<ISA, DUAL_QUATERNION, false>(job, folded, start, out),
-        (Kind::DualQuaternion, true) => batches::<ISA, DUAL_QUATERNION, true>(job, folded, start, out),
-        (Kind::Blend, false) => batches::<ISA, BLEND, false>(job, folded, start, out),
-        (Kind::Blend, true) => batches::<ISA, BLEND, true>(job, folded, start, out),
-        (Kind::CentersOfRotation, false) => batches::<ISA, CENTERS, false>(job, folded, start, out),
-        (Kind::CentersOfRotation, true) => batches::<ISA, CENTERS, true>(job, folded, start, out),
+        (Kind::Linear, _) => batches::<ISA, I, LINEAR, false>(job, folded, slots, start, out),
+        (Kind::DualQuaternion, false) => batches::<ISA, I, DUAL_QUATERNION, false>(job, folded, slots, start, out),
+        (Kind::DualQuaternion, true) => batches::<ISA, I, DUAL_QUATERNION, true>(job, folded, slots, start, out),
+        (Kind::Blend, false) => batches::<ISA, I, BLEND, false>(job, folded, slots, start, out),
+        (Kind::Blend, true) => batches::<ISA, I, BLEND, true>(job, folded, slots, start, out),
+        (Kind::CentersOfRotation, false) => batches::<ISA, I, CENTERS, false>(job, folded, slots, start, out),
+        (Kind::CentersOfRotation, true) => batches::<ISA, I, CENTERS, true>(job, folded, slots, start, out),
     }
 }
 
 /// Skins vertices `start..start + out.len()` batch by batch.
 #[inline(always)]
-fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
+fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
     job: &Job<'_>,
     folded: Folded<'_>,
+    all_slots: &[Slot<I>],
     start: usize,
     out: &mut [[f32; 3]],
 ) {
@@ -179,7 +195,7 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
     for (k, out) in out.chunks_mut(LANES).enumerate() {
         let first = start + k * LANES;
         let n = out.len();
-        let slots = job.influences().batch(first / LANES);
+        let slots = job.influences().batch(all_slots, first / LANES);
         prefetch_ahead(job, first, slots);
         if ISA == ISA_BASELINE && KIND == LINEAR {
             // The baseline's hand-written LBS, where it measures faster than the one body.
@@ -204,7 +220,12 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
             // sets were detected; the job's influences and pose fit together (`Job::new`), so
             // every bone index of the batch's slots indexes every table the method reads.
             unsafe {
-                full_batch::<ISA, KIND, SCALED>(&simd_job, inputs, out.try_into().expect("a full batch"), &mut scratch)
+                full_batch::<ISA, I, KIND, SCALED>(
+                    &simd_job,
+                    inputs,
+                    out.try_into().expect("a full batch"),
+                    &mut scratch,
+                )
             };
         } else {
             // The last, partial batch goes through the same SIMD body, padded (the padding
@@ -236,7 +257,7 @@ fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
             let mut padded = [[0.0f32; 3]; LANES];
             // SAFETY: as for a full batch; the padding lanes' bone indices are 0, which
             // indexes every table (a pose has at least one bone).
-            unsafe { full_batch::<ISA, KIND, SCALED>(&simd_job, inputs, &mut padded, &mut scratch) };
+            unsafe { full_batch::<ISA, I, KIND, SCALED>(&simd_job, inputs, &mut padded, &mut scratch) };
             out.copy_from_slice(&padded[..n]);
         }
     }
@@ -255,7 +276,7 @@ const PREFETCH_AHEAD: usize = 8;
 /// lookup, no bounds check. A hint: nothing is read, and an address past an array's end asks
 /// for nothing harmful.
 #[inline(always)]
-fn prefetch_ahead(job: &Job<'_>, first: usize, slots: &[Slot]) {
+fn prefetch_ahead<I: BoneIndex>(job: &Job<'_>, first: usize, slots: &[Slot<I>]) {
     let lines = |p: *const u8, bytes: usize| {
         let ahead = p.wrapping_add(PREFETCH_AHEAD * bytes);
         (0..bytes.div_ceil(64)).for_each(|l| prefetch(ahead.wrapping_add(64 * l)))
@@ -284,12 +305,12 @@ fn prefetch(p: *const u8) {
 }
 
 /// What one batch of `LANES` vertices reads: sliced from the job, or a partial batch padded.
-struct BatchInputs<'a> {
+struct BatchInputs<'a, I: BoneIndex> {
     positions: &'a [[f32; 3]; LANES],
     strength: Option<&'a [f32; LANES]>,
     blend_amount: Option<&'a [f32; LANES]>,
     centers: Option<&'a [[f32; 3]; LANES]>,
-    slots: &'a [Slot],
+    slots: &'a [Slot<I>],
 }
 
 /// One full batch with the SIMD kernels of the copy `ISA`.
@@ -298,9 +319,9 @@ struct BatchInputs<'a> {
 /// The CPU has the instruction sets of `ISA`; every bone index of the batch's
 /// slots indexes every table of `simd_job` that the method reads.
 #[inline(always)]
-unsafe fn full_batch<const ISA: u8, const KIND: u8, const SCALED: bool>(
+unsafe fn full_batch<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
     simd_job: &BatchJob<'_>,
-    inputs: BatchInputs<'_>,
+    inputs: BatchInputs<'_, I>,
     out: &mut [[f32; 3]; LANES],
     scratch: &mut Scratch,
 ) {
@@ -321,19 +342,19 @@ unsafe fn full_batch<const ISA: u8, const KIND: u8, const SCALED: bool>(
     match ISA {
         // SAFETY: the caller's contract.
         ISA_BASELINE => unsafe {
-            skin_batch::<_, KIND, SCALED, 4>(super::baseline::Baseline, simd_job, batch, scratch)
+            skin_batch::<_, I, KIND, SCALED, 4>(super::baseline::Baseline, simd_job, batch, scratch)
         },
         // SAFETY: the caller's contract.
         #[cfg(target_arch = "x86_64")]
-        ISA_AVX2 => unsafe { skin_batch::<_, KIND, SCALED, 2>(super::avx2::Avx2::new(), simd_job, batch, scratch) },
+        ISA_AVX2 => unsafe { skin_batch::<_, I, KIND, SCALED, 2>(super::avx2::Avx2::new(), simd_job, batch, scratch) },
         // SAFETY: the caller's contract.
         #[cfg(target_arch = "x86_64")]
         ISA_AVX512 => unsafe {
-            skin_batch::<_, KIND, SCALED, 1>(super::avx512::Avx512::new(), simd_job, batch, scratch)
+            skin_batch::<_, I, KIND, SCALED, 1>(super::avx512::Avx512::new(), simd_job, batch, scratch)
         },
         // SAFETY: the caller's contract.
         #[cfg(target_arch = "aarch64")]
-        ISA_NEON => unsafe { skin_batch::<_, KIND, SCALED, 4>(super::neon::Neon::new(), simd_job, batch, scratch) },
+        ISA_NEON => unsafe { skin_batch::<_, I, KIND, SCALED, 4>(super::neon::Neon::new(), simd_job, batch, scratch) },
         _ => unreachable!("no SIMD kernels for copy {ISA}"),
     }
 }

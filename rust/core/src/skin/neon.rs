@@ -10,7 +10,7 @@
 use core::arch::aarch64::*;
 
 use super::batch::VectorOps;
-use super::influences::{lane_record, Slot, LANES};
+use super::influences::{lane_record, BoneIndex, Slot, LANES};
 
 /// Proof that the CPU has NEON (every aarch64 CPU does).
 #[derive(Clone, Copy)]
@@ -98,7 +98,7 @@ impl VectorOps for Neon {
     }
 
     #[inline(always)]
-    unsafe fn load_columns4<T>(self, table: &[T], bones: &[u16], offset: usize) -> [F; 4] {
+    unsafe fn load_columns4<T, I: BoneIndex>(self, table: &[T], bones: &[I], offset: usize) -> [F; 4] {
         debug_assert!(bones.len() >= 4 && offset + 4 <= core::mem::size_of::<T>() / 4);
         let row = |l: usize| {
             // SAFETY: the caller guarantees the record and the offset are in range; NEON as in
@@ -126,9 +126,9 @@ impl VectorOps for Neon {
     /// Accumulated per lane, each row's weight taken from its lane of the weight vector (`fmla`
     /// by element), and transposed once at the end.
     #[inline(always)]
-    unsafe fn window_sums<T, const ROWS: usize>(
+    unsafe fn window_sums<T, I: BoneIndex, const ROWS: usize>(
         self,
-        slots: &[Slot],
+        slots: &[Slot<I>],
         signed: Option<&[[f32; LANES]]>,
         lane0: usize,
         table: &[T],

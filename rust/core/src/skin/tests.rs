@@ -452,6 +452,51 @@ proptest! {
 }
 
 proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// Influences keep their bone indices in 8 bits where the bones number at most 256, else in
+    /// 16 (`influences.rs`): the kernels of both widths give the same bits for every method and
+    /// scale path, with the 16-bit ones naming bones past 255. The same rig is given once as its
+    /// own bones and once reversed at the end of a table of 300 (the others rigid fillers).
+    #[test]
+    fn both_bone_index_widths_skin_to_the_same_bits((rig, positions, lists, mask, premat) in case()) {
+        const WIDE: usize = 300;
+        let b = rig.rest.len();
+        let wide_of = |bone: u32| (WIDE - 1 - bone as usize) as u32;
+        let wide_lists: Vec<Vec<(u32, f32)>> =
+            lists.iter().map(|l| l.iter().map(|&(bone, w)| (wide_of(bone), w)).collect()).collect();
+        let (mut rest, mut deform) = (vec![Mat4::IDENTITY; WIDE], vec![Mat4::from_translation(Vec3::X); WIDE]);
+        for bone in 0..b {
+            rest[wide_of(bone as u32) as usize] = rig.rest[bone];
+            deform[wide_of(bone as u32) as usize] = rig.deform[bone];
+        }
+        let narrow = Influences::from_lists(&lists, b).unwrap();
+        let wide = Influences::from_lists(&wide_lists, WIDE).unwrap();
+        prop_assert!(wide.byte_size() > narrow.byte_size() || narrow.is_empty());
+        for (n, w) in (0..positions.len()).map(|v| (narrow.of_vertex(v), wide.of_vertex(v))) {
+            prop_assert!(n.map(|i| (wide_of(i.bone), i.weight)).eq(w.map(|i| (i.bone, i.weight))));
+        }
+        let (narrow_pose, wide_pose) =
+            (Pose::new(&rig.deform, Some(&rig.rest)).unwrap(), Pose::new(&deform, Some(&rest)).unwrap());
+        let options = SkinOptions { premat: Some(premat), postmat: Some(premat.inverse()), mask: Some(&mask) };
+        let centers: Vec<[f32; 3]> = positions.iter().rev().copied().collect();
+        let amount: Vec<f32> = mask.iter().rev().copied().collect();
+        for method in [
+            Method::Linear,
+            Method::DualQuaternion,
+            Method::Blend { amount: Some(&amount), factor: 0.7 },
+            Method::CentersOfRotation { centers: &centers },
+        ] {
+            let a = skin_all(method, &positions, &narrow, &narrow_pose, &options);
+            let z = skin_all(method, &positions, &wide, &wide_pose, &options);
+            for (v, (a, z)) in a.iter().zip(&z).enumerate() {
+                prop_assert_eq!(a.map(f32::to_bits), z.map(f32::to_bits), "{:?}: vertex {}", method, v);
+            }
+        }
+    }
+}
+
+proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
     /// A vertex's result does not depend on where it is in the mesh: in a full SIMD batch, in the

@@ -9,7 +9,7 @@
 use core::arch::x86_64::*;
 
 use super::super::batch::{apply, centers_rigid, rotation_terms, BatchJob, RigidCenterSums};
-use super::super::influences::{Slot, LANES};
+use super::super::influences::{BoneIndex, Slot, LANES};
 use super::super::pose::LinearBone;
 use super::{idx, join, load_points, scalar_record, store_points, transpose_blocks, Avx512};
 
@@ -47,7 +47,7 @@ fn transpose(r: [__m512; 8]) -> [__m512; 8] {
 /// Every bone index in `slots` must index `moves`.
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn lane_moves(slots: &[Slot], moves: &[LinearBone]) -> ([__m512; LANES], __m512) {
+unsafe fn lane_moves<I: BoneIndex>(slots: &[Slot<I>], moves: &[LinearBone]) -> ([__m512; LANES], __m512) {
     const { assert!(core::mem::size_of::<LinearBone>() == 64) };
     let mut lanes = [_mm512_setzero_ps(); LANES];
     let mut contrib = _mm512_setzero_ps();
@@ -147,11 +147,11 @@ unsafe fn moved_point(rows: __m512, point: *const f32) -> __m512 {
 /// # Safety
 /// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `moves`.
 #[target_feature(enable = "avx512f,avx2,fma")]
-pub(in crate::skin) unsafe fn linear_batch(
+pub(in crate::skin) unsafe fn linear_batch<I: BoneIndex>(
     moves: &[LinearBone],
     positions: &[[f32; 3]; LANES],
     out: &mut [[f32; 3]; LANES],
-    slots: &[Slot],
+    slots: &[Slot<I>],
     strength: Option<&[f32; LANES]>,
 ) {
     // SAFETY: as this function's own contract.
@@ -197,7 +197,7 @@ pub(in crate::skin) unsafe fn linear_batch(
 /// As [`load_columns`].
 #[inline]
 #[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn load_columns_scalar<T>(table: &[T], bones: &[u16; LANES], offset: usize) -> [__m512; 8] {
+unsafe fn load_columns_scalar<T, I: BoneIndex>(table: &[T], bones: &[I; LANES], offset: usize) -> [__m512; 8] {
     // SAFETY: the caller guarantees the records and the offset are in range.
     let row = |l: usize| unsafe { _mm256_loadu_ps(scalar_record(table, bones, l).add(offset)) };
     transpose(core::array::from_fn(|i| join(row(i), row(i + 8))))
@@ -240,12 +240,12 @@ unsafe fn write_batch(
 /// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index
 /// `cor_rigid`.
 #[target_feature(enable = "avx512f,avx2,fma")]
-pub(in crate::skin) unsafe fn centers_rigid_batch(
+pub(in crate::skin) unsafe fn centers_rigid_batch<I: BoneIndex>(
     job: &BatchJob<'_>,
     positions: &[[f32; 3]; LANES],
     centers: &[[f32; 3]; LANES],
     out: &mut [[f32; 3]; LANES],
-    slots: &[Slot],
+    slots: &[Slot<I>],
     strength: Option<&[f32; LANES]>,
 ) {
     // SAFETY: the CPU has AVX-512F, AVX2 and FMA (this function's contract).

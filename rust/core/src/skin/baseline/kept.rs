@@ -5,7 +5,7 @@
 
 use glam::{Affine3A, Vec4};
 
-use super::super::influences::{lane_record, Slot, LANES};
+use super::super::influences::{lane_record, BoneIndex, Slot, LANES};
 use super::super::job::Job;
 use super::super::pose::LinearBone;
 use super::super::MIN_TOTAL_WEIGHT;
@@ -51,13 +51,13 @@ impl Points {
 /// Every bone index of the slots indexes `table` (one record per bone of the pose: `Job::new`
 /// makes sure the indices fit the pose).
 #[inline(always)]
-pub(in crate::skin) unsafe fn linear_batch(
+pub(in crate::skin) unsafe fn linear_batch<I: BoneIndex>(
     job: &Job<'_>,
     table: &[LinearBone],
     premat: Option<&Affine3A>,
     postmat: Option<&Affine3A>,
     first: usize,
-    slots: &[Slot],
+    slots: &[Slot<I>],
     out: &mut [[f32; 3]],
 ) {
     let n = out.len();
@@ -114,7 +114,7 @@ fn store_points(p: &Points, out: &mut [[f32; 3]]) {
 /// `Job::new` checked that the pose has that many bones (and the rest tables the method reads),
 /// and padding lanes use bone 0, which exists whenever there is a slot at all.
 #[inline(always)]
-unsafe fn bone<T>(table: &[T], bone: u16) -> &T {
+unsafe fn bone<T, I: BoneIndex>(table: &[T], bone: I) -> &T {
     // SAFETY: the caller's contract; the record is a whole, aligned `T` of `table`.
     unsafe { &*lane_record(table, bone).cast::<T>() }
 }
@@ -126,7 +126,7 @@ unsafe fn bone<T>(table: &[T], bone: u16) -> &T {
 /// # Safety
 /// Every bone index of `slots` indexes `linear` (see [`bone`]).
 #[inline(always)]
-unsafe fn linear(co: &Points, slots: &[Slot], linear: &[LinearBone], strength: &Lanes) -> Points {
+unsafe fn linear<I: BoneIndex>(co: &Points, slots: &[Slot<I>], linear: &[LinearBone], strength: &Lanes) -> Points {
     let mut r = *co;
     for l in 0..LANES {
         let mut acc = [Vec4::ZERO; 3];

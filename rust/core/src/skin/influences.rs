@@ -3,7 +3,9 @@
 use super::SkinError;
 
 mod counts;
+mod lane_order;
 use counts::Counts;
+pub(crate) use lane_order::WINDOW;
 
 /// The most influences one vertex may have. Sums of weights run in single precision as in
 /// Blender (at most 4096 · 2⁻²⁴ ≈ 2.4e-4 relative error), and the lane layout pads a vertex's
@@ -166,6 +168,9 @@ pub struct Influences {
     /// slots `batch_starts[b]..batch_starts[b+1]`, as many as its vertex with the most influences.
     slots: LaneSlots,
     batch_starts: Vec<u32>,
+    /// Each vertex's lane position within its window of [`WINDOW`] vertices, where the lanes
+    /// take them by decreasing count (`lane_order.rs`); `None`: in vertex order.
+    lane_positions: Option<Box<[u8]>>,
 }
 
 impl Influences {
@@ -225,18 +230,23 @@ impl Influences {
         }
         let entries: Vec<Influence> =
             bones.iter().zip(weights).map(|(&bone, &weight)| Influence { bone, weight }).collect();
-        let (slots, batch_starts) = if bone_count <= u8::BONES {
-            let (slots, starts) = pack_lanes::<u8>(offsets, &entries)?;
+        // (Each count fits 16 bits: at most MAX_INFLUENCES_PER_VERTEX, checked above.)
+        let counts: Vec<u16> = offsets.windows(2).map(|w| (w[1] - w[0]) as u16).collect();
+        let narrow = bone_count <= u8::BONES;
+        let slot_bytes = if narrow { core::mem::size_of::<Slot<u8>>() } else { core::mem::size_of::<Slot<u16>>() };
+        let lane_positions = lane_order::choose(&counts, slot_bytes);
+        let vertex_at = lane_order::vertex_at(lane_positions.as_deref(), counts.len());
+        let (slots, batch_starts) = if narrow {
+            let (slots, starts) = pack_lanes::<u8>(offsets, &entries, &vertex_at)?;
             (LaneSlots::Narrow(slots), starts)
         } else {
-            let (slots, starts) = pack_lanes::<u16>(offsets, &entries)?;
+            let (slots, starts) = pack_lanes::<u16>(offsets, &entries, &vertex_at)?;
             (LaneSlots::Wide(slots), starts)
         };
         // Only the lane order is kept: a vertex's pairs are read back from its lane (a crowd
         // keeps one set of influences per character).
-        // (Each count fits 16 bits: at most MAX_INFLUENCES_PER_VERTEX, checked above.)
-        let counts = Counts::pack(offsets.windows(2).map(|w| (w[1] - w[0]) as u16), max_per_vertex);
-        Ok(Self { counts, pairs: total, bone_count, max_per_vertex, slots, batch_starts })
+        let counts = Counts::pack(counts.into_iter(), max_per_vertex);
+        Ok(Self { counts, pairs: total, bone_count, max_per_vertex, slots, batch_starts, lane_positions })
     }
 
     /// From dense rows, as glTF stores joints and weights: vertex `v` lists the `per_vertex`
@@ -339,7 +349,8 @@ impl Influences {
     #[inline]
     pub fn of_vertex(&self, v: usize) -> impl ExactSizeIterator<Item = Influence> + Clone + '_ {
         let count = self.counts.get(v);
-        let (start, lane) = (self.batch_starts[v / LANES] as usize, v % LANES);
+        let at = lane_order::position_of(self.lane_positions.as_deref(), v);
+        let (start, lane) = (self.batch_starts[at / LANES] as usize, at % LANES);
         (start..start + count).map(move |k| self.slots.pair(k, lane))
     }
 
@@ -363,13 +374,18 @@ impl Influences {
     /// Bytes the kernels read per call for the influences (the lane-ordered slots and their
     /// batch starts).
     pub fn byte_size(&self) -> usize {
-        self.slots.len() * self.slots.slot_bytes() + self.batch_starts.len() * 4
+        self.slots.len() * self.slots.slot_bytes()
+            + self.batch_starts.len() * 4
+            + self.lane_positions.as_ref().map_or(0, |p| p.len())
     }
 
     /// The bytes they hold on the heap (counts, lane-ordered slots, batch starts): for memory
     /// accounting.
     pub fn heap_bytes(&self) -> usize {
-        self.counts.heap_bytes() + self.slots.capacity_bytes() + self.batch_starts.capacity() * 4
+        self.counts.heap_bytes()
+            + self.slots.capacity_bytes()
+            + self.batch_starts.capacity() * 4
+            + self.lane_positions.as_ref().map_or(0, |p| p.len())
     }
 
     /// The lane-ordered layout the kernels read, as 32-bit words: `(batch starts, slots, words
@@ -378,6 +394,12 @@ impl Influences {
     #[doc(hidden)]
     pub fn kernel_words(&self) -> (&[u32], &[u32], usize) {
         (&self.batch_starts, self.slots.as_words(), self.slots.slot_bytes() / 4)
+    }
+
+    /// Each vertex's lane position within its window of [`WINDOW`] (`None`: the vertex order).
+    #[inline]
+    pub(crate) fn lane_positions(&self) -> Option<&[u8]> {
+        self.lane_positions.as_deref()
     }
 
     /// The lane-ordered slots, in their index width.
@@ -395,13 +417,19 @@ impl Influences {
 }
 
 /// Transposes CSR influences into lane order, padding each batch to its longest vertex.
-fn pack_lanes<I: BoneIndex>(offsets: &[u32], entries: &[Influence]) -> Result<(Vec<Slot<I>>, Vec<u32>), SkinError> {
+/// Lane position `p` holds vertex `vertex_at[p]`.
+fn pack_lanes<I: BoneIndex>(
+    offsets: &[u32],
+    entries: &[Influence],
+    vertex_at: &[u32],
+) -> Result<(Vec<Slot<I>>, Vec<u32>), SkinError> {
     let vertices = offsets.len() - 1;
     let batches = vertices.div_ceil(LANES);
-    let longest = |b: usize| {
-        let (first, last) = (b * LANES, ((b + 1) * LANES).min(vertices));
-        (first..last).map(|v| offsets[v + 1] - offsets[v]).max().unwrap_or(0) as usize
+    let count = |p: usize| {
+        let v = vertex_at[p] as usize;
+        (offsets[v + 1] - offsets[v]) as usize
     };
+    let longest = |b: usize| (b * LANES..((b + 1) * LANES).min(vertices)).map(count).max().unwrap_or(0);
     // Counted first and allocated once: grown by pushing, the slots would keep up to twice the
     // memory they use (a crowd keeps one set per character).
     let mut slots = Vec::with_capacity((0..batches).map(longest).sum());
@@ -413,8 +441,8 @@ fn pack_lanes<I: BoneIndex>(offsets: &[u32], entries: &[Influence]) -> Result<(V
         let longest = longest(b);
         let base = slots.len();
         slots.resize(base + longest, Slot::EMPTY);
-        for v in first..last {
-            let lane = v - first;
+        for p in first..last {
+            let (lane, v) = (p - first, vertex_at[p] as usize);
             let list = &entries[offsets[v] as usize..offsets[v + 1] as usize];
             for (k, e) in list.iter().enumerate() {
                 // Below the bone count, which the width `I` was chosen for (validated).

@@ -14,16 +14,16 @@ use glam::Affine3A;
 use rayon::prelude::*;
 
 use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
-use super::influences::{BoneIndex, LaneSlots, Slot, LANES};
+use super::influences::{BoneIndex, LaneSlots, Slot, LANES, WINDOW};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
 use super::pose::{CorRigidBone, DqBone, LinearBone};
 use super::spaces::{fold_rigid_centers, fold_rigid_spaces, fold_spaces, Fold};
 
 /// Vertices per parallel task: large enough to amortize scheduling, small enough to balance.
-/// A multiple of [`LANES`], so tasks start on batch boundaries.
+/// A multiple of [`LANES`] and of [`WINDOW`], so tasks start on batch and window boundaries.
 pub(crate) const CHUNK: usize = 4096;
-const _: () = assert!(CHUNK.is_multiple_of(LANES));
+const _: () = assert!(CHUNK.is_multiple_of(LANES) && CHUNK.is_multiple_of(WINDOW));
 
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     assert_eq!(out.len(), job.positions.len(), "one output point per vertex");
@@ -151,7 +151,9 @@ fn methods<const ISA: u8, I: BoneIndex>(
     }
 }
 
-/// Skins vertices `start..start + out.len()` batch by batch.
+/// Skins vertices `start..start + out.len()` batch by batch: in vertex order, or where the
+/// influences take their lanes in another order within windows (`influences/lane_order.rs`),
+/// window by window, their inputs copied into lane order and their results back.
 #[inline(always)]
 fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
     job: &Job<'_>,
@@ -191,74 +193,178 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
         postmat: postmat.as_ref(),
         blend_factor: job.blend_factor,
     };
-    let mut scratch = Scratch::new(job.influences().max_per_vertex());
-    for (k, out) in out.chunks_mut(LANES).enumerate() {
-        let first = start + k * LANES;
+    let mut run =
+        BatchRun { job, simd_job: &simd_job, all_slots, scratch: Scratch::new(job.influences().max_per_vertex()) };
+    let Some(positions) = job.influences().lane_positions() else {
+        let streams = Streams {
+            positions: &job.positions[start..],
+            mask: job.mask.map(|a| &a[start..]),
+            blend_amount: job.blend_amount.map(|a| &a[start..]),
+            centers: job.centers.map(|a| &a[start..]),
+        };
+        return run.batches::<ISA, KIND, SCALED>(streams, start, out);
+    };
+    let (mut window, mut lane_out) = (Window::new(), [[0.0f32; 3]; WINDOW]);
+    for (w, out) in out.chunks_mut(WINDOW).enumerate() {
+        let first = start + w * WINDOW;
         let n = out.len();
-        let slots = job.influences().batch(all_slots, first / LANES);
-        prefetch_ahead(job, first, slots);
-        if ISA == ISA_BASELINE && KIND == LINEAR {
-            // The baseline's hand-written LBS, where it measures faster than the one body.
-            // SAFETY: the job's influences and pose fit together (`Job::new`), so every bone
-            // index of the batch's slots indexes `linear` (the pose's table, or its folded copy
-            // with one record per bone).
-            unsafe { super::baseline::linear_batch(job, linear, premat.as_ref(), postmat.as_ref(), first, slots, out) };
-            continue;
+        let lanes = &positions[first..first + n];
+        let streams = window.gather(job, first, lanes);
+        run.batches::<ISA, KIND, SCALED>(streams, first, &mut lane_out[..n]);
+        for (o, &p) in out.iter_mut().zip(lanes) {
+            *o = lane_out[usize::from(p)];
         }
-        if n == LANES {
-            fn full<T>(a: &[T], first: usize) -> &[T; LANES] {
-                a[first..first + LANES].try_into().expect("a full batch")
+    }
+}
+
+/// The inputs a batch reads, from its first vertex: the job's own, or a window's in lane order.
+#[derive(Clone, Copy)]
+struct Streams<'a> {
+    positions: &'a [[f32; 3]],
+    mask: Option<&'a [f32]>,
+    blend_amount: Option<&'a [f32]>,
+    centers: Option<&'a [[f32; 3]]>,
+}
+
+/// One window's inputs in its lanes' order (`influences/lane_order.rs`).
+struct Window {
+    positions: [[f32; 3]; WINDOW],
+    mask: [f32; WINDOW],
+    blend_amount: [f32; WINDOW],
+    centers: [[f32; 3]; WINDOW],
+}
+
+impl Window {
+    fn new() -> Self {
+        Window {
+            positions: [[0.0; 3]; WINDOW],
+            mask: [0.0; WINDOW],
+            blend_amount: [0.0; WINDOW],
+            centers: [[0.0; 3]; WINDOW],
+        }
+    }
+
+    /// The inputs of the window's vertices `first..first + lanes.len()`, each put in its lane
+    /// position `lanes[i]` (a permutation of `0..lanes.len()`).
+    fn gather(&mut self, job: &Job<'_>, first: usize, lanes: &[u8]) -> Streams<'_> {
+        let n = lanes.len();
+        fn put<T: Copy>(to: &mut [T; WINDOW], from: &[T], lanes: &[u8]) {
+            for (x, &p) in from.iter().zip(lanes) {
+                to[usize::from(p)] = *x;
             }
-            let inputs = BatchInputs {
-                positions: full(job.positions, first),
-                strength: job.mask.map(|a| full(a, first)),
-                blend_amount: job.blend_amount.map(|a| full(a, first)),
-                centers: job.centers.map(|c| full(c, first)),
-                slots,
-            };
-            // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction
-            // sets were detected; the job's influences and pose fit together (`Job::new`), so
-            // every bone index of the batch's slots indexes every table the method reads.
-            unsafe {
-                full_batch::<ISA, I, KIND, SCALED>(
-                    &simd_job,
-                    inputs,
-                    out.try_into().expect("a full batch"),
-                    &mut scratch,
-                )
-            };
-        } else {
-            // The last, partial batch goes through the same SIMD body, padded (the padding
-            // lanes' slots have weight 0 and their results are dropped): a vertex's result
-            // does not depend on where it is in the mesh, so vertices split at one place
-            // (UV seams, sharp edges) stay together, as they do under Blender's modifier.
-            let pad = |a: Option<&[f32]>| {
-                a.map(|a| {
-                    let mut p = [0.0f32; LANES];
+        }
+        put(&mut self.positions, &job.positions[first..first + n], lanes);
+        let mask = job.mask.map(|a| put(&mut self.mask, &a[first..first + n], lanes)).is_some();
+        let blend = job.blend_amount.map(|a| put(&mut self.blend_amount, &a[first..first + n], lanes)).is_some();
+        let centers = job.centers.map(|a| put(&mut self.centers, &a[first..first + n], lanes)).is_some();
+        Streams {
+            positions: &self.positions[..n],
+            mask: mask.then_some(&self.mask[..n]),
+            blend_amount: blend.then_some(&self.blend_amount[..n]),
+            centers: centers.then_some(&self.centers[..n]),
+        }
+    }
+}
+
+/// What every batch of one task shares.
+struct BatchRun<'a, 'j, I: BoneIndex> {
+    job: &'a Job<'j>,
+    simd_job: &'a BatchJob<'a>,
+    all_slots: &'a [Slot<I>],
+    scratch: Scratch,
+}
+
+impl<I: BoneIndex> BatchRun<'_, '_, I> {
+    /// Skins the lane positions `at..at + out.len()` (a multiple of [`LANES`] from `at`), whose
+    /// inputs `streams` start at lane position `at`.
+    #[inline(always)]
+    fn batches<const ISA: u8, const KIND: u8, const SCALED: bool>(
+        &mut self,
+        streams: Streams<'_>,
+        at: usize,
+        out: &mut [[f32; 3]],
+    ) {
+        let (job, simd_job) = (self.job, self.simd_job);
+        for (k, out) in out.chunks_mut(LANES).enumerate() {
+            let first = k * LANES;
+            let n = out.len();
+            let slots = job.influences().batch(self.all_slots, (at + first) / LANES);
+            prefetch_ahead(streams, first, slots);
+            if ISA == ISA_BASELINE && KIND == LINEAR {
+                // The baseline's hand-written LBS, where it measures faster than the one body.
+                let (positions, mask) =
+                    (&streams.positions[first..first + n], streams.mask.map(|a| &a[first..first + n]));
+                // SAFETY: the job's influences and pose fit together (`Job::new`), so every bone
+                // index of the batch's slots indexes `linear` (the pose's table, or its folded
+                // copy with one record per bone).
+                unsafe {
+                    super::baseline::linear_batch(
+                        positions,
+                        mask,
+                        simd_job.linear,
+                        simd_job.premat,
+                        simd_job.postmat,
+                        slots,
+                        out,
+                    )
+                };
+                continue;
+            }
+            if n == LANES {
+                fn full<T>(a: &[T], first: usize) -> &[T; LANES] {
+                    a[first..first + LANES].try_into().expect("a full batch")
+                }
+                let inputs = BatchInputs {
+                    positions: full(streams.positions, first),
+                    strength: streams.mask.map(|a| full(a, first)),
+                    blend_amount: streams.blend_amount.map(|a| full(a, first)),
+                    centers: streams.centers.map(|c| full(c, first)),
+                    slots,
+                };
+                // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction
+                // sets were detected; the job's influences and pose fit together (`Job::new`), so
+                // every bone index of the batch's slots indexes every table the method reads.
+                unsafe {
+                    full_batch::<ISA, I, KIND, SCALED>(
+                        simd_job,
+                        inputs,
+                        out.try_into().expect("a full batch"),
+                        &mut self.scratch,
+                    )
+                };
+            } else {
+                // The last, partial batch goes through the same SIMD body, padded (the padding
+                // lanes' slots have weight 0 and their results are dropped): a vertex's result
+                // does not depend on where it is in the mesh, so vertices split at one place
+                // (UV seams, sharp edges) stay together, as they do under Blender's modifier.
+                let pad = |a: Option<&[f32]>| {
+                    a.map(|a| {
+                        let mut p = [0.0f32; LANES];
+                        p[..n].copy_from_slice(&a[first..first + n]);
+                        p
+                    })
+                };
+                let pad_points = |a: &[[f32; 3]]| {
+                    let mut p = [[0.0f32; 3]; LANES];
                     p[..n].copy_from_slice(&a[first..first + n]);
                     p
-                })
-            };
-            let pad_points = |a: &[[f32; 3]]| {
-                let mut p = [[0.0f32; 3]; LANES];
-                p[..n].copy_from_slice(&a[first..first + n]);
-                p
-            };
-            let positions = pad_points(job.positions);
-            let (strength, blend_amount) = (pad(job.mask), pad(job.blend_amount));
-            let centers = job.centers.map(pad_points);
-            let inputs = BatchInputs {
-                positions: &positions,
-                strength: strength.as_ref(),
-                blend_amount: blend_amount.as_ref(),
-                centers: centers.as_ref(),
-                slots,
-            };
-            let mut padded = [[0.0f32; 3]; LANES];
-            // SAFETY: as for a full batch; the padding lanes' bone indices are 0, which
-            // indexes every table (a pose has at least one bone).
-            unsafe { full_batch::<ISA, I, KIND, SCALED>(&simd_job, inputs, &mut padded, &mut scratch) };
-            out.copy_from_slice(&padded[..n]);
+                };
+                let positions = pad_points(streams.positions);
+                let (strength, blend_amount) = (pad(streams.mask), pad(streams.blend_amount));
+                let centers = streams.centers.map(pad_points);
+                let inputs = BatchInputs {
+                    positions: &positions,
+                    strength: strength.as_ref(),
+                    blend_amount: blend_amount.as_ref(),
+                    centers: centers.as_ref(),
+                    slots,
+                };
+                let mut padded = [[0.0f32; 3]; LANES];
+                // SAFETY: as for a full batch; the padding lanes' bone indices are 0, which
+                // indexes every table (a pose has at least one bone).
+                unsafe { full_batch::<ISA, I, KIND, SCALED>(simd_job, inputs, &mut padded, &mut self.scratch) };
+                out.copy_from_slice(&padded[..n]);
+            }
         }
     }
 }
@@ -276,18 +382,18 @@ const PREFETCH_AHEAD: usize = 8;
 /// lookup, no bounds check. A hint: nothing is read, and an address past an array's end asks
 /// for nothing harmful.
 #[inline(always)]
-fn prefetch_ahead<I: BoneIndex>(job: &Job<'_>, first: usize, slots: &[Slot<I>]) {
+fn prefetch_ahead<I: BoneIndex>(streams: Streams<'_>, first: usize, slots: &[Slot<I>]) {
     let lines = |p: *const u8, bytes: usize| {
         let ahead = p.wrapping_add(PREFETCH_AHEAD * bytes);
         (0..bytes.div_ceil(64)).for_each(|l| prefetch(ahead.wrapping_add(64 * l)))
     };
     lines(slots.as_ptr().cast(), core::mem::size_of_val(slots));
     let points = LANES * core::mem::size_of::<[f32; 3]>();
-    lines(job.positions.as_ptr().wrapping_add(first).cast(), points);
-    if let Some(c) = job.centers {
+    lines(streams.positions.as_ptr().wrapping_add(first).cast(), points);
+    if let Some(c) = streams.centers {
         lines(c.as_ptr().wrapping_add(first).cast(), points);
     }
-    for a in [job.mask, job.blend_amount].into_iter().flatten() {
+    for a in [streams.mask, streams.blend_amount].into_iter().flatten() {
         lines(a.as_ptr().wrapping_add(first).cast(), LANES * 4);
     }
 }

@@ -451,6 +451,79 @@ proptest! {
     }
 }
 
+/// Every method of `positions` at once, and each vertex skinned alone (whose influences keep
+/// the vertex order: one vertex has nothing to reorder), must give the same bits.
+fn each_vertex_as_alone(
+    rig: &Rig,
+    positions: &[[f32; 3]],
+    lists: &[Vec<(u32, f32)>],
+    mask: &[f32],
+    premat: Mat4,
+) -> Result<(), TestCaseError> {
+    let influences = Influences::from_lists(lists, rig.rest.len()).unwrap();
+    prop_assume!(influences.lane_positions().is_some());
+    let pose = Pose::new(&rig.deform, Some(&rig.rest)).unwrap();
+    let centers: Vec<[f32; 3]> = positions.iter().rev().copied().collect();
+    let amount: Vec<f32> = mask.iter().rev().copied().collect();
+    let options = SkinOptions { premat: Some(premat), postmat: Some(premat.inverse()), mask: Some(mask) };
+    let methods = |v: Option<usize>| {
+        let pick = |a: &[f32]| -> Vec<f32> { v.map_or_else(|| a.to_vec(), |v| vec![a[v]]) };
+        (pick(&amount), v.map_or_else(|| centers.clone(), |v| vec![centers[v]]))
+    };
+    let (all_amount, all_centers) = methods(None);
+    let all = [
+        skin_all(Method::Linear, positions, &influences, &pose, &options),
+        skin_all(Method::DualQuaternion, positions, &influences, &pose, &options),
+        skin_all(Method::Blend { amount: Some(&all_amount), factor: 0.7 }, positions, &influences, &pose, &options),
+        skin_all(Method::CentersOfRotation { centers: &all_centers }, positions, &influences, &pose, &options),
+    ];
+    for v in 0..positions.len() {
+        let alone = Influences::from_lists(&lists[v..v + 1], rig.rest.len()).unwrap();
+        prop_assert!(alone.lane_positions().is_none());
+        let (amount, centers) = methods(Some(v));
+        let mask = [mask[v]];
+        let options = SkinOptions { mask: Some(&mask), ..options };
+        let point = &positions[v..v + 1];
+        let got = [
+            skin_all(Method::Linear, point, &alone, &pose, &options),
+            skin_all(Method::DualQuaternion, point, &alone, &pose, &options),
+            skin_all(Method::Blend { amount: Some(&amount), factor: 0.7 }, point, &alone, &pose, &options),
+            skin_all(Method::CentersOfRotation { centers: &centers }, point, &alone, &pose, &options),
+        ];
+        for (m, (a, g)) in all.iter().zip(&got).enumerate() {
+            prop_assert_eq!(a[v].map(f32::to_bits), g[0].map(f32::to_bits), "method {}, vertex {}", m, v);
+        }
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+
+    /// Influences whose vertices take their lanes by decreasing count within windows
+    /// (`influences/lane_order.rs`): every vertex's result is the one it has alone, for every
+    /// method and compiled copy.
+    #[test]
+    fn lanes_in_window_order_give_each_vertex_its_own_result((rig, positions, lists, mask, premat) in case()) {
+        each_vertex_as_alone(&rig, &positions, &lists, &mask, premat)?;
+    }
+}
+
+/// The same across windows and the thread pool's chunks: two chunks and a partial window, with
+/// counts from 0 to 6 mixed in every batch.
+#[test]
+fn lanes_in_window_order_hold_across_windows_and_chunks() {
+    let n = kernels::CHUNK + 300;
+    let (positions, _, deform, rest) = batch_fixture(n, 24, 1);
+    let lists: Vec<Vec<(u32, f32)>> = (0..n)
+        .map(|v| (0..(v * 7 % 11) % 7).map(|k| (((v * 5 + k * 3) % 24) as u32, 0.1 + (k as f32) * 0.3)).collect())
+        .collect();
+    let mask: Vec<f32> = (0..n).map(|v| [1.0, 0.0, 0.5, 0.25][v % 4]).collect();
+    let rig = Rig { rest, deform };
+    let premat = Mat4::from_rotation_translation(Quat::from_rotation_z(0.3), Vec3::new(0.1, 0.2, 0.3));
+    each_vertex_as_alone(&rig, &positions, &lists, &mask, premat).unwrap();
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 

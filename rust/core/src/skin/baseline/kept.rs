@@ -6,7 +6,6 @@
 use glam::{Affine3A, Vec4};
 
 use super::super::influences::{lane_record, BoneIndex, Slot, LANES};
-use super::super::job::Job;
 use super::super::pose::LinearBone;
 use super::super::MIN_TOTAL_WEIGHT;
 
@@ -43,8 +42,8 @@ impl Points {
     }
 }
 
-/// LBS on one batch of up to [`LANES`] vertices from `first` (`out` holds its results; `slots`
-/// its influences) with the bone matrices `table` (the pose's, or with the spaces folded in):
+/// LBS on one batch of up to [`LANES`] vertices (`positions` and `mask` from its first, `out`
+/// holds its results; `slots` its influences) with the bone matrices `table` (the pose's, or with the spaces folded in):
 /// load, `premat`, the sums, strength, `postmat`, mask, store.
 ///
 /// # Safety
@@ -52,19 +51,19 @@ impl Points {
 /// makes sure the indices fit the pose).
 #[inline(always)]
 pub(in crate::skin) unsafe fn linear_batch<I: BoneIndex>(
-    job: &Job<'_>,
+    positions: &[[f32; 3]],
+    mask: Option<&[f32]>,
     table: &[LinearBone],
     premat: Option<&Affine3A>,
     postmat: Option<&Affine3A>,
-    first: usize,
     slots: &[Slot<I>],
     out: &mut [[f32; 3]],
 ) {
     let n = out.len();
-    let original = load_points(&job.positions[first..first + n]);
+    let original = load_points(&positions[..n]);
     let mut strength: Lanes = [1.0; LANES];
-    if let Some(mask) = job.mask {
-        strength[..n].copy_from_slice(&mask[first..first + n]);
+    if let Some(mask) = mask {
+        strength[..n].copy_from_slice(&mask[..n]);
     }
     let co = match premat {
         Some(m) => original.transform(m),

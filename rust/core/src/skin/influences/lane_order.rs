@@ -1,0 +1,109 @@
+//! The order of vertices in the kernels' lanes. A 16-vertex batch has as many slots as its vertex
+//! with the most influences, so a character whose neighbouring vertices have 1 to 4 influences
+//! pads about a third of its slots with weight 0 (CesiumMan: 1.31× its pairs). Within windows
+//! of [`WINDOW`] vertices the lanes may take the vertices by decreasing count instead, which
+//! leaves almost no padding; each vertex then keeps its position in its window (a byte), and the
+//! kernels copy a window's inputs into that order and its results back (`kernels.rs`). The order
+//! is kept only where it saves more bytes than it costs; a vertex's result does not depend on
+//! its lane, so both orders give the same bits.
+
+use core::cmp::Reverse;
+
+use super::LANES;
+
+/// Vertices that may change lanes among themselves: a position in a window fits a byte.
+pub(crate) const WINDOW: usize = 256;
+const _: () = assert!(WINDOW.is_multiple_of(LANES) && WINDOW <= 1 << 8);
+
+/// Each vertex's position within its window, by decreasing count (ties in vertex order),
+/// where that needs fewer bytes (slots of `slot_bytes` saved, against a byte a vertex) than
+/// the vertex order; `None` where it does not.
+pub(super) fn choose(counts: &[u16], slot_bytes: usize) -> Option<Box<[u8]>> {
+    let in_vertex_order: usize = counts.chunks(LANES).map(longest).sum();
+    let mut position = vec![0u8; counts.len()].into_boxed_slice();
+    let mut sorted = Vec::with_capacity(WINDOW);
+    let mut in_window_order = 0;
+    for (w, window) in counts.chunks(WINDOW).enumerate() {
+        sorted.clear();
+        sorted.extend(window.iter().copied().zip(0u32..));
+        sorted.sort_unstable_by_key(|&(count, v)| (Reverse(count), v));
+        in_window_order += sorted.chunks(LANES).map(|batch| usize::from(batch[0].0)).sum::<usize>();
+        for (p, &(_, v)) in sorted.iter().enumerate() {
+            // Below WINDOW ≤ 256 (asserted above).
+            position[w * WINDOW + v as usize] = p as u8;
+        }
+    }
+    let saved = (in_vertex_order - in_window_order) * slot_bytes;
+    (saved > counts.len()).then_some(position)
+}
+
+/// The vertex in each lane position: the inverse of [`choose`]'s positions (the identity
+/// without them).
+pub(super) fn vertex_at(position: Option<&[u8]>, vertices: usize) -> Vec<u32> {
+    let mut at: Vec<u32> = (0..vertices as u32).collect();
+    if let Some(position) = position {
+        for (v, &p) in position.iter().enumerate() {
+            at[v - v % WINDOW + usize::from(p)] = v as u32;
+        }
+    }
+    at
+}
+
+/// The lane position of vertex `v`.
+#[inline]
+pub(super) fn position_of(position: Option<&[u8]>, v: usize) -> usize {
+    match position {
+        Some(p) => v - v % WINDOW + usize::from(p[v]),
+        None => v,
+    }
+}
+
+fn longest(batch: &[u16]) -> usize {
+    batch.iter().copied().max().map_or(0, usize::from)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uniform_counts_keep_the_vertex_order() {
+        assert_eq!(choose(&[4; 1000], 80), None);
+        assert_eq!(choose(&[], 80), None);
+    }
+
+    #[test]
+    fn mixed_counts_take_lanes_by_decreasing_count_within_their_window() {
+        // Counts 1..=4 in turn: every batch in vertex order needs 4 slots.
+        let counts: Vec<u16> = (0..600).map(|v| 1 + (v % 4) as u16).collect();
+        let position = choose(&counts, 80).expect("sorting saves here");
+        let at = vertex_at(Some(&position), counts.len());
+        // A permutation of each window onto itself.
+        let mut seen = at.clone();
+        seen.sort_unstable();
+        assert!(seen.iter().copied().eq(0..600));
+        for (p, &v) in at.iter().enumerate() {
+            assert_eq!(p / WINDOW, v as usize / WINDOW, "vertex {v} left its window");
+            assert_eq!(position_of(Some(&position), v as usize), p, "vertex {v} position {} ", position[v as usize]);
+        }
+        // Decreasing counts within a window, ties in vertex order.
+        for window in at.chunks(WINDOW) {
+            for pair in window.windows(2) {
+                let (a, b) = (counts[pair[0] as usize], counts[pair[1] as usize]);
+                assert!(a > b || (a == b && pair[0] < pair[1]));
+            }
+        }
+        // The last window (88 vertices) is sorted too.
+        assert_eq!(counts[at[512] as usize], 4);
+    }
+
+    #[test]
+    fn the_order_is_kept_only_where_it_saves_more_than_its_bytes() {
+        // One vertex of 2 influences among 1s in each batch: sorting saves one slot a batch
+        // minus one (the 2s share batches), 80 bytes each, against a byte a vertex.
+        let counts: Vec<u16> = (0..256).map(|v| if v % 16 == 0 { 2 } else { 1 }).collect();
+        assert!(choose(&counts, 80).is_some());
+        // With 1-byte slots it would cost more than it saves.
+        assert_eq!(choose(&counts, 1), None);
+    }
+}

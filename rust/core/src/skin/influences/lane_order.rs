@@ -43,7 +43,7 @@ pub(super) fn vertex_at(position: Option<&[u8]>, vertices: usize) -> Vec<u32> {
     let mut at: Vec<u32> = (0..vertices as u32).collect();
     if let Some(position) = position {
         for (v, &p) in position.iter().enumerate() {
-            at[v - v % WINDOW + usize::from(p)] = v as u32;
+            at[in_window(window_start(v), p)] = v as u32;
         }
     }
     at
@@ -53,9 +53,23 @@ pub(super) fn vertex_at(position: Option<&[u8]>, vertices: usize) -> Vec<u32> {
 #[inline]
 pub(super) fn position_of(position: Option<&[u8]>, v: usize) -> usize {
     match position {
-        Some(p) => v - v % WINDOW + usize::from(p[v]),
+        Some(p) => in_window(window_start(v), p[v]),
         None => v,
     }
+}
+
+/// Position `p` of the window that starts at `start`. (The start goes through `black_box`: the
+/// LLVM of Rust 1.95 compiles `start + p`, which it turns into `(v & !255) | p`, to `p` alone on
+/// x86-64, measured: `readback_tests` below fails without it.)
+#[inline]
+fn in_window(start: usize, p: u8) -> usize {
+    core::hint::black_box(start) + usize::from(p)
+}
+
+/// The first vertex of `v`'s window.
+#[inline]
+fn window_start(v: usize) -> usize {
+    v / WINDOW * WINDOW
 }
 
 fn longest(batch: &[u16]) -> usize {
@@ -105,5 +119,27 @@ mod tests {
         assert!(choose(&counts, 80).is_some());
         // With 1-byte slots it would cost more than it saves.
         assert_eq!(choose(&counts, 1), None);
+    }
+}
+
+#[cfg(test)]
+mod readback_tests {
+    use crate::skin::Influences;
+
+    /// Every vertex's pairs read back from its lane, in every window (the position in a window
+    /// plus the window's start), also through the kernels' batch layout of a release build.
+    #[test]
+    fn pairs_read_back_from_lanes_in_window_order_in_every_window() {
+        let lists: Vec<Vec<(u32, f32)>> = (0..1000u32)
+            .map(|v| (0..(v.wrapping_mul(2654435761) >> 28) % 5).map(|k| (k * 2 + v % 2, v as f32 + 0.5)).collect())
+            .collect();
+        let influences = Influences::from_lists(&lists, 10).unwrap();
+        assert!(influences.lane_positions().is_some());
+        for (v, want) in lists.iter().enumerate() {
+            let got: Vec<(u32, f32)> = influences.of_vertex(v).map(|i| (i.bone, i.weight)).collect();
+            assert_eq!(&got, want, "vertex {v}");
+        }
+        let entries: Vec<(u32, f32)> = influences.entries().iter().map(|i| (i.bone, i.weight)).collect();
+        assert_eq!(entries, lists.concat());
     }
 }

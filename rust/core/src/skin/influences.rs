@@ -46,33 +46,24 @@ pub(crate) trait BoneIndex: Copy + core::fmt::Debug + PartialEq + Send + Sync + 
     fn index(self) -> usize;
 }
 
-impl BoneIndex for u8 {
-    const ZERO: Self = 0;
-    const BONES: usize = 1 << 8;
-    #[inline(always)]
-    fn narrow(bone: u32) -> Self {
-        debug_assert!((bone as usize) < Self::BONES);
-        bone as u8
-    }
-    #[inline(always)]
-    fn index(self) -> usize {
-        usize::from(self)
-    }
+macro_rules! bone_index {
+    ($($width:ty),*) => {$(
+        impl BoneIndex for $width {
+            const ZERO: Self = 0;
+            const BONES: usize = 1 << <$width>::BITS;
+            #[inline(always)]
+            fn narrow(bone: u32) -> Self {
+                debug_assert!((bone as usize) < Self::BONES);
+                bone as $width
+            }
+            #[inline(always)]
+            fn index(self) -> usize {
+                usize::from(self)
+            }
+        }
+    )*};
 }
-
-impl BoneIndex for u16 {
-    const ZERO: Self = 0;
-    const BONES: usize = 1 << 16;
-    #[inline(always)]
-    fn narrow(bone: u32) -> Self {
-        debug_assert!((bone as usize) < Self::BONES);
-        bone as u16
-    }
-    #[inline(always)]
-    fn index(self) -> usize {
-        usize::from(self)
-    }
-}
+bone_index!(u8, u16);
 
 /// The lane-ordered slots of a set of influences, in the narrowest index width their bone
 /// count allows.

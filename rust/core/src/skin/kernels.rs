@@ -195,7 +195,7 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
     };
     let mut run =
         BatchRun { job, simd_job: &simd_job, all_slots, scratch: Scratch::new(job.influences().max_per_vertex()) };
-    let Some(positions) = job.influences().lane_positions() else {
+    let Some(lane_positions) = job.influences().lane_positions() else {
         let streams = Streams {
             positions: &job.positions[start..],
             mask: job.mask.map(|a| &a[start..]),
@@ -208,7 +208,7 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
     for (w, out) in out.chunks_mut(WINDOW).enumerate() {
         let first = start + w * WINDOW;
         let n = out.len();
-        let lanes = &positions[first..first + n];
+        let lanes = &lane_positions[first..first + n];
         let streams = window.gather(job, first, lanes);
         run.batches::<ISA, KIND, SCALED>(streams, first, &mut lane_out[..n]);
         for (o, &p) in out.iter_mut().zip(lanes) {

@@ -7,8 +7,6 @@
 //! is kept only where it saves more bytes than it costs; a vertex's result does not depend on
 //! its lane, so both orders give the same bits.
 
-use core::cmp::Reverse;
-
 use super::LANES;
 
 /// Vertices that may change lanes among themselves: a position in a window fits a byte.
@@ -17,25 +15,56 @@ const _: () = assert!(WINDOW.is_multiple_of(LANES) && WINDOW <= 1 << 8);
 
 /// Each vertex's position within its window, by decreasing count (ties in vertex order),
 /// where that needs fewer bytes (slots of `slot_bytes` saved, against a byte a vertex) than
-/// the vertex order; `None` where it does not.
+/// the vertex order; `None` where it does not. Counted, not sorted: influences made on every
+/// frame (B-Bones, envelopes) pay this each time, and a window whose vertices all have one
+/// count (a grid) is passed over at once.
 pub(super) fn choose(counts: &[u16], slot_bytes: usize) -> Option<Box<[u8]>> {
     let in_vertex_order: usize = counts.chunks(LANES).map(longest).sum();
-    let mut position = vec![0u8; counts.len()].into_boxed_slice();
-    let mut sorted = Vec::with_capacity(WINDOW);
+    // Each count's number of vertices in the window, then where its run starts by decreasing
+    // count (sized for the largest count, cleared up to each window's).
+    let mut run_start = vec![0u32; longest(counts) + 1];
     let mut in_window_order = 0;
-    for (w, window) in counts.chunks(WINDOW).enumerate() {
-        sorted.clear();
-        sorted.extend(window.iter().copied().zip(0u32..));
-        sorted.sort_unstable_by_key(|&(count, v)| (Reverse(count), v));
-        in_window_order += sorted.chunks(LANES).map(|batch| usize::from(batch[0].0)).sum::<usize>();
-        for (p, &(_, v)) in sorted.iter().enumerate() {
+    for window in counts.chunks(WINDOW) {
+        in_window_order += sorted_batch_maxima(window, &mut run_start);
+    }
+    let saved = in_vertex_order.saturating_sub(in_window_order) * slot_bytes;
+    if saved <= counts.len() {
+        return None;
+    }
+    let mut position = vec![0u8; counts.len()].into_boxed_slice();
+    for (window, positions) in counts.chunks(WINDOW).zip(position.chunks_mut(WINDOW)) {
+        sorted_batch_maxima(window, &mut run_start);
+        for (&count, p) in window.iter().zip(positions) {
+            let at = &mut run_start[usize::from(count)];
             // Below WINDOW ≤ 256 (asserted above).
-            position[w * WINDOW + v as usize] = p as u8;
+            *p = *at as u8;
+            *at += 1;
         }
     }
-    // (Never negative: by decreasing count, each batch's longest vertex is as short as it can be.)
-    let saved = in_vertex_order.saturating_sub(in_window_order) * slot_bytes;
-    (saved > counts.len()).then_some(position)
+    Some(position)
+}
+
+/// The sum of the longest count of each 16-vertex batch of `window` by decreasing count;
+/// leaves in `run_start[c]` where count `c`'s run starts in that order.
+fn sorted_batch_maxima(window: &[u16], run_start: &mut [u32]) -> usize {
+    let most = longest(window);
+    let runs = &mut run_start[..=most];
+    runs.fill(0);
+    for &c in window {
+        runs[usize::from(c)] += 1;
+    }
+    // Runs by decreasing count; a batch's longest vertex is the first of it.
+    let (mut at, mut sum) = (0u32, 0);
+    for c in (0..=most).rev() {
+        let n = runs[c];
+        runs[c] = at;
+        // The batches that start inside this run: at positions at, at + 16, … below at + n.
+        let first_batch = at.div_ceil(LANES as u32);
+        let end_batch = (at + n).div_ceil(LANES as u32);
+        sum += (end_batch - first_batch) as usize * c;
+        at += n;
+    }
+    sum
 }
 
 /// The vertex in each lane position: the inverse of [`choose`]'s positions (the identity
@@ -110,6 +139,26 @@ mod tests {
         }
         // The last window (88 vertices) is sorted too.
         assert_eq!(counts[at[512] as usize], 4);
+    }
+
+    #[test]
+    fn counted_batch_maxima_equal_those_of_a_sorted_window() {
+        let mut seed = 7u32;
+        for n in [1usize, 15, 16, 17, 100, 255, 256] {
+            for most in [1u32, 4, 15, 300, 4096] {
+                let window: Vec<u16> = (0..n)
+                    .map(|_| {
+                        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                        ((seed >> 8) % (most + 1)) as u16
+                    })
+                    .collect();
+                let mut sorted = window.clone();
+                sorted.sort_unstable_by(|a, b| b.cmp(a));
+                let want: usize = sorted.chunks(LANES).map(|b| usize::from(b[0])).sum();
+                let mut runs = vec![0u32; 4097];
+                assert_eq!(sorted_batch_maxima(&window, &mut runs), want, "{n} vertices, counts to {most}");
+            }
+        }
     }
 
     #[test]

@@ -142,7 +142,8 @@ pub struct Influence {
 /// Per-vertex influences: vertex `v` has `offsets[v+1] − offsets[v]` pairs, **in the order
 /// given** (the order matters for dual quaternion skinning, whose sign choice follows it, as in
 /// Blender). They are kept once, in the kernels' lane order (16-vertex batches, each padded to
-/// its vertex with the most pairs); [`Influences::of_vertex`] reads a vertex's back from its lane.
+/// its vertex with the most pairs, in vertex order or by count within windows: `lane_order.rs`);
+/// [`Influences::of_vertex`] reads a vertex's back from its lane.
 ///
 /// Invariants (checked by [`Influences::from_csr`]): `offsets` starts at 0, never decreases and
 /// ends at the number of entries; every bone index is below `bone_count`; every weight is finite
@@ -155,7 +156,7 @@ pub struct Influences {
     pairs: usize,
     bone_count: usize,
     max_per_vertex: usize,
-    /// The same influences in lane order for the kernels: batch `b` (vertices `b·LANES ..`) has
+    /// The same influences in lane order for the kernels: batch `b` (lane positions `b·LANES ..`) has
     /// slots `batch_starts[b]..batch_starts[b+1]`, as many as its vertex with the most influences.
     slots: LaneSlots,
     batch_starts: Vec<u32>,
@@ -399,7 +400,7 @@ impl Influences {
         &self.slots
     }
 
-    /// The slots of batch `b` (vertices `b·LANES .. (b+1)·LANES`) of `slots`, the slots of
+    /// The slots of batch `b` (lane positions `b·LANES .. (b+1)·LANES`) of `slots`, the slots of
     /// [`Influences::lane_slots`].
     #[inline]
     pub(crate) fn batch<'a, I: BoneIndex>(&self, slots: &'a [Slot<I>], b: usize) -> &'a [Slot<I>] {

@@ -448,6 +448,83 @@ def test_a_character_handed_over_is_not_evaluated_every_frame_and_follows_change
     assert status(dq_skin, obj).live
 
 
+def checks_of_stepping_aside(dq_skin, monkeypatch) -> list:
+    """The objects whose stepping aside is checked through Blender's Python API from now on (not
+    from their state in memory, `playback.AsideCheck`), one name per check."""
+    pipeline = dq_skin.engine.pipeline
+    checked = []
+    real = pipeline.still_steps_aside
+    monkeypatch.setattr(pipeline, "still_steps_aside", lambda obj, *a: checked.append(obj.name) or real(obj, *a))
+    return checked
+
+
+def _companion_edited(dq, obj, tw, mod, arm):
+    next(m for m in obj.modifiers if m.type == "ARMATURE").use_deform_preserve_volume = True
+
+
+def _another_armature(dq, obj, tw, mod, arm):
+    other = arm.copy()  # (the same animation, one unit away: the mesh follows it)
+    bpy.context.scene.collection.objects.link(other)
+    other.location.x += 1.0
+    dq.blender.nodes.put(mod, "Armature", other)
+    next(m for m in tw.modifiers if m.type == "ARMATURE").object = other
+
+
+def _vertex_group_renamed(dq, obj, tw, mod, arm):
+    for o in (obj, tw):
+        o.vertex_groups[0].name = "Renamed"
+
+
+def _method(dq, obj, tw, mod, arm):
+    assert dq.blender.nodes.put_method(mod, "Dual Quaternion")
+    next(m for m in tw.modifiers if m.type == "ARMATURE").use_deform_preserve_volume = True
+
+
+def _smoothing_off(dq, obj, tw, mod, arm):
+    for o in (obj, tw):
+        o.modifiers["Corrective Smooth"].show_viewport = False
+
+
+# What a script may change between two frames while a character is handed over, each on the
+# character and on its twin so that the two stay equal: (obj, twin, DQ Skin, armature).
+ASIDE_CHANGES = {
+    "the method": _method,
+    "the companion edited by hand": _companion_edited,
+    "Corrective Smooth off": _smoothing_off,
+    "DQ Skin hidden": lambda dq, obj, tw, mod, arm: setattr(mod, "show_viewport", False),
+    "another armature": _another_armature,
+    "a vertex group renamed": _vertex_group_renamed,
+}
+
+
+@pytest.mark.parametrize("change", sorted(ASIDE_CHANGES))
+def test_a_character_handed_over_is_checked_from_memory_and_every_change_is_seen(dq_skin, monkeypatch, change):
+    """While nothing but the pose changes, the frame handler checks that a character handed over
+    still is from its state in Blender's memory (one read), not through the Python API (dozens of
+    calls a character and frame); what a script changes before the next frame is seen there and
+    followed at once (the frames equal its twin's, on Blender's Armature modifier changed the
+    same way)."""
+    obj, arm, _ = animated_tube()
+    obj.modifiers.new("Corrective Smooth", "CORRECTIVE_SMOOTH")
+    mod = add_dq_skin(obj, "LINEAR")
+    tw = twin(obj, share_mesh=False)
+    for f in (2, 3):
+        bpy.context.scene.frame_set(f)
+    assert status(dq_skin, obj).mode.name == "HANDED_OVER"
+    assert dq_skin.SESSION.readers.object_state is not None, dq_skin.SESSION.readers.object_state_error
+    checked = checks_of_stepping_aside(dq_skin, monkeypatch)
+    check_frames([(obj, tw)], frames=(4, 8, 14))
+    assert checked == [], "frames where only the pose changed were checked through the Python API"
+    ASIDE_CHANGES[change](dq_skin, obj, tw, mod, arm)
+    check_frames([(obj, tw)], frames=(5, 9))
+    if change == "Corrective Smooth off":
+        assert status(dq_skin, obj).live
+    elif change == "DQ Skin hidden":
+        assert status(dq_skin, obj).mode.name == "OFF"
+    else:
+        assert status(dq_skin, obj).mode.name == "HANDED_OVER"
+
+
 def test_a_character_switched_off_is_not_evaluated_every_frame(dq_skin, monkeypatch):
     """DQ Skin switched off in the viewport (to compare with Blender's deformation): the
     companion deforms, and the frames run no full evaluation of DQ Skin's until it is switched

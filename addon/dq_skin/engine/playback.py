@@ -124,26 +124,72 @@ def _fed_frame_stands(obj, ctx: Context, bones_changed: bool) -> list | None:
     return checked if all(mod.show_viewport for mod in mods) else None
 
 
-def stepped_aside_stands(obj, ctx: Context) -> bool:
-    """Whether every DQ Skin of `obj` leaves the deforming to its companion (switched off or
+@dataclass(frozen=True)
+class AsideCheck:
+    """What the last check that an object's DQ Skins still step aside saw (`stepped_aside_stands`):
+    the digest of its state in Blender's memory (as `FedCheck`'s) and, for each DQ Skin, its key,
+    its state and the decision that state kept (`ModifierState.stepped_aside`)."""
+
+    digest: bytes
+    mods: tuple  # (key, state, decision) each
+
+
+def stepped_aside_stands(rec, ctx: Context) -> bool:
+    """Whether every DQ Skin of `rec.obj` leaves the deforming to its companion (switched off or
     handed over) as at its last full evaluation (`pipeline.still_steps_aside`): the companion
     deforms each frame by itself, and a full evaluation of each frame would only decide the same
     again (a crowd whose characters have a Corrective Smooth after DQ Skin, or DQ Skin switched
-    off to compare, paid it for every character on every frame)."""
+    off to compare, paid it for every character on every frame). Where it stands, what it saw is
+    kept (`AsideCheck`) for `steps_aside_as_checked` on the frames after."""
+    obj = rec.obj
+    rec.aside_check = None
     if obj.library is not None:
         return False
     mods = dq_skin_modifiers(obj)
     if not mods:
         return False
     states = ctx.session.states
+    checked = []
     try:
         for mod in mods:
-            st = states.find(mod_key(obj, mod))
+            key = mod_key(obj, mod)
+            st = states.find(key)
             if st is None or st.status.mode not in STEPPED_ASIDE or not pipeline.still_steps_aside(obj, mod, st, ctx):
                 return False
+            checked.append((key, st, st.stepped_aside))
     except (ReferenceError, AttributeError):  # (the armature was deleted: the full path says so)
         return False
+    reader = ctx.session.readers.object_state
+    digest = reader.digest(obj) if reader is not None else None
+    if digest is not None:
+        rec.aside_check = AsideCheck(digest, tuple(checked))
     return True
+
+
+def steps_aside_as_checked(rec, ctx: Context) -> bool:
+    """Whether `rec.obj` still steps aside as `rec.aside_check` saw: Blender's side unchanged (one
+    read of the object's state: its modes, modifier stack with every switch, DQ Skin's inputs,
+    the companion's settings), the add-on's side the same decisions, the scene's structure the
+    same, no export and no render (as `pipeline.still_steps_aside` requires), in place of reading
+    the decision's inputs again through Blender's Python API for every character and frame."""
+    check: AsideCheck | None = rec.aside_check
+    if check is None:
+        return False
+    session = ctx.session
+    if ctx.render or session.exports.active():
+        return False
+    states = session.states
+    for key, st, decision in check.mods:
+        if (
+            states.find(key) is not st
+            or st.stepped_aside is not decision
+            or st.status.mode not in STEPPED_ASIDE
+            or st.decided_structure != ctx.structure
+        ):
+            rec.aside_check = None
+            return False
+    reader = session.readers.object_state
+    return reader is not None and reader.unchanged(rec.obj, check.digest)
 
 
 STEPPED_ASIDE = (Mode.OFF, Mode.HANDED_OVER)

@@ -37,6 +37,7 @@ class Record:
     bones_changed: bool = False  # its armature's data was updated: the bones' binding is compared
     modifier_count: int = 0
     fed_check: object = None  # what the last check of its fed frame that stood saw (`playback.FedCheck`)
+    aside_check: object = None  # what the last check that it still steps aside saw (`playback.AsideCheck`)
 
 
 class Tracker:
@@ -342,9 +343,11 @@ class Tracker:
                 continue
             forced, rec.pending = rec.pending, False
             bones, rec.bones_changed = rec.bones_changed, False
+            if not forced and not bones and playback.steps_aside_as_checked(rec, ctx):
+                continue  # Blender's Armature modifier deforms it, as it did (nothing was fed)
             if not forced and playback.fed_frame_stands(rec, ctx, bones):
                 continue  # the feed made this frame inside Blender's evaluation
-            if not forced and not bones and playback.stepped_aside_stands(rec.obj, ctx):
+            if not forced and not bones and playback.stepped_aside_stands(rec, ctx):
                 continue  # Blender's Armature modifier deforms it, as it did
             self.evaluate(rec, depsgraph, forced, ctx)
         pipeline.run_batch(self.session, ctx.batch)

@@ -180,6 +180,15 @@ def moved(obj, frames=(1, 10)) -> float:
     return float(np.abs(a - b).max()) if a.shape == b.shape else float("inf")
 
 
+def names_of_calls(monkeypatch, module, function: str) -> list:
+    """The names of the objects `module.function(obj, ...)` is called with from now on, in order
+    (a list that grows as it is called)."""
+    calls = []
+    real = getattr(module, function)
+    monkeypatch.setattr(module, function, lambda obj, *a: calls.append(obj.name) or real(obj, *a))
+    return calls
+
+
 def check_frames(pairs, frames=FRAMES):
     """Every (ours, twin) pair equal at every frame; returns the worst deviation."""
     worst = 0.0

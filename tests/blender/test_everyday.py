@@ -26,6 +26,7 @@ from dqtest import (
     draw_panel,
     evaluated_positions,
     import_character,
+    names_of_calls,
     output_of,
     perturbed,
     reference_copy,
@@ -409,11 +410,7 @@ def test_corrective_smooth_after_dq_skin(dq_skin, assets, method):
 def full_evaluations(dq_skin, monkeypatch) -> list:
     """The names of the objects DQ Skin evaluates in full from now on, in order (a list that
     grows as they are)."""
-    pipeline = dq_skin.engine.pipeline
-    evaluated = []
-    real = pipeline._evaluate
-    monkeypatch.setattr(pipeline, "_evaluate", lambda obj, *a: evaluated.append(obj.name) or real(obj, *a))
-    return evaluated
+    return names_of_calls(monkeypatch, dq_skin.engine.pipeline, "_evaluate")
 
 
 def test_a_character_handed_over_is_not_evaluated_every_frame_and_follows_changes(dq_skin, monkeypatch):
@@ -451,11 +448,7 @@ def test_a_character_handed_over_is_not_evaluated_every_frame_and_follows_change
 def checks_of_stepping_aside(dq_skin, monkeypatch) -> list:
     """The objects whose stepping aside is checked through Blender's Python API from now on (not
     from their state in memory, `playback.AsideCheck`), one name per check."""
-    pipeline = dq_skin.engine.pipeline
-    checked = []
-    real = pipeline.still_steps_aside
-    monkeypatch.setattr(pipeline, "still_steps_aside", lambda obj, *a: checked.append(obj.name) or real(obj, *a))
-    return checked
+    return names_of_calls(monkeypatch, dq_skin.engine.pipeline, "still_steps_aside")
 
 
 def _companion_edited(dq, obj, tw, mod, arm):

@@ -25,6 +25,7 @@ from dqtest import (
     evaluated_positions,
     fed_runs,
     is_carrier,
+    names_of_calls,
     reference_copy,
     route_of,
     select_only,
@@ -610,11 +611,7 @@ def test_the_result_route_keeps_no_buffer_between_fed_frames(dq_skin, monkeypatc
 def checks_through_python(dq_skin, monkeypatch) -> list:
     """The objects whose fed frame is checked through Blender's Python API from now on (not
     from their state in memory, `playback.FedCheck`), one name per check."""
-    playback = dq_skin.engine.playback
-    checked = []
-    real = playback._fed_frame_stands
-    monkeypatch.setattr(playback, "_fed_frame_stands", lambda obj, *a: checked.append(obj.name) or real(obj, *a))
-    return checked
+    return names_of_calls(monkeypatch, dq_skin.engine.playback, "_fed_frame_stands")
 
 
 def _swap_armature(dq_skin, obj, reference, mod, arm):

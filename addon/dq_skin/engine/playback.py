@@ -46,8 +46,7 @@ def fed_frame_stands(rec, ctx: Context, bones_changed: bool = False) -> bool:
     checked = _fed_frame_stands(obj, ctx, bones_changed)
     if checked is None:
         return False
-    reader = ctx.session.readers.object_state
-    digest = reader.digest(obj) if reader is not None else None
+    digest = _state_digest(ctx, obj)
     if digest is not None:
         mods = tuple(
             (key, st, st.output.written.settings, st.output.written.mesh_version, (st.companion.shown, st.companion.deforms))
@@ -82,8 +81,20 @@ def _stands_as_checked(rec, ctx: Context) -> bool:
             or (st.companion.shown, st.companion.deforms) != companion
         ):
             return False
-    reader = session.readers.object_state
-    return reader is not None and reader.unchanged(obj, check.digest)
+    return _state_unchanged(ctx, obj, check.digest)
+
+
+def _state_digest(ctx: Context, obj) -> bytes | None:
+    """The digest of `obj`'s state in Blender's memory (`dqskin.memory.ObjectStateMemory`); None
+    where the reader is refused for the session."""
+    reader = ctx.session.readers.object_state
+    return reader.digest(obj) if reader is not None else None
+
+
+def _state_unchanged(ctx: Context, obj, digest: bytes) -> bool:
+    """Whether `obj`'s state in Blender's memory still has `digest`."""
+    reader = ctx.session.readers.object_state
+    return reader is not None and reader.unchanged(obj, digest)
 
 
 def _fed_frame_stands(obj, ctx: Context, bones_changed: bool) -> list | None:
@@ -159,8 +170,7 @@ def stepped_aside_stands(rec, ctx: Context) -> bool:
             checked.append((key, st, st.stepped_aside))
     except (ReferenceError, AttributeError):  # (the armature was deleted: the full path says so)
         return False
-    reader = ctx.session.readers.object_state
-    digest = reader.digest(obj) if reader is not None else None
+    digest = _state_digest(ctx, obj)
     if digest is not None:
         rec.aside_check = AsideCheck(digest, tuple(checked))
     return True
@@ -188,8 +198,7 @@ def steps_aside_as_checked(rec, ctx: Context) -> bool:
         ):
             rec.aside_check = None
             return False
-    reader = session.readers.object_state
-    return reader is not None and reader.unchanged(rec.obj, check.digest)
+    return _state_unchanged(ctx, rec.obj, check.digest)
 
 
 STEPPED_ASIDE = (Mode.OFF, Mode.HANDED_OVER)

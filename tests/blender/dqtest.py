@@ -189,6 +189,17 @@ def names_of_calls(monkeypatch, module, function: str) -> list:
     return calls
 
 
+def swap_armature(dq_skin, obj, reference, mod, arm):
+    """A script's change between frames: DQ Skin of `obj` and the Armature modifier of its
+    `reference` both given a copy of `arm`, one unit away (the same animation: the mesh follows
+    it)."""
+    other = arm.copy()
+    bpy.context.scene.collection.objects.link(other)
+    other.location.x += 1.0
+    dq_skin.blender.nodes.put(mod, "Armature", other)
+    next(m for m in reference.modifiers if m.type == "ARMATURE").object = other
+
+
 def check_frames(pairs, frames=FRAMES):
     """Every (ours, twin) pair equal at every frame; returns the worst deviation."""
     worst = 0.0

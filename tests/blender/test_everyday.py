@@ -33,6 +33,7 @@ from dqtest import (
     select_only,
     stack,
     status,
+    swap_armature,
     twin,
 )
 from scenes import RIGS
@@ -455,14 +456,6 @@ def _companion_edited(dq, obj, tw, mod, arm):
     next(m for m in obj.modifiers if m.type == "ARMATURE").use_deform_preserve_volume = True
 
 
-def _another_armature(dq, obj, tw, mod, arm):
-    other = arm.copy()  # (the same animation, one unit away: the mesh follows it)
-    bpy.context.scene.collection.objects.link(other)
-    other.location.x += 1.0
-    dq.blender.nodes.put(mod, "Armature", other)
-    next(m for m in tw.modifiers if m.type == "ARMATURE").object = other
-
-
 def _vertex_group_renamed(dq, obj, tw, mod, arm):
     for o in (obj, tw):
         o.vertex_groups[0].name = "Renamed"
@@ -485,7 +478,7 @@ ASIDE_CHANGES = {
     "the companion edited by hand": _companion_edited,
     "Corrective Smooth off": _smoothing_off,
     "DQ Skin hidden": lambda dq, obj, tw, mod, arm: setattr(mod, "show_viewport", False),
-    "another armature": _another_armature,
+    "another armature": swap_armature,
     "a vertex group renamed": _vertex_group_renamed,
 }
 

@@ -30,6 +30,7 @@ from dqtest import (
     route_of,
     select_only,
     status,
+    swap_armature,
 )
 from test_pose_memory import bbone_rig
 from test_render import SAME_IMAGE, changed, render_frame, setup_scene
@@ -614,14 +615,6 @@ def checks_through_python(dq_skin, monkeypatch) -> list:
     return names_of_calls(monkeypatch, dq_skin.engine.playback, "_fed_frame_stands")
 
 
-def _swap_armature(dq_skin, obj, reference, mod, arm):
-    other = arm.copy()  # (the same animation, one unit away: the mesh follows it)
-    bpy.context.scene.collection.objects.link(other)
-    other.location.x += 1.0
-    dq_skin.blender.nodes.put(mod, "Armature", other)
-    next(m for m in reference.modifiers if m.type == "ARMATURE").object = other
-
-
 def _reference_modifier(reference):
     return next(m for m in reference.modifiers if m.type == "ARMATURE")
 
@@ -642,7 +635,7 @@ SCRIPT_CHANGES = {
         dq.blender.nodes.put_attribute(mod, "Mask", "Bone2"),
         setattr(_reference_modifier(ref), "vertex_group", "Bone2"),
     ),
-    "another armature": _swap_armature,
+    "another armature": swap_armature,
     "the companion shown": lambda dq, obj, ref, mod, arm: setattr(
         obj.modifiers[dq.blender.nodes.get_companion(mod)["name"]], "show_viewport", True
     ),

@@ -14,14 +14,19 @@
 //! [--vertices N] [--influences K] [--threads T] [--rounds R]`. The last four narrow the grid to one
 //! size, influence count or thread count and set the number of timed rounds (for profiling: under
 //! `valgrind --tool=callgrind`, `--rounds 1` skins each case twice, the warm-up and one round);
-//! with any of them the precompute runs only if `--only precompute` asks for it.
+//! with any of them the precompute runs only if `--only precompute` asks for it. `--copies` runs
+//! each kernel on every compiled copy with fused multiply-adds the CPU has, the copies alternated
+//! round by round in this one process (rows name the copy): processes on a shared machine can
+//! differ from each other by 2x, so copies are compared within one.
 
 use std::hint::black_box;
 use std::time::Instant;
 
 use dqskin_core::glam::{Mat4, Quat, Vec3};
 use dqskin_core::rigs::Creature;
-use dqskin_core::{centers_of_rotation, kernel_copies, pool, skin, Influences, Method, Pose, SkinOptions};
+use dqskin_core::{
+    centers_of_rotation, kernel_copies, pool, set_kernel_copy, skin, Influences, Method, Pose, SkinOptions,
+};
 use rayon::prelude::*;
 
 const BONES: usize = 64;
@@ -139,6 +144,8 @@ struct Row {
     threads: usize,
     method: &'static str,
     pose: &'static str,
+    /// The copy that ran: named with `--copies`, else `DQSKIN_SIMD`'s, else "chosen".
+    copy: &'static str,
     seconds: f64,
     reference_seconds: f64,
     bytes: usize,
@@ -149,11 +156,11 @@ const ONLY: [&str; 7] =
     ["LBS-rigid", "DQS-rigid", "DQS-scaled", "Blend-rigid", "CoR-rigid", "CoR-scaled", "precompute"];
 /// The options that take a value, and the flags that take none.
 const VALUED: [&str; 6] = ["--json", "--only", "--vertices", "--influences", "--threads", "--rounds"];
-const FLAGS: [&str; 1] = ["--quick"];
+const FLAGS: [&str; 2] = ["--quick", "--copies"];
 
 fn usage() -> String {
     format!(
-        "usage: dqskin-bench [--quick] [--json FILE] [--only {}] [--vertices N] [--influences K] [--threads T] [--rounds R]",
+        "usage: dqskin-bench [--quick] [--copies] [--json FILE] [--only {}] [--vertices N] [--influences K] [--threads T] [--rounds R]",
         ONLY.join("|")
     )
 }
@@ -212,11 +219,22 @@ fn main() {
     let influences_given = number("--influences").is_some();
     let thread_counts: Vec<usize> = number("--threads").map_or(vec![1, all], |t| vec![t]);
     let rounds = number("--rounds");
+    // The copies each case runs on: with --copies every one with fused multiply-adds here, each
+    // named to set_kernel_copy in turn; else the one the process runs ("chosen", or DQSKIN_SIMD's).
+    let compare_copies = args.iter().any(|a| a == "--copies");
+    let copies: Vec<&'static str> = if compare_copies {
+        let here: Vec<&'static str> =
+            ["avx2", "avx512", "neon"].into_iter().filter(|c| set_kernel_copy(Some(c)).is_ok()).collect();
+        set_kernel_copy(None).expect("back to the measured copies");
+        here
+    } else {
+        vec![std::env::var("DQSKIN_SIMD").ok().map_or("chosen", |c| &*c.leak())]
+    };
     let mut rows = Vec::new();
-    // DQSKIN_SIMD=avx2 measures the AVX2 copy on a CPU that has AVX-512 (make bench runs both).
-    println!("kernel copies: {:?}", kernel_copies());
+    // DQSKIN_SIMD=avx2 measures the AVX2 copy on a CPU that has AVX-512 (make bench runs both);
+    // without it each kernel runs the copy its first calls measured fastest (printed at the end).
     println!(
-        "{:>9} {:>3} {:>3} {:<6} {:<6} {:>9} {:>10} {:>8} {:>10} {:>7}",
+        "{:>9} {:>3} {:>3} {:<6} {:<6} {:>9} {:>10} {:>8} {:>10} {:>7} copy",
         "vertices", "inf", "thr", "method", "pose", "ms", "Mverts/s", "GB/s", "ref Mv/s", "of ref"
     );
     for &vertices in &sizes {
@@ -236,7 +254,7 @@ fn main() {
                 } else {
                     60
                 });
-                let cases: Vec<(&str, Method, &str, &Pose)> = [
+                let cases: Vec<(&str, Method, &str, &Pose, &str)> = [
                     ("LBS", Method::Linear, "rigid", &s.rigid),
                     ("DQS", Method::DualQuaternion, "rigid", &s.rigid),
                     ("DQS", Method::DualQuaternion, "scaled", &s.scaled),
@@ -246,6 +264,9 @@ fn main() {
                 ]
                 .into_iter()
                 .filter(|(name, _, pose_name, _)| only.as_ref().is_none_or(|o| *o == format!("{name}-{pose_name}")))
+                .flat_map(|(name, method, pose_name, pose)| {
+                    copies.iter().map(move |&c| (name, method, pose_name, pose, c))
+                })
                 .collect();
                 // Rounds alternate the reference and the kernels so that both see the same
                 // conditions on a shared machine; each keeps its best time (after a warm-up round).
@@ -258,7 +279,10 @@ fn main() {
                 );
                 for round in 0..=runs {
                     let r = [false, true].map(|c| once(&mut || bandwidth_reference(&s, &mut out, c)));
-                    for (k, (_, method, _, pose)) in cases.iter().enumerate() {
+                    for (k, (_, method, _, pose, copy)) in cases.iter().enumerate() {
+                        if compare_copies {
+                            set_kernel_copy(Some(copy)).expect("a copy this CPU has");
+                        }
                         // The object and armature spaces every Blender job has (the modifier's
                         // premat and postmat): the Python module once ran them 3x slower than this
                         // binary did without them (intrinsics left uninlined).
@@ -274,12 +298,15 @@ fn main() {
                         reference = [reference[0].min(r[0]), reference[1].min(r[1])];
                     }
                 }
-                for ((name, method, pose_name, _), secs) in cases.iter().zip(best) {
+                if compare_copies {
+                    set_kernel_copy(None).expect("back to the measured copies");
+                }
+                for ((name, method, pose_name, _, copy), secs) in cases.iter().zip(best) {
                     let centers = matches!(method, Method::CentersOfRotation { .. });
                     let reference = reference[centers as usize];
                     let bytes = bytes + if centers { vertices * 12 } else { 0 };
                     println!(
-                        "{:>9} {:>3} {:>3} {:<6} {:<6} {:>9.3} {:>10.1} {:>8.2} {:>10.1} {:>6.0}%",
+                        "{:>9} {:>3} {:>3} {:<6} {:<6} {:>9.3} {:>10.1} {:>8.2} {:>10.1} {:>6.0}% {}",
                         vertices,
                         per_vertex,
                         threads,
@@ -289,7 +316,8 @@ fn main() {
                         vertices as f64 / secs / 1e6,
                         bytes as f64 / secs / 1e9,
                         vertices as f64 / reference / 1e6,
-                        100.0 * reference / secs
+                        100.0 * reference / secs,
+                        copy
                     );
                     rows.push(Row {
                         vertices,
@@ -297,6 +325,7 @@ fn main() {
                         threads,
                         method: name,
                         pose: pose_name,
+                        copy,
                         seconds: secs,
                         reference_seconds: reference,
                         bytes,
@@ -305,6 +334,12 @@ fn main() {
             }
         }
     }
+    // Which copy each variant's trial chose, per size of job (none where no call of it ran).
+    let chosen: Vec<String> = kernel_copies()
+        .into_iter()
+        .filter_map(|(variant, size, copy)| copy.map(|c| format!("\"{variant}/{size}\":\"{c}\"")))
+        .collect();
+    println!("kernel copies: {{{}}}", chosen.join(", "));
     let narrowed = ["--vertices", "--influences", "--threads", "--rounds"].iter().any(|f| value(f).is_some());
     let precompute = match only.as_deref() {
         Some("precompute") => precompute_rows(quick, all),
@@ -316,12 +351,13 @@ fn main() {
             .iter()
             .map(|r| {
                 format!(
-                    "{{\"vertices\":{},\"influences\":{},\"threads\":{},\"method\":\"{}\",\"pose\":\"{}\",\"seconds\":{:.6e},\"mverts_per_s\":{:.2},\"reference_seconds\":{:.6e},\"fraction_of_reference\":{:.4},\"bytes\":{}}}",
+                    "{{\"vertices\":{},\"influences\":{},\"threads\":{},\"method\":\"{}\",\"pose\":\"{}\",\"copy\":\"{}\",\"seconds\":{:.6e},\"mverts_per_s\":{:.2},\"reference_seconds\":{:.6e},\"fraction_of_reference\":{:.4},\"bytes\":{}}}",
                     r.vertices,
                     r.per_vertex,
                     r.threads,
                     r.method,
                     r.pose,
+                    r.copy,
                     r.seconds,
                     r.vertices as f64 / r.seconds / 1e6,
                     r.reference_seconds,
@@ -340,8 +376,9 @@ fn main() {
             })
             .collect();
         let text = format!(
-            "{{\"copy\":\"{}\",\"bones\":{BONES},\"threads_available\":{all},\"rows\":[\n{}\n],\"centers_precompute\":[\n{}\n]}}\n",
-            kernel_copies().iter().find(|(v, _)| *v == "linear").map_or("", |(_, c)| *c),
+            "{{\"copy\":\"{}\",\"chosen\":{{{}}},\"bones\":{BONES},\"threads_available\":{all},\"rows\":[\n{}\n],\"centers_precompute\":[\n{}\n]}}\n",
+            copies.join("+"),
+            chosen.join(","),
             body.join(",\n"),
             pre.join(",\n")
         );

@@ -1,18 +1,24 @@
 //! Which compiled copy of the kernels runs by default: the fastest on this CPU, measured rather
 //! than guessed from the vendor or from the widest instruction set (a wider copy is not always
-//! faster: see docs/performance.md), among copies that give the same bits ([`candidates`]). Each
-//! kernel variant is timed once per process, on first use, on a small mesh that stays in the
-//! caches, every candidate in turn; the result is kept for the life of the process.
+//! faster: see docs/performance.md), among copies that give the same bits ([`candidates`]).
+//!
+//! Measured on the user's own calls: each kernel variant and [`Size`] starts with a trial, in
+//! which its calls take the candidate copies in turn and are timed, until each copy has
+//! [`Size::samples`] timings; then the copy with the best time per byte moved runs every later
+//! call of that variant and size in the process. The copies give the same bits, so a trial
+//! changes no result, only which instructions compute it; and it measures what the calls
+//! really meet (a large mesh's data streamed from memory after Blender's evaluation, a small
+//! one's in the caches), which a calibration on a fixed small mesh did not: it chose the slower
+//! copy in a tenth to a third of processes (docs/performance.md).
 //! [`set_kernel_copy`] (the API) and `DQSKIN_SIMD` (the environment) override it, in that order.
 
-use std::sync::{OnceLock, RwLock};
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::{Mutex, OnceLock, RwLock};
 use std::time::Instant;
 
-use glam::{Mat4, Quat, Vec3};
-
 use super::isa::{InstructionSet, Simd};
-use super::job::{Job, Kind};
-use super::{kernels, Influences, Pose, SkinError};
+use super::job::Kind;
+use super::SkinError;
 
 /// The kernel variants whose copy is chosen separately: the method, and whether some bone takes
 /// Blender's scale path (a different body with different loads and shuffles).
@@ -50,19 +56,6 @@ impl Variant {
         }
     }
 
-    fn kind(self) -> Kind {
-        match self {
-            Variant::Linear => Kind::Linear,
-            Variant::DualQuaternion | Variant::DualQuaternionScaled => Kind::DualQuaternion,
-            Variant::Blend | Variant::BlendScaled => Kind::Blend,
-            Variant::Centers | Variant::CentersScaled => Kind::CentersOfRotation,
-        }
-    }
-
-    fn scaled(self) -> bool {
-        matches!(self, Variant::DualQuaternionScaled | Variant::BlendScaled | Variant::CentersScaled)
-    }
-
     pub(crate) fn name(self) -> &'static str {
         match self {
             Variant::Linear => "linear",
@@ -94,32 +87,152 @@ pub fn set_kernel_copy(name: Option<&str>) -> Result<(), SkinError> {
     Ok(())
 }
 
-/// The copy that runs `variant`: the API's override, else `DQSKIN_SIMD`'s, else the one measured
-/// fastest here (timed on first use).
-pub(crate) fn copy_for(variant: Variant) -> Simd {
-    if let Some(simd) = *OVERRIDE.read().unwrap_or_else(|e| e.into_inner()) {
-        return simd;
-    }
-    if let Some(simd) = Simd::requested() {
-        return simd;
-    }
-    measured(variant)
+/// Jobs whose copy is chosen apart: a copy that is faster while a mesh's data stay in a core's
+/// caches may be slower when they stream from memory (on one Intel Xeon, the scaled Optimized
+/// Centers' AVX-512 copy: as fast as AVX2 at 16k vertices, 5-10 % slower at 1M).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Size {
+    /// Up to [`Size::STREAMED_FROM`] vertices.
+    Cached,
+    Streamed,
 }
 
-/// The copy measured fastest for `variant` (measured once per process; concurrent first callers
-/// wait for the one measurement).
-pub(crate) fn measured(variant: Variant) -> Simd {
-    static CHOSEN: [OnceLock<Simd>; 7] = [const { OnceLock::new() }; 7];
-    *CHOSEN[variant.index()].get_or_init(|| {
-        let candidates = candidates();
-        if candidates.len() == 1 {
-            return candidates[0];
+impl Size {
+    /// From this many vertices a job's positions, influences and output (about 45 bytes a vertex
+    /// with four influences, 3 MB here) outgrow a core's L2 cache.
+    pub(crate) const STREAMED_FROM: usize = 65_536;
+    const ALL: [Size; 2] = [Size::Cached, Size::Streamed];
+
+    pub(crate) fn of(vertices: usize) -> Self {
+        if vertices < Self::STREAMED_FROM {
+            Size::Cached
+        } else {
+            Size::Streamed
         }
-        match Fixture::new(variant) {
-            Ok(fixture) => fastest(&candidates, BUDGET, |simd| fixture.time(simd)),
-            // Cannot happen (the fixture is valid by construction); the widest is the safe guess.
-            Err(_) => Simd::widest(),
+    }
+
+    /// Timed calls per copy before the choice: small calls vary more (a few microseconds, where
+    /// an interrupt counts), large ones cost more to repeat on the slower copy.
+    pub(crate) fn samples(self) -> u32 {
+        match self {
+            Size::Cached => 8,
+            Size::Streamed => 3,
         }
+    }
+
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Size::Cached => "cached",
+            Size::Streamed => "streamed",
+        }
+    }
+}
+
+/// The copy the override or the environment asks for, if any.
+fn fixed_copy() -> Option<Simd> {
+    if let Some(simd) = *OVERRIDE.read().unwrap_or_else(|e| e.into_inner()) {
+        return Some(simd);
+    }
+    Simd::requested()
+}
+
+/// Runs `run` on the copy for `variant` and a job of `vertices` vertices moving `bytes` bytes:
+/// the API's override, else `DQSKIN_SIMD`'s, else the one measured fastest here for that variant
+/// and size, or, while that is being measured, the next copy of its trial, timed.
+pub(crate) fn run_on_copy(variant: Variant, vertices: usize, bytes: usize, run: impl FnOnce(Simd)) {
+    if let Some(simd) = fixed_copy() {
+        return run(simd);
+    }
+    let trial = &TRIALS[variant.index()][Size::of(vertices) as usize];
+    let simd = match trial.chosen() {
+        Some(simd) => return run(simd),
+        None => trial.next(),
+    };
+    let start = Instant::now();
+    run(simd);
+    trial.record(simd, start.elapsed().as_secs_f64() / bytes.max(1) as f64);
+}
+
+/// The copy chosen for `variant` on jobs of `size`: the override's or the environment's, else
+/// the measured one; None while its trial runs.
+pub(crate) fn chosen_copy(variant: Variant, size: Size) -> Option<Simd> {
+    fixed_copy().or_else(|| TRIALS[variant.index()][size as usize].chosen())
+}
+
+/// Every variant's choice per size, for [`super::kernel_copies`].
+pub(crate) fn chosen_copies() -> Vec<(Variant, Size, Option<Simd>)> {
+    Variant::ALL.iter().flat_map(|&v| Size::ALL.map(|size| (v, size, chosen_copy(v, size)))).collect()
+}
+
+static TRIALS: [[Trial; 2]; 7] = [const { [Trial::new(Size::Cached), Trial::new(Size::Streamed)] }; 7];
+
+/// The most candidate copies (the baseline, AVX2, AVX-512 on x86-64).
+const MAX_COPIES: usize = 3;
+
+/// One variant and size's measurement: which copy was chosen (its index among [`candidates`]
+/// plus one, 0 while the trial runs), read without a lock on every call, and the trial's
+/// timings.
+struct Trial {
+    size: Size,
+    chosen: AtomicU8,
+    timings: Mutex<Timings>,
+}
+
+#[derive(Clone, Copy)]
+struct Timings {
+    /// Each candidate's timed calls so far and its best time per byte.
+    samples: [u32; MAX_COPIES],
+    best: [f64; MAX_COPIES],
+}
+
+impl Trial {
+    const fn new(size: Size) -> Self {
+        Trial {
+            size,
+            chosen: AtomicU8::new(0),
+            timings: Mutex::new(Timings { samples: [0; MAX_COPIES], best: [f64::INFINITY; MAX_COPIES] }),
+        }
+    }
+
+    fn chosen(&self) -> Option<Simd> {
+        match self.chosen.load(Ordering::Acquire) {
+            0 => None,
+            k => Some(candidate_list()[k as usize - 1]),
+        }
+    }
+
+    /// The copy for the next call of the trial: the one with the fewest timings (the first of
+    /// them), so that the copies take turns.
+    fn next(&self) -> Simd {
+        let candidates = candidate_list();
+        let t = self.timings.lock().unwrap_or_else(|e| e.into_inner());
+        let k = (0..candidates.len()).min_by_key(|&k| t.samples[k]).unwrap_or(0);
+        candidates[k]
+    }
+
+    /// One timed call of `simd`, `per_byte` seconds for each byte it moved; once every copy has
+    /// enough, the choice.
+    fn record(&self, simd: Simd, per_byte: f64) {
+        let candidates = candidate_list();
+        let Some(k) = candidates.iter().position(|&c| c == simd) else { return };
+        let mut t = self.timings.lock().unwrap_or_else(|e| e.into_inner());
+        t.samples[k] += 1;
+        t.best[k] = t.best[k].min(per_byte);
+        let needed = self.size.samples();
+        if self.chosen.load(Ordering::Relaxed) == 0 && t.samples[..candidates.len()].iter().all(|&n| n >= needed) {
+            let k = fastest(&t.best[..candidates.len()]);
+            self.chosen.store(k as u8 + 1, Ordering::Release);
+        }
+    }
+}
+
+/// [`candidates`], computed once.
+fn candidate_list() -> &'static [Simd] {
+    static LIST: OnceLock<Vec<Simd>> = OnceLock::new();
+    LIST.get_or_init(|| {
+        let list = candidates();
+        assert!(list.len() <= MAX_COPIES);
+        list
     })
 }
 
@@ -138,111 +251,15 @@ pub(crate) fn candidates() -> Vec<Simd> {
     }
 }
 
-/// The most timed rounds per copy (after one warm-up each), interleaved so that every copy sees the
-/// same conditions; each keeps its best.
-const MAX_ROUNDS: usize = 5;
-
-/// Seconds of kernel time after which no new round starts (there is always one timed round): a
-/// variant's calibration costs about this much, or two passes of each copy where one pass is
-/// slower (an emulated CPU).
-const BUDGET: f64 = 0.5e-3;
-
 /// Copies within this share of the fastest time count as tied, and a tie goes to the wider copy
 /// (the later in [`Simd::available`]): the choice should not flip between processes with noise.
 const TIE: f64 = 0.03;
 
-/// The fastest of `candidates` (widest last) by the best of its timings (`time` returns seconds),
-/// with ties within [`TIE`] going to the wider copy: a warm-up round, then timed rounds until
-/// `budget` seconds have been timed in all (at least one, at most [`MAX_ROUNDS`]).
-pub(crate) fn fastest(candidates: &[Simd], budget: f64, mut time: impl FnMut(Simd) -> f64) -> Simd {
-    let mut best = vec![f64::INFINITY; candidates.len()];
-    let mut spent = 0.0;
-    for round in 0..=MAX_ROUNDS {
-        for (k, &simd) in candidates.iter().enumerate() {
-            let t = time(simd);
-            spent += t;
-            if round > 0 {
-                best[k] = best[k].min(t);
-            }
-        }
-        if round > 0 && spent >= budget {
-            break;
-        }
-    }
+/// The index of the fastest of the candidates (widest last) by their best times, ties within
+/// [`TIE`] going to the wider copy.
+pub(crate) fn fastest(best: &[f64]) -> usize {
     let quickest = best.iter().copied().fold(f64::INFINITY, f64::min);
-    let k = best.iter().rposition(|&t| t <= quickest * (1.0 + TIE)).unwrap_or(candidates.len() - 1);
-    candidates[k]
-}
-
-/// Vertices of the calibration mesh: 64 batches, enough for each copy's steady state, few enough
-/// that one pass takes microseconds (the cost of a calibration: docs/performance.md).
-const VERTICES: usize = 1024;
-const BONES: usize = 32;
-const INFLUENCES: usize = 4;
-
-/// A small mesh with four influences per vertex on neighbouring bones, as a real mesh has.
-struct Fixture {
-    variant: Variant,
-    positions: Vec<[f32; 3]>,
-    centers: Vec<[f32; 3]>,
-    influences: Influences,
-    pose: Pose,
-    out: std::cell::RefCell<Vec<[f32; 3]>>,
-}
-
-impl Fixture {
-    fn new(variant: Variant) -> Result<Self, SkinError> {
-        // A fixed sequence (an LCG): the same mesh in every process.
-        let mut state = 0x2545_F491_u32;
-        let mut unit = move || {
-            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (state >> 8) as f32 / (1u32 << 24) as f32
-        };
-        let positions: Vec<[f32; 3]> =
-            (0..VERTICES).map(|_| [2.0 * unit() - 1.0, 2.0 * unit(), 2.0 * unit() - 1.0]).collect();
-        let centers = positions.iter().map(|p| [0.9 * p[0], p[1], 0.9 * p[2]]).collect();
-        let mut offsets = vec![0u32];
-        let (mut bones, mut weights) = (Vec::new(), Vec::new());
-        for v in 0..VERTICES {
-            let base = v * BONES / VERTICES;
-            for k in 0..INFLUENCES {
-                bones.push(((base + 3 * k) % BONES) as u32);
-                weights.push(0.1 + unit());
-            }
-            offsets.push(bones.len() as u32);
-        }
-        let influences = Influences::from_csr(&offsets, &bones, &weights, BONES)?;
-        let rest: Vec<Mat4> =
-            (0..BONES).map(|b| Mat4::from_translation(Vec3::new(0.0, b as f32 / 16.0, 0.0))).collect();
-        let deform: Vec<Mat4> = rest
-            .iter()
-            .enumerate()
-            .map(|(b, r)| {
-                let angle = 0.1 * b as f32;
-                let q = Quat::from_axis_angle(Vec3::new(1.0, 2.0, 0.5).normalize(), angle);
-                let s = if variant.scaled() && b % 2 == 1 { Vec3::new(1.0, 1.3, 0.9) } else { Vec3::ONE };
-                Mat4::from_scale_rotation_translation(s, q, Vec3::new(0.1, -0.2, 0.05 * angle)) * r.inverse()
-            })
-            .collect();
-        let pose = Pose::new(&deform, Some(&rest))?;
-        let out = std::cell::RefCell::new(vec![[0.0; 3]; VERTICES]);
-        Ok(Fixture { variant, positions, centers, influences, pose, out })
-    }
-
-    /// Seconds one pass of the copy `simd` takes (on this thread: the mesh is one chunk).
-    fn time(&self, simd: Simd) -> f64 {
-        let mut job = Job::new(self.variant.kind(), &self.positions, &self.influences, &self.pose);
-        job.premat = Some(Mat4::from_translation(Vec3::new(0.5, -1.0, 2.0)));
-        job.postmat = Some(Mat4::from_translation(Vec3::new(-0.5, 1.0, -2.0)));
-        job.blend_factor = 0.5;
-        if self.variant.kind() == Kind::CentersOfRotation {
-            job.centers = Some(&self.centers);
-        }
-        let mut out = self.out.borrow_mut();
-        let start = Instant::now();
-        kernels::run(&job, &mut out, simd);
-        start.elapsed().as_secs_f64()
-    }
+    best.iter().rposition(|&t| t <= quickest * (1.0 + TIE)).unwrap_or(best.len().saturating_sub(1))
 }
 
 #[cfg(test)]
@@ -251,82 +268,76 @@ mod tests {
 
     #[test]
     fn the_fastest_copy_wins_and_a_tie_goes_to_the_wider() {
-        let all = Simd::available();
+        assert_eq!(fastest(&[1.0, 2.0]), 0);
+        assert_eq!(fastest(&[2.0, 1.0]), 1);
+        assert_eq!(fastest(&[1.0, 1.0 + TIE / 2.0]), 1, "within the tie margin, the wider");
+        assert_eq!(fastest(&[1.0, 1.0 + 2.0 * TIE]), 0);
+        assert_eq!(fastest(&[1.0, 1.0 + TIE / 2.0, 3.0]), 1);
+        assert_eq!(fastest(&[5.0]), 0);
+    }
+
+    /// A trial of its own (not one of the process's), fed timings by the test.
+    fn decide(trial: &Trial, time: impl Fn(Simd) -> f64) -> (Simd, Vec<Simd>) {
+        let mut taken = Vec::new();
+        while trial.chosen().is_none() {
+            let simd = trial.next();
+            taken.push(simd);
+            trial.record(simd, time(simd));
+            assert!(taken.len() < 100, "a trial ends");
+        }
+        (trial.chosen().unwrap(), taken)
+    }
+
+    #[test]
+    fn a_trial_takes_the_copies_in_turn_then_keeps_the_fastest() {
+        let all = candidate_list();
         let widest = *all.last().unwrap();
-        // The widest slowest: another wins when it is clearly faster.
-        let times = |slow: Simd| move |simd: Simd| if simd == slow { 2.0 } else { 1.0 };
-        if all.len() > 1 {
-            assert_ne!(fastest(&all, 0.0, times(widest)), widest);
-            assert_eq!(fastest(&all, 0.0, times(all[0])), widest);
-        }
-        // Within the tie margin, the wider copy.
-        let close = |simd: Simd| if simd == widest { 1.0 + TIE / 2.0 } else { 1.0 };
-        assert_eq!(fastest(&all, 0.0, close), widest);
-        // Each copy keeps its best timed round; the warm-up does not count.
-        let mut calls = 0;
-        let noisy = |simd: Simd| {
-            calls += 1;
-            if calls <= all.len() {
-                0.0 // the warm-up round, ignored
-            } else if simd == all[0] {
-                3.0
-            } else {
-                1.0 + calls as f64
+        for size in Size::ALL {
+            // The narrowest clearly fastest, and in one call of each copy very slow (an
+            // interrupt): the best time counts.
+            let calls = std::cell::Cell::new(0);
+            let time = |simd: Simd| {
+                calls.set(calls.get() + 1);
+                if calls.get() <= all.len() {
+                    10.0
+                } else if simd == all[0] {
+                    1.0
+                } else {
+                    2.0
+                }
+            };
+            let trial = Trial::new(size);
+            let (chosen, taken) = decide(&trial, time);
+            assert_eq!(chosen, all[0], "{size:?}");
+            assert_eq!(taken.len(), all.len() * size.samples() as usize, "{size:?}: every copy timed as often");
+            for (i, simd) in taken.iter().enumerate() {
+                assert_eq!(*simd, all[i % all.len()], "{size:?}: in turn");
             }
-        };
-        assert_eq!(fastest(&all, 0.0, noisy), if all.len() > 1 { all[0] } else { widest });
-    }
-
-    #[test]
-    fn rounds_stop_at_the_budget() {
-        let all = Simd::available();
-        let rounds = |budget: f64, pass: f64| {
-            let mut calls = 0;
-            fastest(&all, budget, |_| {
-                calls += 1;
-                pass
-            });
-            calls / all.len() - 1 // timed rounds, after the warm-up
-        };
-        // One pass of each copy costs 1 ms: a 0.5 ms budget allows one timed round, a huge one
-        // every round, and a budget of three rounds' worth (counting the warm-up) two.
-        assert_eq!(rounds(0.5e-3 * all.len() as f64, 1e-3), 1);
-        assert_eq!(rounds(1e9, 1e-3), MAX_ROUNDS);
-        assert_eq!(rounds(3e-3 * all.len() as f64, 1e-3), 2);
-    }
-
-    #[test]
-    fn every_variant_chooses_an_available_copy_once() {
-        let all = candidates();
-        for variant in Variant::ALL {
-            let chosen = measured(variant);
-            assert!(all.contains(&chosen));
-            assert_eq!(measured(variant), chosen, "remembered");
-            assert_eq!(Variant::of(variant.kind(), variant.scaled()), variant);
+            // A tie: the widest.
+            let (chosen, _) = decide(&Trial::new(size), |simd| if simd == widest { 1.0 + TIE / 2.0 } else { 1.0 });
+            assert_eq!(chosen, widest);
+            // Timings after the choice change nothing.
+            trial.record(widest, 0.0);
+            assert_eq!(trial.chosen(), Some(all[0]));
         }
     }
 
     #[test]
-    fn a_calibration_is_cheap() {
-        let start = Instant::now();
-        let mut passes = 0;
-        for variant in Variant::ALL {
-            let fixture = Fixture::new(variant).unwrap();
-            fastest(&Simd::available(), BUDGET, |simd| {
-                passes += 1;
-                fixture.time(simd)
-            });
+    fn sizes_are_told_apart_at_the_threshold() {
+        assert_eq!(Size::of(0), Size::Cached);
+        assert_eq!(Size::of(Size::STREAMED_FROM - 1), Size::Cached);
+        assert_eq!(Size::of(Size::STREAMED_FROM), Size::Streamed);
+        assert!(Size::Cached.samples() >= Size::Streamed.samples());
+    }
+
+    #[test]
+    fn every_variant_and_size_has_a_slot_of_its_own() {
+        for (i, variant) in Variant::ALL.into_iter().enumerate() {
+            assert_eq!(variant.index(), i);
+            for size in Size::ALL {
+                assert_eq!(TRIALS[i][size as usize].size, size);
+            }
         }
-        let seconds = start.elapsed().as_secs_f64();
-        let copies = Simd::available().len();
-        eprintln!(
-            "calibrating all {} variants on {copies} copies: {:.2} ms, {passes} passes",
-            Variant::ALL.len(),
-            seconds * 1e3
-        );
-        // Bounded by rounds, not by the clock (emulated CPUs run slower): at most all rounds.
-        assert!(passes <= Variant::ALL.len() * copies * (MAX_ROUNDS + 1));
-        assert!(passes >= Variant::ALL.len() * copies * 2);
     }
 
     #[test]

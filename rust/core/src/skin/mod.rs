@@ -185,12 +185,20 @@ pub fn skin(
 
 /// The compiled copy of the kernels that [`skin`] and [`skin_many`] run here for each kernel
 /// variant (`linear`, `dual_quaternion`, `dual_quaternion_scaled`, `blend`, `blend_scaled`,
-/// `centers`, `centers_scaled`): `baseline`, `avx2`, `avx512` or `neon`, the one measured fastest
-/// on this CPU unless [`set_kernel_copy`] or `DQSKIN_SIMD` asks for another. Measures the
-/// variants not measured yet (about a millisecond for all).
-pub fn kernel_copies() -> Vec<(&'static str, &'static str)> {
-    calibration::Variant::ALL.iter().map(|&v| (v.name(), calibration::copy_for(v).instruction_set().name())).collect()
+/// `centers`, `centers_scaled`) and size of job (`cached`: fewer vertices than
+/// [`STREAMED_FROM`], else `streamed`): `baseline`, `avx2`, `avx512` or `neon`, the one measured
+/// fastest on this process's own calls unless [`set_kernel_copy`] or `DQSKIN_SIMD` asks for
+/// another; None while it is being measured (the first calls of that variant and size).
+pub fn kernel_copies() -> Vec<(&'static str, &'static str, Option<&'static str>)> {
+    calibration::chosen_copies()
+        .into_iter()
+        .map(|(variant, size, simd)| (variant.name(), size.name(), simd.map(|s| s.instruction_set().name())))
+        .collect()
 }
+
+/// Jobs of at least this many vertices have their kernel copy chosen apart from smaller ones
+/// (see [`kernel_copies`]).
+pub const STREAMED_FROM: usize = calibration::Size::STREAMED_FROM;
 
 /// [`skin`] on a given compiled copy of the kernels (tests run every copy the CPU has), or with
 /// `None` on the one chosen for the method (see [`kernel_copies`]).
@@ -254,7 +262,6 @@ fn skin_with(
             (kind, amount, factor)
         }
     };
-    let simd = simd.unwrap_or_else(|| calibration::copy_for(calibration::Variant::of(kind, pose.any_scaled())));
     let mut job = job::Job::new(kind, positions, influences, pose);
     job.premat = options.premat;
     job.postmat = options.postmat;
@@ -262,12 +269,22 @@ fn skin_with(
     job.blend_amount = blend_amount;
     job.blend_factor = blend_factor;
     job.centers = centers;
-    if n <= kernels::CHUNK {
-        // One task's worth: run it here. Handing it to the pool would cost more than the work
-        // (a thread wake-up), which matters for scenes with many small meshes.
-        kernels::run(&job, out, simd);
-    } else {
-        crate::pool::run(|| kernels::run(&job, out, simd));
+    let mut run = |simd| {
+        if n <= kernels::CHUNK {
+            // One task's worth: run it here. Handing it to the pool would cost more than the
+            // work (a thread wake-up), which matters for scenes with many small meshes.
+            kernels::run(&job, out, simd);
+        } else {
+            crate::pool::run(|| kernels::run(&job, out, simd));
+        }
+    };
+    match simd {
+        Some(simd) => run(simd),
+        None => {
+            // What the call moves: its points in and out, its influences.
+            let bytes = 2 * std::mem::size_of_val(positions) + influences.byte_size();
+            calibration::run_on_copy(calibration::Variant::of(kind, pose.any_scaled()), n, bytes, run)
+        }
     }
     Ok(())
 }

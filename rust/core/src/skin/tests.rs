@@ -864,6 +864,37 @@ fn skin_many_equals_one_call_per_mesh_and_reports_each_error() {
     assert_eq!(bad_out, vec![[7.0f32; 3]; 4]);
 }
 
+#[test]
+fn the_trial_of_copies_changes_no_result_and_ends_in_a_choice() {
+    // Each size's trial runs on this process's first calls (`calibration.rs`); other tests may
+    // share it (the scaled Blend, rarely used elsewhere), which only ends it sooner.
+    let samples = |size: calibration::Size| size.samples() as usize * calibration::candidates().len();
+    for (vertices, size) in [(500, calibration::Size::Cached), (STREAMED_FROM, calibration::Size::Streamed)] {
+        assert_eq!(calibration::Size::of(vertices), size);
+        let (positions, influences, mut deform, rest) = batch_fixture(vertices, 6, 4);
+        deform[2] *= Mat4::from_scale(Vec3::new(1.0, 1.4, 0.8)); // a scaled bone: the scaled kernels
+        let pose = Pose::new(&deform, Some(&rest)).unwrap();
+        let method = Method::Blend { amount: None, factor: 0.3 };
+        let mut first = vec![[0.0f32; 3]; vertices];
+        skin(method, &positions, &influences, &pose, &SkinOptions::default(), &mut first).unwrap();
+        for call in 0..samples(size) {
+            let mut out = vec![[f32::NAN; 3]; vertices];
+            skin(method, &positions, &influences, &pose, &SkinOptions::default(), &mut out).unwrap();
+            let same = out.iter().zip(&first).all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits));
+            assert!(same, "call {call} of {vertices} vertices differs from the first");
+        }
+        let chosen = kernel_copies().into_iter().find(|&(v, s, _)| v == "blend_scaled" && s == size.name()).unwrap().2;
+        let names: Vec<&str> = calibration::candidates().iter().map(|s| s.instruction_set().name()).collect();
+        let requested = std::env::var("DQSKIN_SIMD").ok();
+        match chosen {
+            Some(name) => {
+                assert!(names.contains(&name) || requested.as_deref() == Some(name), "{name} among {names:?}")
+            }
+            None => panic!("{size:?}: no copy chosen after {} calls", samples(size) + 1),
+        }
+    }
+}
+
 /// Random positions, `bones` bones with random rigid deforms, `k` influences per vertex.
 pub(crate) fn batch_fixture(n: usize, bones: usize, k: usize) -> (Vec<[f32; 3]>, Influences, Vec<Mat4>, Vec<Mat4>) {
     let mut seed = 12345u64 + n as u64;

@@ -82,13 +82,14 @@ test-clippy:
 	rustup component list --installed | grep -q '^clippy' || rustup component add clippy
 	cargo clippy --workspace --release -- -D warnings
 
-# The module's tests (on the editable module of .venv), then the Blender tests in their own
-# process, on the module of the installed extension zip (tests/blender/conftest.py).
+# The module's tests (on the editable module of .venv), then the Blender tests on the module of
+# the installed extension zip (tests/blender/conftest.py): a pytest process per test file, two at
+# a time (DQSKIN_TEST_JOBS), as tests/run_blenders.py runs the other releases.
 test-python: setup
 	$(PY) -m pytest -q tests/python
 
 test-blender: setup
-	$(PY) -m pytest -q tests/blender
+	$(PY) tests/run_blenders.py --pinned
 
 # The Rust core's tests (every SIMD copy the CPU has, the thread pool, the centers precompute)
 # built for Windows (x86_64-pc-windows-gnu, linked by zig as the Windows module is) and run under

@@ -5,7 +5,8 @@ up to Blender 5.0, 3.13 from 5.1) and its `bpy` wheel from PyPI, and the Linux e
 from `dist/` installed into its own Blender user folder (`.venvs/bpy-VERSION/user`), which puts
 the zip's `dqskin` wheel into that folder's extension site-packages; then `tests/blender` runs
 there, on that module, with DQSKIN_BLENDER_USER pointing at the folder. Usage: python tests/run_blenders.py [--full] [VERSION ...] (default: all of VERSIONS; --full runs
-every file on every release).
+every file on every release; --pinned runs every file on the pinned release in this Python, as
+`make test` does; DQSKIN_TEST_JOBS=N runs N files at once, two by default).
 """
 
 from __future__ import annotations
@@ -15,7 +16,9 @@ import shutil
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import NamedTuple
 
 ROOT = Path(__file__).resolve().parents[1]
 # Release -> (CPython it needs, extra requirements). The pinned release (requirements-dev.txt)
@@ -54,7 +57,19 @@ def run(cmd, **kw) -> None:
     subprocess.run(cmd, check=True, **kw)
 
 
-def prepare(version: str, minor: str, extras: list[str]) -> Path:
+class Target(NamedTuple):
+    """Where one release's tests run: its Python, and its Blender user folder with the
+    extension installed (None: conftest.py's default, .blender_user/)."""
+
+    python: Path
+    user: Path | None
+
+
+# The name the pinned release's results go under.
+PINNED = "pinned"
+
+
+def prepare(version: str, minor: str, extras: list[str]) -> Target:
     venv = ROOT / ".venvs" / f"bpy-{version}"
     py = venv / "bin" / "python"
     stamp = venv / "bpy-installed"
@@ -71,7 +86,7 @@ def prepare(version: str, minor: str, extras: list[str]) -> Path:
     # A dqskin of its own in the venv (as earlier runs installed) would only be shadowed; take it out.
     run([str(py), "-m", "pip", "uninstall", "--quiet", "--yes", "dqskin"])
     run([str(py), str(ROOT / "addon" / "install.py"), str(zips[0]), str(venv / "user")], cwd=venv)
-    return venv
+    return Target(py, venv / "user")
 
 
 FULL = ("4.2.23",)
@@ -112,49 +127,93 @@ CORE_FILES = (
 def main(argv: list[str]) -> int:
     full = "--full" in argv
     argv = [a for a in argv if a != "--full"]
-    chosen = argv or list(VERSIONS)
-    unknown = [v for v in chosen if v not in VERSIONS]
-    if unknown:
-        raise SystemExit(f"unknown Blender release(s) {unknown}; known: {list(VERSIONS)}")
-    results = {}
+    if argv == ["--pinned"]:
+        # `make test`'s Blender part: the pinned release of requirements-dev.txt, in this Python's
+        # environment, on the extension `make setup` installed into .blender_user/ (conftest.py's
+        # default), every file.
+        chosen, full = [PINNED], True
+        targets = {PINNED: Target(Path(sys.executable), None)}
+    else:
+        chosen = argv or list(VERSIONS)
+        unknown = [v for v in chosen if v not in VERSIONS]
+        if unknown:
+            raise SystemExit(f"unknown Blender release(s) {unknown}; known: {list(VERSIONS)}")
+        targets = {}
+    t = time.perf_counter()
+    targets = targets or {version: prepare(version, *VERSIONS[version]) for version in chosen}
+    jobs = [
+        (version, path)
+        for version in chosen
+        for path in test_files(None if full or version in FULL else CORE_FILES + EXTRA.get(version, ()))
+    ]
+    results = run_jobs(targets, jobs)
+    print("\nBlender release  result   time in its files")
     for version in chosen:
-        t = time.perf_counter()
-        venv = prepare(version, *VERSIONS[version])
-        failed = run_files(venv, None if full or version in FULL else CORE_FILES + EXTRA.get(version, ()))
-        results[version] = (failed, time.perf_counter() - t)
-    print("\nBlender release  result   time")
-    for version, (failed, seconds) in results.items():
+        mine = [(name, r) for (v, name), r in results.items() if v == version]
+        failed = [name for name, (ok, _) in mine if not ok]
+        seconds = sum(s for _, (_, s) in mine)
         print(f"{version:<16} {'passed' if not failed else 'FAILED':<8} {seconds:5.0f} s  {' '.join(failed)}")
-    return 0 if not any(failed for failed, _ in results.values()) else 1
+    print(f"{len(jobs)} files in {time.perf_counter() - t:.0f} s, {workers()} at a time")
+    return 0 if all(ok for ok, _ in results.values()) else 1
 
 
 # A test file that takes longer than this has hung (the longest takes about 3 minutes).
 FILE_TIMEOUT = 900
+# Files measured to take longest (about 1-3 minutes each, where the others take seconds): they
+# start first, so that the last minutes of a run are not one of them alone.
+LONG_FILES = ("test_own_methods_everywhere.py", "test_cli.py", "test_consumers.py", "test_docs_examples.py", "test_everyday.py")
 
 
-def run_files(venv: Path, only: tuple[str, ...] | None) -> list[str]:
-    """Each test file of tests/blender (or those named in `only`) in a pytest process of its own
-    (as `make test` runs them in one): a crash inside one Blender release's bpy module then costs
-    that file, not the files after it, and says which file it was. Returns the files that failed."""
-    env = dict(os.environ, DQSKIN_BLENDER_USER=str(venv / "user"))
-    failed = []
+def workers() -> int:
+    """How many test files run at once: DQSKIN_TEST_JOBS, else two (each is one Blender process,
+    mostly one thread busy; CI's machines have two cores or more)."""
+    wanted = os.environ.get("DQSKIN_TEST_JOBS", "2")
+    if not wanted.isdigit() or int(wanted) < 1:
+        raise SystemExit(f"DQSKIN_TEST_JOBS must be a whole number of at least 1, not {wanted!r}")
+    return int(wanted)
+
+
+def test_files(only: tuple[str, ...] | None) -> list[Path]:
+    """The test files of tests/blender, or those named in `only`."""
     paths = sorted((ROOT / "tests" / "blender").glob("test_*.py"))
     missing = set(only or ()) - {p.name for p in paths}
     if missing:
         raise SystemExit(f"CORE_FILES names files that do not exist: {sorted(missing)}")
-    for path in paths:
-        if only is not None and path.name not in only:
-            continue
+    return [p for p in paths if only is None or p.name in only]
+
+
+def run_jobs(targets: dict[str, Target], jobs: list[tuple[str, Path]]) -> dict[tuple[str, str], tuple[bool, float]]:
+    """Each (release, test file) in a pytest process of its own (as `make test` runs them in one),
+    `workers()` at a time: a crash inside one Blender release's bpy module then costs that file,
+    not the files after it, and says which file it was. A file's output goes to a log in
+    target/blender-tests/RELEASE/ and is printed when it fails. Returns (passed, seconds) per release and file."""
+    order = sorted(jobs, key=lambda job: job[1].name not in LONG_FILES)  # stable: long ones first
+
+    def run_one(job: tuple[str, Path]) -> tuple[bool, float]:
+        version, path = job
+        target = targets[version]
+        log = ROOT / "target" / "blender-tests" / version / f"{path.stem}.log"
+        log.parent.mkdir(parents=True, exist_ok=True)
+        env = dict(os.environ)
+        if target.user is not None:
+            env["DQSKIN_BLENDER_USER"] = str(target.user)
+        cmd = [str(target.python), "-m", "pytest", "-q", "-p", "no:cacheprovider", str(path.relative_to(ROOT))]
         t = time.perf_counter()
-        cmd = [str(venv / "bin" / "python"), "-m", "pytest", "-q", "-p", "no:cacheprovider", str(path.relative_to(ROOT))]
-        try:
-            code = subprocess.run(cmd, cwd=ROOT, env=env, timeout=FILE_TIMEOUT).returncode
-        except subprocess.TimeoutExpired:  # (subprocess.run kills the process)
-            code = f"timed out after {FILE_TIMEOUT} s"
-        print(f"  {path.name}: {'passed' if code == 0 else f'FAILED ({code})'} in {time.perf_counter() - t:.0f} s", flush=True)
+        with log.open("w") as out:
+            try:
+                code = subprocess.run(cmd, cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT, timeout=FILE_TIMEOUT).returncode
+            except subprocess.TimeoutExpired:  # (subprocess.run kills the process)
+                code = f"timed out after {FILE_TIMEOUT} s"
+        seconds = time.perf_counter() - t
+        lines = log.read_text(errors="replace").splitlines()
+        summary = next((line.strip() for line in reversed(lines) if line.strip()), "")  # pytest's "N passed in …"
+        print(f"  {version} {path.name}: {'passed' if code == 0 else f'FAILED ({code})'} in {seconds:.0f} s ({summary})", flush=True)
         if code != 0:
-            failed.append(path.name)
-    return failed
+            print("\n".join(f"    | {line}" for line in lines[-120:]), flush=True)
+        return code == 0, seconds
+
+    with ThreadPoolExecutor(max_workers=workers()) as pool:
+        return {(v, p.name): r for (v, p), r in zip(order, pool.map(run_one, order), strict=True)}
 
 
 if __name__ == "__main__":

@@ -88,8 +88,7 @@ pub fn set_kernel_copy(name: Option<&str>) -> Result<(), SkinError> {
 }
 
 /// Jobs whose copy is chosen apart: a copy that is faster while a mesh's data stay in a core's
-/// caches may be slower when they stream from memory (on one Intel Xeon, the scaled Optimized
-/// Centers' AVX-512 copy: as fast as AVX2 at 16k vertices, 5-10 % slower at 1M).
+/// caches may be slower when they stream from memory (docs/performance.md has a case).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Size {
     /// Up to [`Size::STREAMED_FROM`] vertices.
@@ -194,10 +193,13 @@ impl Trial {
         }
     }
 
+    /// The copy chosen; the one candidate where there is one (nothing to measure).
     fn chosen(&self) -> Option<Simd> {
+        let candidates = candidate_list();
         match self.chosen.load(Ordering::Acquire) {
+            0 if candidates.len() == 1 => Some(candidates[0]),
             0 => None,
-            k => Some(candidate_list()[k as usize - 1]),
+            k => Some(candidates[k as usize - 1]),
         }
     }
 
@@ -230,8 +232,9 @@ impl Trial {
 fn candidate_list() -> &'static [Simd] {
     static LIST: OnceLock<Vec<Simd>> = OnceLock::new();
     LIST.get_or_init(|| {
-        let list = candidates();
-        assert!(list.len() <= MAX_COPIES);
+        let mut list = candidates();
+        debug_assert!(list.len() <= MAX_COPIES);
+        list.truncate(MAX_COPIES); // (cannot happen: at most the baseline and two copies)
         list
     })
 }
@@ -319,6 +322,16 @@ mod tests {
             // Timings after the choice change nothing.
             trial.record(widest, 0.0);
             assert_eq!(trial.chosen(), Some(all[0]));
+        }
+    }
+
+    #[test]
+    fn one_candidate_needs_no_trial() {
+        let trial = Trial::new(Size::Cached);
+        if candidate_list().len() == 1 {
+            assert_eq!(trial.chosen(), Some(candidate_list()[0]));
+        } else {
+            assert_eq!(trial.chosen(), None, "several candidates: a trial first");
         }
     }
 

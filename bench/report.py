@@ -201,6 +201,8 @@ def main() -> int:
         if path.exists():
             data = json.loads(path.read_text())
             copies[data["copy"]] = data["rows"]
+            if data["copy"] == "chosen" and data.get("chosen"):  # (each variant's trial, per size of job: the "chosen" column)
+                print(f"\nCopies the trials chose ({name}): " + ", ".join(f"{k} {v}" for k, v in data["chosen"].items()))
     if copies:
         sizes = sorted({(r["vertices"], r["influences"]) for rows in copies.values() for r in rows})
         for vertices, influences in sizes:

@@ -295,6 +295,9 @@ mod tests {
     fn a_trial_takes_the_copies_in_turn_then_keeps_the_fastest() {
         let all = candidate_list();
         let widest = *all.last().unwrap();
+        if all.len() == 1 {
+            return; // nothing to measure (`one_candidate_needs_no_trial`)
+        }
         for size in Size::ALL {
             // The narrowest clearly fastest, and in one call of each copy very slow (an
             // interrupt): the best time counts.

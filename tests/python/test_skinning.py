@@ -789,3 +789,47 @@ def test_every_copy_with_fused_multiply_adds_gives_the_same_bytes():
     for simd in others:
         differ = [k for k, d in digests[first].items() if digests[simd][k] != d]
         assert not differ, f"{simd} and {first} differ on {len(differ)} of {len(digests[first])}: {differ[:8]}"
+
+
+KERNEL_COPIES = """
+import json, numpy as np, dqskin
+rng = np.random.default_rng(5)
+n, bones = 700, 6
+positions = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+bone_ids = rng.integers(0, bones, (n, 4))
+weights = rng.uniform(0.1, 1, (n, 4)).astype(np.float32)
+influences = dqskin.Influences.from_dense(bone_ids, weights, bone_count=bones)
+rest = np.tile(np.eye(4, dtype=np.float32), (bones, 1, 1))
+deform = rest.copy()
+deform[:, :3, 3] = rng.uniform(-1, 1, (bones, 3))
+before = dqskin.kernel_copies()
+first = dqskin.skin(positions, influences, deform, rest, method="dual_quaternion")
+same = all(np.array_equal(dqskin.skin(positions, influences, deform, rest, method="dual_quaternion"), first) for _ in range(40))
+print(json.dumps({"before": before, "after": dqskin.kernel_copies(), "same": same}))
+"""
+
+
+def test_kernel_copies_says_which_copy_each_variant_chose():
+    # A process's first calls of a variant measure the copies in turn (the same bits on each);
+    # once measured, `kernel_copies` names the one that stays. DQSKIN_SIMD names it throughout.
+    copies = fused_copies()
+    for env_copy in [None, *copies[:1]]:
+        env = {k: v for k, v in os.environ.items() if k != "DQSKIN_SIMD"}
+        if env_copy:
+            env["DQSKIN_SIMD"] = env_copy
+        run = subprocess.run([sys.executable, "-c", KERNEL_COPIES], env=env, capture_output=True, text=True, timeout=120)
+        assert run.returncode == 0, run.stderr
+        got = json.loads(run.stdout)
+        assert got["same"], "a call during the measurement gave other bytes"
+        before = {(v, s): c for v, s, c in got["before"]}
+        after = {(v, s): c for v, s, c in got["after"]}
+        variants = {"linear", "dual_quaternion", "dual_quaternion_scaled", "blend", "blend_scaled", "centers", "centers_scaled"}
+        assert set(before) == set(after) == {(v, s) for v in variants for s in ("cached", "streamed")}
+        if env_copy:
+            assert set(after.values()) == {env_copy}, after
+        elif len(copies) > 1:
+            assert before[("dual_quaternion", "cached")] is None, "nothing measured before the first call"
+            assert after[("dual_quaternion", "cached")] in copies, after
+            assert after[("dual_quaternion", "streamed")] is None, "larger meshes are measured apart"
+        else:
+            assert after[("dual_quaternion", "cached")] is not None

@@ -66,6 +66,14 @@ fn get_num_threads() -> PyResult<usize> {
     guard(|| Ok(dqskin_core::pool::num_threads()))
 }
 
+/// Which compiled copy of the kernels runs each kernel variant in this process, per size of job:
+/// a list of ``(variant, size, copy)``, ``copy`` ``None`` while its first calls still measure the
+/// copies (see ``dqskin_core::kernel_copies``).
+#[pyfunction]
+fn kernel_copies() -> PyResult<Vec<(&'static str, &'static str, Option<&'static str>)>> {
+    guard(|| Ok(dqskin_core::kernel_copies()))
+}
+
 /// Panics on purpose (tests check that no `PanicException` escapes).
 #[pyfunction]
 fn _panic_for_tests() -> PyResult<()> {
@@ -79,6 +87,7 @@ fn _dqskin(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MAX_BONES", dqskin_core::MAX_BONES)?;
     m.add_function(wrap_pyfunction!(set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(get_num_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel_copies, m)?)?;
     m.add_function(wrap_pyfunction!(_panic_for_tests, m)?)?;
     dual_quat::register(m)?;
     blending::register(m)?;

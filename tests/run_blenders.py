@@ -127,20 +127,19 @@ CORE_FILES = (
 def main(argv: list[str]) -> int:
     full = "--full" in argv
     argv = [a for a in argv if a != "--full"]
-    if argv == ["--pinned"]:
+    pinned = argv == ["--pinned"]
+    chosen = [PINNED] if pinned else argv or list(VERSIONS)
+    unknown = [v for v in chosen if v not in VERSIONS and not pinned]
+    if unknown:
+        raise SystemExit(f"unknown Blender release(s) {unknown}; known: {list(VERSIONS)}")
+    t = time.perf_counter()
+    if pinned:
         # `make test`'s Blender part: the pinned release of requirements-dev.txt, in this Python's
         # environment, on the extension `make setup` installed into .blender_user/ (conftest.py's
         # default), every file.
-        chosen, full = [PINNED], True
-        targets = {PINNED: Target(Path(sys.executable), None)}
+        targets, full = {PINNED: Target(Path(sys.executable), None)}, True
     else:
-        chosen = argv or list(VERSIONS)
-        unknown = [v for v in chosen if v not in VERSIONS]
-        if unknown:
-            raise SystemExit(f"unknown Blender release(s) {unknown}; known: {list(VERSIONS)}")
-        targets = {}
-    t = time.perf_counter()
-    targets = targets or {version: prepare(version, *VERSIONS[version]) for version in chosen}
+        targets = {version: prepare(version, *VERSIONS[version]) for version in chosen}
     jobs = [
         (version, path)
         for version in chosen

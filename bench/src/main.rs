@@ -221,7 +221,8 @@ fn main() {
     let rounds = number("--rounds");
     // The copies each case runs on: with --copies every one with fused multiply-adds here, each
     // named to set_kernel_copy in turn; else the one the process runs ("chosen", or DQSKIN_SIMD's).
-    let fused: Vec<&'static str> = if args.iter().any(|a| a == "--copies") {
+    let copies_asked = args.iter().any(|a| a == "--copies");
+    let fused: Vec<&'static str> = if copies_asked {
         let here = ["avx2", "avx512", "neon"].into_iter().filter(|c| set_kernel_copy(Some(c)).is_ok()).collect();
         set_kernel_copy(None).expect("back to the measured copies");
         here
@@ -232,7 +233,7 @@ fn main() {
     let copies: Vec<&'static str> = if compare_copies {
         fused
     } else {
-        if args.iter().any(|a| a == "--copies") {
+        if copies_asked {
             println!("--copies: no copy with fused multiply-adds here, only the baseline runs");
         }
         vec![std::env::var("DQSKIN_SIMD").ok().map_or("chosen", |c| &*c.leak())]

@@ -91,7 +91,7 @@ pub fn set_kernel_copy(name: Option<&str>) -> Result<(), SkinError> {
 /// caches may be slower when they stream from memory (docs/performance.md has a case).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Size {
-    /// Up to [`Size::STREAMED_FROM`] vertices.
+    /// Fewer than [`Size::STREAMED_FROM`] vertices.
     Cached,
     Streamed,
 }
@@ -163,7 +163,8 @@ pub(crate) fn chosen_copies() -> Vec<(Variant, Size, Option<Simd>)> {
     Variant::ALL.iter().flat_map(|&v| Size::ALL.map(|size| (v, size, chosen_copy(v, size)))).collect()
 }
 
-static TRIALS: [[Trial; 2]; 7] = [const { [Trial::new(Size::Cached), Trial::new(Size::Streamed)] }; 7];
+static TRIALS: [[Trial; Size::ALL.len()]; Variant::ALL.len()] =
+    [const { [Trial::new(Size::Cached), Trial::new(Size::Streamed)] }; Variant::ALL.len()];
 
 /// The most candidate copies (the baseline, AVX2, AVX-512 on x86-64).
 const MAX_COPIES: usize = 3;

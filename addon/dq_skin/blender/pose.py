@@ -97,7 +97,7 @@ def frame(arm_eval, binding: rig.Binding, segments: np.ndarray, reads: PoseReads
     if len(binding.bone_indices) != len(deform):
         deform = deform[binding.bone_indices]
     joints = rig.with_bbone_joints(rig.Frame(np.ascontiguousarray(deform), binding.rest, None, None), arm_eval, binding, segments)
-    return Bones(joints.deform, joints.rest, PoseKey(matrices=joints.deform.tobytes()), None)
+    return Bones(joints.deform, joints.rest, PoseKey.of_matrices(joints.deform), None)
 
 
 def memory_key(data) -> PoseKey:

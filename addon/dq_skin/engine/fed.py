@@ -99,7 +99,7 @@ class FedFrame:
             deform, rest, pose_key = bones.deform, bones.rest, bones.key
         else:
             deform = self._pose_matrices(arm, arm_eval, bound)
-            influences, rest, pose_key = bound.influences, bound.rest, PoseKey(matrices=deform.tobytes())
+            influences, rest, pose_key = bound.influences, bound.rest, PoseKey.of_matrices(deform)
         key = FrameKey(old.settings, input_key, pose_key, premat.tobytes(), old.result, old.mesh_version)
         if key == old:
             return None  # already this (what the carrier reads holds it)

@@ -263,7 +263,7 @@ def _prepare(obj, obj_eval, target: Target, s: Settings, ctx: Context, source, p
         pose_key = bones.key
     else:
         deform = pose_matrices(ctx, arm, arm_eval, bound)
-        pose_key = PoseKey(matrices=deform.tobytes())
+        pose_key = PoseKey.of_matrices(deform)
     out = st.output
     if out.spaces is None or not (obj.session_uid in ctx.unmoved and arm.session_uid in ctx.unmoved):
         out.spaces = rig.spaces(obj_eval, arm_eval)

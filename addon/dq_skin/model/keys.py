@@ -37,12 +37,20 @@ class InputKey:
 
 @dataclass(frozen=True)
 class PoseKey:
-    """The bones of one frame: their matrices (read through Blender's Python API), or the
-    signatures of a pose read from Blender's memory (pose and binding)."""
+    """The bones of one frame: a digest of their matrices (read through Blender's Python API), or
+    the signatures of a pose read from Blender's memory (pose and binding)."""
 
-    matrices: bytes = b""
+    matrices_digest: int | None = None
     pose_signature: int | None = None
     binding_signature: int | None = None
+
+    @classmethod
+    def of_matrices(cls, matrices) -> PoseKey:
+        """The key of matrices read through the Python API: a 64-bit digest of their bytes
+        (SipHash, Python's own hash of bytes, as wide as the memory reader's signatures). Each
+        character keeps its last frame's key for the whole session, where the matrices are 64
+        bytes a bone (about 10 KB on a Rigify character)."""
+        return cls(matrices_digest=hash(matrices.tobytes()))
 
     @property
     def from_memory(self) -> bool:

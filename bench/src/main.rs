@@ -29,27 +29,12 @@ use dqskin_core::{
 };
 use rayon::prelude::*;
 
+mod rng;
+use rng::Rng;
+
 const BONES: usize = 64;
 /// A mesh larger than any CPU's caches, so that kernels and reference stream from memory.
 const BEYOND_CACHES: usize = 16_000_000;
-
-/// A small deterministic generator (xorshift64*), so runs are comparable.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
-}
 
 struct Scene {
     positions: Vec<[f32; 3]>,

@@ -19,9 +19,15 @@
 //! Usage: `palette [--vertices N] [--rounds R] [--mesh bench|mixed]`.
 
 #[cfg(target_arch = "x86_64")]
+#[path = "../rng.rs"]
+mod rng;
+
+#[cfg(target_arch = "x86_64")]
 mod x86 {
     use core::arch::x86_64::*;
     use std::time::Instant;
+
+    use super::rng::Rng;
 
     const LANES: usize = 16;
     const SLOTS: usize = 4;
@@ -47,20 +53,6 @@ mod x86 {
         at: [[u8; LANES]; SLOTS],
     }
 
-    struct Rng(u64);
-
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-        }
-        fn unit(&mut self) -> f32 {
-            (self.next() >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
-
     struct Mesh {
         records: Vec<Record>,
         points: Vec<[f32; 3]>,
@@ -74,7 +66,7 @@ mod x86 {
         let records = (0..BONES)
             .map(|_| {
                 let mut r = [0.0; 16];
-                r[..12].iter_mut().for_each(|x| *x = rng.unit() - 0.5);
+                r[..12].iter_mut().for_each(|x| *x = rng.range(-0.5, 0.5));
                 Record(r)
             })
             .collect();
@@ -83,12 +75,12 @@ mod x86 {
         let mut weights = vec![[0f32; SLOTS]; vertices];
         for v in 0..vertices {
             let base = v * BONES / vertices;
-            let raw: [f32; SLOTS] = core::array::from_fn(|_| 0.05 + rng.unit());
+            let raw: [f32; SLOTS] = core::array::from_fn(|_| rng.range(0.05, 1.0));
             let sum: f32 = raw.iter().sum();
             for k in 0..SLOTS {
                 let bone = if mixed {
                     loop {
-                        let b = ((base + (rng.next() % 8) as usize) % BONES) as u8;
+                        let b = ((base + (rng.next_u64() % 8) as usize) % BONES) as u8;
                         if !bones[v][..k].contains(&b) {
                             break b;
                         }

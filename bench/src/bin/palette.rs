@@ -3,10 +3,11 @@
 //! is measured on that CPU (docs/performance.md, "An alternative measured: a palette of bones per
 //! batch").
 //!
-//! - **Per lane** (the shipped kernels' design): each lane adds its weight times its bone's whole
+//! - **Per lane** (the shipped kernels' sums): each lane adds its weight times its bone's whole
 //!   16-float record (rows of a 3×4 matrix, zero padding), one fused multiply-add a lane and
-//!   influence, the record's load indexed by the lane's bone; the sixteen lane vectors are
-//!   transposed once a batch.
+//!   influence, the record's load indexed by the lane's bone; here the sixteen lane vectors are
+//!   transposed once a batch, as the one body's AVX-512 sums are (the shipped Linear applies each
+//!   lane's sum to its point in place instead, `avx512/kept.rs`, a little faster).
 //! - **Palette**: each batch keeps the distinct bones its lanes use (at most 16) and, per slot,
 //!   each lane's position among them (made once, as influences are); the kernel loads the
 //!   palette's records, transposes them, and sums component by component, each lane's component

@@ -17,7 +17,7 @@
 //! (checked). Meshes: `bench`, dqskin-bench's (every lane of a slot on one bone), and `mixed` (each
 //! vertex 4 of the 8 bones from its place, in random order: about 8 distinct bones a batch).
 //!
-//! Usage: `palette [--vertices N] [--rounds R] [--mesh bench|mixed]`.
+//! Usage: `palette [--method linear|dq] [--vertices N] [--rounds R] [--mesh bench|mixed]`.
 
 #[cfg(target_arch = "x86_64")]
 #[path = "../rng.rs"]
@@ -39,6 +39,11 @@ mod x86 {
     #[derive(Clone, Copy)]
     struct Record([f32; 16]);
 
+    /// A bone's rigid dual quaternion: the rotation, then the dual part (x, y, z, w each).
+    #[repr(C, align(32))]
+    #[derive(Clone, Copy)]
+    struct DqRecord([f32; 8]);
+
     #[derive(Clone, Copy)]
     struct Slot {
         bones: [u8; LANES],
@@ -52,10 +57,13 @@ mod x86 {
         /// Groups of four records transposed: 1 to 4.
         groups: usize,
         at: [[u8; LANES]; SLOTS],
+        /// Each lane's bone's index in `bones` (the order of the 16-entry tables DQS transposes).
+        index: [[u8; LANES]; SLOTS],
     }
 
     struct Mesh {
         records: Vec<Record>,
+        dq: Vec<DqRecord>,
         points: Vec<[f32; 3]>,
         slots: Vec<Slot>,
         palettes: Vec<Palette>,
@@ -69,6 +77,23 @@ mod x86 {
                 let mut r = [0.0; 16];
                 r[..12].iter_mut().for_each(|x| *x = rng.range(-0.5, 0.5));
                 Record(r)
+            })
+            .collect();
+        // Unit rotations in both signs (so the sign chain flips some weights) and translations.
+        let dq = (0..BONES)
+            .map(|_| {
+                let q: [f32; 4] = core::array::from_fn(|_| rng.range(-1.0, 1.0));
+                let n = q.iter().map(|x| x * x).sum::<f32>().sqrt();
+                let t: [f32; 3] = core::array::from_fn(|_| rng.range(-0.5, 0.5));
+                let [x, y, z, w] = q.map(|c| c / n);
+                // dual = ½·(t, 0)·q
+                let dual = [
+                    0.5 * (t[0] * w + t[1] * z - t[2] * y),
+                    0.5 * (-t[0] * z + t[1] * w + t[2] * x),
+                    0.5 * (t[0] * y - t[1] * x + t[2] * w),
+                    -0.5 * (t[0] * x + t[1] * y + t[2] * z),
+                ];
+                DqRecord([x, y, z, w, dual[0], dual[1], dual[2], dual[3]])
             })
             .collect();
         let points = (0..vertices).map(|_| [rng.unit(), rng.unit(), rng.unit()]).collect();
@@ -113,17 +138,19 @@ mod x86 {
             let groups = used.len().div_ceil(4);
             // Two groups sit in blocks 0 and 2 of the transposed vectors, more in blocks 0-3.
             let place = |j: usize| if groups <= 2 { 8 * (j / 4) + j % 4 } else { j };
-            let mut palette = Palette { bones: [used[0]; LANES], groups, at: [[0; LANES]; SLOTS] };
+            let mut palette =
+                Palette { bones: [used[0]; LANES], groups, at: [[0; LANES]; SLOTS], index: [[0; LANES]; SLOTS] };
             palette.bones[..used.len()].copy_from_slice(&used);
-            for (k, at) in palette.at.iter_mut().enumerate() {
-                for (l, at) in at.iter_mut().enumerate() {
-                    *at = place(used.iter().position(|&u| u == bones[lane(l)][k]).expect("listed")) as u8;
+            for (k, (at, index)) in palette.at.iter_mut().zip(&mut palette.index).enumerate() {
+                for (l, (at, index)) in at.iter_mut().zip(index).enumerate() {
+                    let j = used.iter().position(|&u| u == bones[lane(l)][k]).expect("listed");
+                    (*at, *index) = (place(j) as u8, j as u8);
                 }
             }
             palettes.push(palette);
         }
         let distinct = distinct as f64 / palettes.len().max(1) as f64;
-        Mesh { records, points, slots, palettes, distinct }
+        Mesh { records, dq, points, slots, palettes, distinct }
     }
 
     /// The 4×4 transposes within each 128-bit block of four vectors.
@@ -327,21 +354,139 @@ mod x86 {
         }
     }
 
-    /// Both designs over `m`: whether they give the same bits, and each one's best time.
-    fn compare(m: &Mesh, rounds: usize) -> (bool, f64, f64) {
+    /// Four floats from `offset` of the 16 records `bones` names, transposed: vector `c` holds
+    /// float `offset + c` of each (as the shipped AVX-512 copy loads them, `avx512.rs` `columns4`).
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn columns4(dq: &[DqRecord], bones: &[u8; LANES], offset: usize) -> [__m512; 4] {
+        let at = |l: usize| {
+            let r = &dq[usize::from(bones[l])].0[offset..offset + 4];
+            // SAFETY: four floats.
+            unsafe { _mm_loadu_ps(r.as_ptr()) }
+        };
+        transpose_blocks(core::array::from_fn(|k| {
+            let v = _mm512_castps128_ps512(at(k));
+            let v = _mm512_insertf32x4::<1>(v, at(k + 4));
+            let v = _mm512_insertf32x4::<2>(v, at(k + 8));
+            _mm512_insertf32x4::<3>(v, at(k + 12))
+        }))
+    }
+
+    /// The sign chain's step for one slot, shared: `±w` against the running sum, then the sums.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn add_dq(first: bool, q: [__m512; 4], d: [__m512; 4], w: __m512, real: &mut [__m512; 4], dual: &mut [__m512; 4]) {
+        let ws = if first {
+            w
+        } else {
+            let dot = _mm512_add_ps(
+                _mm512_fmadd_ps(q[1], real[1], _mm512_mul_ps(q[0], real[0])),
+                _mm512_fmadd_ps(q[3], real[3], _mm512_mul_ps(q[2], real[2])),
+            );
+            let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(dot, _mm512_setzero_ps());
+            let bits = _mm512_castps_si512(w);
+            _mm512_castsi512_ps(_mm512_mask_xor_epi32(bits, negative, bits, _mm512_set1_epi32(i32::MIN)))
+        };
+        for c in 0..4 {
+            real[c] = _mm512_fmadd_ps(q[c], ws, real[c]);
+            dual[c] = _mm512_fmadd_ps(d[c], ws, dual[c]);
+        }
+    }
+
+    /// The dual quaternion sums applied to the points, shared (the library's `dual_quaternion`,
+    /// full strength): `p + u·(2/|q|²)`.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn finish_dq(real: [__m512; 4], dual: [__m512; 4], contrib: __m512, p: [__m512; 3]) -> [__m512; 3] {
+        let [x, y, z, w] = real;
+        let [tx, ty, tz, t0] = dual;
+        let b = [
+            _mm512_fnmadd_ps(z, p[1], _mm512_fmadd_ps(y, p[2], tx)),
+            _mm512_fnmadd_ps(x, p[2], _mm512_fmadd_ps(z, p[0], ty)),
+            _mm512_fnmadd_ps(y, p[0], _mm512_fmadd_ps(x, p[1], tz)),
+        ];
+        let t = [
+            _mm512_fnmadd_ps(z, b[1], _mm512_fmadd_ps(y, b[2], _mm512_mul_ps(w, b[0]))),
+            _mm512_fnmadd_ps(x, b[2], _mm512_fmadd_ps(z, b[0], _mm512_mul_ps(w, b[1]))),
+            _mm512_fnmadd_ps(y, b[0], _mm512_fmadd_ps(x, b[1], _mm512_mul_ps(w, b[2]))),
+        ];
+        let u = [_mm512_fnmadd_ps(t0, x, t[0]), _mm512_fnmadd_ps(t0, y, t[1]), _mm512_fnmadd_ps(t0, z, t[2])];
+        let len2 = _mm512_fmadd_ps(z, z, _mm512_fmadd_ps(y, y, _mm512_fmadd_ps(x, x, _mm512_mul_ps(w, w))));
+        let valid = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(contrib, _mm512_set1_ps(1e-4))
+            & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(len2, _mm512_setzero_ps());
+        let g = _mm512_maskz_div_ps(valid, _mm512_set1_ps(2.0), len2);
+        core::array::from_fn(|k| _mm512_fmadd_ps(u[k], g, p[k]))
+    }
+
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    fn per_lane_dq(m: &Mesh, out: &mut [[f32; 3]]) {
+        let batches =
+            m.slots.chunks_exact(SLOTS).zip(m.points.as_chunks::<LANES>().0).zip(out.as_chunks_mut::<LANES>().0);
+        for (b, ((slots, p), o)) in batches.enumerate() {
+            prefetch_ahead(m, b);
+            let zero = [_mm512_setzero_ps(); 4];
+            let (mut real, mut dual, mut contrib) = (zero, zero, _mm512_setzero_ps());
+            for (k, s) in slots.iter().enumerate() {
+                let (q, d) = (columns4(&m.dq, &s.bones, 0), columns4(&m.dq, &s.bones, 4));
+                let w = weights(&s.weights);
+                add_dq(k == 0, q, d, w, &mut real, &mut dual);
+                contrib = _mm512_add_ps(contrib, w);
+            }
+            store_points(finish_dq(real, dual, contrib, load_points(p)), o);
+        }
+    }
+
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    fn palette_dq(m: &Mesh, out: &mut [[f32; 3]]) {
+        let batches = m.palettes.iter().zip(m.points.as_chunks::<LANES>().0).zip(out.as_chunks_mut::<LANES>().0);
+        for (b, ((pal, p), o)) in batches.enumerate() {
+            prefetch_ahead(m, b);
+            // The palette's rotations and dual parts as 16-entry tables, once a batch.
+            let (tq, td) = (columns4(&m.dq, &pal.bones, 0), columns4(&m.dq, &pal.bones, 4));
+            let zero = [_mm512_setzero_ps(); 4];
+            let (mut real, mut dual, mut contrib) = (zero, zero, _mm512_setzero_ps());
+            for (k, s) in m.slots[b * SLOTS..(b + 1) * SLOTS].iter().enumerate() {
+                // SAFETY: sixteen bytes.
+                let at = _mm512_cvtepu8_epi32(unsafe { _mm_loadu_si128(pal.index[k].as_ptr().cast()) });
+                let pick =
+                    |t: &[__m512; 4]| -> [__m512; 4] { core::array::from_fn(|c| _mm512_permutexvar_ps(at, t[c])) };
+                let w = weights(&s.weights);
+                add_dq(k == 0, pick(&tq), pick(&td), w, &mut real, &mut dual);
+                contrib = _mm512_add_ps(contrib, w);
+            }
+            store_points(finish_dq(real, dual, contrib, load_points(p)), o);
+        }
+    }
+
+    /// One design's kernel over a whole mesh (needs AVX-512F, AVX2 and FMA).
+    type Design = unsafe fn(&Mesh, &mut [[f32; 3]]);
+
+    /// Which sums the two designs compute.
+    #[derive(Clone, Copy, PartialEq, Debug)]
+    enum Method {
+        Linear,
+        DualQuaternion,
+    }
+
+    /// Both designs of `method` over `m`: whether they give the same bits, and each one's best
+    /// time.
+    fn compare(m: &Mesh, method: Method, rounds: usize) -> (bool, f64, f64) {
         let vertices = m.points.len();
         let (mut a, mut b) = (vec![[0f32; 3]; vertices], vec![[0f32; 3]; vertices]);
-        let time = |f: &dyn Fn(&mut [[f32; 3]]), out: &mut [[f32; 3]]| {
+        let (lane_design, palette_design): (Design, Design) = match method {
+            Method::Linear => (per_lane, palette),
+            Method::DualQuaternion => (per_lane_dq, palette_dq),
+        };
+        let time = |f: Design, out: &mut [[f32; 3]]| {
             let start = Instant::now();
-            f(out);
+            // SAFETY: the callers checked that the CPU has AVX-512F, AVX2 and FMA.
+            unsafe { f(m, out) };
             start.elapsed().as_secs_f64()
         };
         let (mut lane, mut palette_time) = (f64::INFINITY, f64::INFINITY);
         for _ in 0..=rounds {
-            // SAFETY: the callers checked that the CPU has AVX-512F, AVX2 and FMA.
-            lane = lane.min(time(&|o| unsafe { per_lane(m, o) }, &mut a));
-            // SAFETY: as above.
-            palette_time = palette_time.min(time(&|o| unsafe { palette(m, o) }, &mut b));
+            lane = lane.min(time(lane_design, &mut a));
+            palette_time = palette_time.min(time(palette_design, &mut b));
         }
         let same = a.iter().zip(&b).all(|(x, y)| x.map(f32::to_bits) == y.map(f32::to_bits));
         (same, lane, palette_time)
@@ -358,7 +503,9 @@ mod x86 {
         }
         for mixed in [false, true] {
             let m = mesh(4096, mixed);
-            assert!(compare(&m, 0).0, "mixed: {mixed}");
+            for method in [Method::Linear, Method::DualQuaternion] {
+                assert!(compare(&m, method, 0).0, "mixed: {mixed}, {method:?}");
+            }
         }
     }
 
@@ -381,14 +528,19 @@ mod x86 {
             Some("mixed") => true,
             Some(other) => return Err(format!("--mesh is bench or mixed, not {other:?}")),
         };
+        let method = match arg("--method").as_deref() {
+            None | Some("linear") => Method::Linear,
+            Some("dq") => Method::DualQuaternion,
+            Some(other) => return Err(format!("--method is linear or dq, not {other:?}")),
+        };
         if vertices == 0 {
             return Err("--vertices must be at least 16".into());
         }
         let m = mesh(vertices, mixed);
-        let (same, best_lane, best_palette) = compare(&m, rounds);
+        let (same, best_lane, best_palette) = compare(&m, method, rounds);
         let rate = |s: f64| vertices as f64 / s / 1e6;
         println!(
-            "mesh {}: {vertices} vertices, {:.2} distinct bones a batch",
+            "{method:?}, mesh {}: {vertices} vertices, {:.2} distinct bones a batch",
             if mixed { "mixed" } else { "bench" },
             m.distinct
         );

@@ -14,10 +14,11 @@
 //!   picked from the transposed palette by `vpermps`.
 //!
 //! Both add the same products in the same order and share the finish, so they give the same bits
-//! (checked). Meshes: `bench`, dqskin-bench's (every lane of a slot on one bone), and `mixed` (each
-//! vertex 4 of the 8 bones from its place, in random order: about 8 distinct bones a batch).
+//! (checked). Meshes: `bench`, dqskin-bench's (every lane of a slot on one bone), `mixed` (each
+//! vertex 4 of the 8 bones from its place, in random order: about 8 distinct bones a batch) and
+//! `wide` (4 of the 16: 9 to 16 a batch, the palette's largest tables).
 //!
-//! Usage: `palette [--method linear|dq] [--vertices N] [--rounds R] [--mesh bench|mixed]`.
+//! Usage: `palette [--method linear|dq] [--vertices N] [--rounds R] [--mesh bench|mixed|wide]`.
 
 #[cfg(target_arch = "x86_64")]
 #[path = "../rng.rs"]
@@ -70,7 +71,9 @@ mod x86 {
         distinct: f64,
     }
 
-    fn mesh(vertices: usize, mixed: bool) -> Mesh {
+    /// A mesh whose vertices take 4 bones: `spread` 0, those of dqskin-bench's mesh; else 4 of
+    /// the `spread` bones from each vertex's place, in random order.
+    fn mesh(vertices: usize, spread: u64) -> Mesh {
         let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
         let records = (0..BONES)
             .map(|_| {
@@ -104,9 +107,11 @@ mod x86 {
             let raw: [f32; SLOTS] = core::array::from_fn(|_| rng.range(0.05, 1.0));
             let sum: f32 = raw.iter().sum();
             for k in 0..SLOTS {
-                let bone = if mixed {
+                let bone = if spread > 0 {
+                    // From the batch's place, so that a batch draws from `spread` bones at most.
+                    let base = v / LANES * LANES * BONES / vertices;
                     loop {
-                        let b = ((base + (rng.next_u64() % 8) as usize) % BONES) as u8;
+                        let b = ((base + (rng.next_u64() % spread) as usize) % BONES) as u8;
                         if !bones[v][..k].contains(&b) {
                             break b;
                         }
@@ -176,6 +181,19 @@ mod x86 {
         let a = _mm512_shuffle_f32x4::<SEL>(u[0][k], u[1][k]);
         let b = _mm512_shuffle_f32x4::<SEL>(u[2][k], u[3][k]);
         _mm512_shuffle_f32x4::<0x88>(a, b)
+    }
+
+    /// The twelve components (rows 0-2, columns 0-3) of sixteen entries, from four groups of
+    /// four transposed within their blocks (`transpose_blocks`): entry `4g + k` of component
+    /// `e` is float `e` of group `g`'s entry `k`.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn components(u: &[[__m512; 4]; 4]) -> [__m512; 12] {
+        core::array::from_fn(|e| match e / 4 {
+            0 => gather_block::<0x00>(u, e % 4),
+            1 => gather_block::<0x55>(u, e % 4),
+            _ => gather_block::<0xAA>(u, e % 4),
+        })
     }
 
     /// The sums' finish, shared: `p + (1/Σw)·(M·p − Σw·p)` per lane, from the twelve summed
@@ -305,11 +323,7 @@ mod x86 {
             let u: [[__m512; 4]; 4] = core::array::from_fn(|g| {
                 transpose_blocks([lanes[4 * g], lanes[4 * g + 1], lanes[4 * g + 2], lanes[4 * g + 3]])
             });
-            let sums: [__m512; 12] = core::array::from_fn(|e| match e / 4 {
-                0 => gather_block::<0x00>(&u, e % 4),
-                1 => gather_block::<0x55>(&u, e % 4),
-                _ => gather_block::<0xAA>(&u, e % 4),
-            });
+            let sums = components(&u);
             store_points(finish(&sums, contrib, load_points(p)), o);
         }
     }
@@ -333,11 +347,7 @@ mod x86 {
                     _ => _mm512_shuffle_f32x4::<0xAA>(u[0][e % 4], u[1][e % 4]),
                 })
             } else {
-                core::array::from_fn(|e| match e / 4 {
-                    0 => gather_block::<0x00>(&u, e % 4),
-                    1 => gather_block::<0x55>(&u, e % 4),
-                    _ => gather_block::<0xAA>(&u, e % 4),
-                })
+                components(&u)
             };
             let mut sums = [_mm512_setzero_ps(); 12];
             let mut contrib = _mm512_setzero_ps();
@@ -501,12 +511,14 @@ mod x86 {
         if !avx512() {
             return; // (nothing to compare on this CPU)
         }
-        for mixed in [false, true] {
-            let m = mesh(4096, mixed);
+        for spread in [0, 8, 16] {
+            let m = mesh(4096, spread);
             for method in [Method::Linear, Method::DualQuaternion] {
-                assert!(compare(&m, method, 0).0, "mixed: {mixed}, {method:?}");
+                assert!(compare(&m, method, 0).0, "spread {spread}, {method:?}");
             }
         }
+        // The wide mesh reaches the palettes of three and four groups of records.
+        assert!(mesh(4096, 16).palettes.iter().any(|p| p.groups > 2));
     }
 
     fn arg(name: &str) -> Option<String> {
@@ -523,10 +535,11 @@ mod x86 {
         };
         let vertices = number("--vertices", 1_000_000)? / LANES * LANES;
         let rounds = number("--rounds", 5)?.max(1);
-        let mixed = match arg("--mesh").as_deref() {
-            None | Some("bench") => false,
-            Some("mixed") => true,
-            Some(other) => return Err(format!("--mesh is bench or mixed, not {other:?}")),
+        let (name, spread) = match arg("--mesh").as_deref() {
+            None | Some("bench") => ("bench", 0),
+            Some("mixed") => ("mixed", 8),
+            Some("wide") => ("wide", 16),
+            Some(other) => return Err(format!("--mesh is bench, mixed or wide, not {other:?}")),
         };
         let method = match arg("--method").as_deref() {
             None | Some("linear") => Method::Linear,
@@ -536,14 +549,10 @@ mod x86 {
         if vertices == 0 {
             return Err("--vertices must be at least 16".into());
         }
-        let m = mesh(vertices, mixed);
+        let m = mesh(vertices, spread);
         let (same, best_lane, best_palette) = compare(&m, method, rounds);
         let rate = |s: f64| vertices as f64 / s / 1e6;
-        println!(
-            "{method:?}, mesh {}: {vertices} vertices, {:.2} distinct bones a batch",
-            if mixed { "mixed" } else { "bench" },
-            m.distinct
-        );
+        println!("{method:?}, mesh {name}: {vertices} vertices, {:.2} distinct bones a batch", m.distinct);
         println!(
             "per lane {:.3} ms ({:.0} Mverts/s), palette {:.3} ms ({:.0} Mverts/s), the same bits: {same}",
             best_lane * 1e3,

@@ -310,11 +310,13 @@ unsafe fn read_channel(layout: &PoseLayout, chan: usize, bone: usize) -> Result<
         if name != name_bytes(bone + layout.bone_name, layout.bone_name_size) {
             return Err(ReadError::Implausible("pose channel named unlike its bone"));
         }
-        let name = String::from_utf8_lossy(name).into_owned();
         let flag: i32 = read(bone + layout.bone_flag);
         if flag & BONE_NO_DEFORM != 0 {
-            return Ok(PoseChannel::not_deforming(name));
+            // No name: a rig has many more such bones than deforming ones (Rigify's 546 of
+            // 706), and a string for each, every frame, was a third of this read.
+            return Ok(PoseChannel::not_deforming(String::new()));
         }
+        let name = String::from_utf8_lossy(name).into_owned();
         let segments: i16 = read(bone + layout.bone_segments);
         let cache_segments: i32 = read(chan + layout.runtime_segments);
         if !(0..=MAX_BBONE_SEGMENTS as i16).contains(&segments)

@@ -279,9 +279,9 @@ fn reads_channels_bones_and_the_b_bone_cache() {
     let f = fixture();
     let got = read_fixture(&f, 2).unwrap();
     let (root, spine) = (&got[0], &got[1]);
-    assert_eq!((root.name.as_str(), spine.name.as_str()), ("Root", "Spine"));
-    // A bone that does not deform: its name and flag only.
-    assert_eq!(root, &PoseChannel::not_deforming("Root".into()));
+    assert_eq!((root.name.as_str(), spine.name.as_str()), ("", "Spine"));
+    // A bone that does not deform: its flag only (nothing deforms with it or looks it up by name).
+    assert_eq!(root, &PoseChannel::not_deforming(String::new()));
     assert!(spine.deform && !spine.envelope.multiply_groups);
     assert_eq!(spine.channel, Mat4::from_cols_array(&matrix(2.0)));
     assert_eq!(spine.rest, Mat4::from_cols_array(&matrix(100.0)));

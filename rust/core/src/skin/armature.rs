@@ -26,8 +26,10 @@ pub struct BBoneCache {
     pub arc_length_reciprocal: f32,
 }
 
-/// One pose channel with its bone. For a bone that does not deform only `name` and `deform`
-/// matter (nothing deforms with it); [`PoseChannel::not_deforming`] leaves the rest at rest.
+/// One pose channel with its bone. For a bone that does not deform only `deform` matters
+/// (nothing deforms with it, and the Armature modifier looks up no vertex group's bone among
+/// them): [`PoseChannel::not_deforming`] leaves the rest at rest, and the memory reader gives it
+/// no name.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseChannel {
     pub name: String,
@@ -235,7 +237,7 @@ impl ArmaturePose {
     }
 
     /// A 64-bit digest of everything the influences depend on besides the vertices: the
-    /// channels' names and order and deform flags, and the bones' rest matrices, lengths,
+    /// channels' order and deform flags, the deforming bones' names, rest matrices, lengths,
     /// envelopes, B-Bone settings and rest shapes (cache included). Equal digests: the same
     /// influences.
     pub fn binding_signature(&self) -> u64 {
@@ -252,11 +254,11 @@ impl ArmaturePose {
         let mut h = Digest::default();
         h.word(self.channels.len() as u64);
         for c in &self.channels {
-            h.bytes(c.name.as_bytes());
             h.word(u64::from(c.deform));
             if !c.deform {
                 continue;
             }
+            h.bytes(c.name.as_bytes());
             h.matrix(&c.rest);
             let e = &c.envelope;
             h.floats(&[c.length, e.head_radius, e.tail_radius, e.distance, e.weight]);
@@ -294,17 +296,28 @@ impl ArmaturePose {
     }
 }
 
-/// A fast word-by-word digest (FxHash's step with a final mix). Each step is a bijection of the
-/// state for a fixed word and of the word for a fixed state, so changing any single word always
-/// changes the result; unrelated inputs collide with probability about 2⁻⁶⁴.
+/// A fast word-by-word digest: FxHash's step on four interleaved lanes (word `i` into lane
+/// `i % 4`, so that four steps are in flight rather than one chain), the lanes then stepped into
+/// one, with a final mix. Each step is a bijection of the state for a fixed word and of the word
+/// for a fixed state, so changing any single word always changes the result; unrelated inputs
+/// collide with probability about 2⁻⁶⁴.
 #[derive(Default)]
-struct Digest(u64);
+struct Digest {
+    lanes: [u64; 4],
+    words: u64,
+}
 
 impl Digest {
     const K: u64 = 0x517c_c1b7_2722_0a95;
 
+    fn step(state: u64, w: u64) -> u64 {
+        (state.rotate_left(5) ^ w).wrapping_mul(Self::K)
+    }
+
     fn word(&mut self, w: u64) {
-        self.0 = (self.0.rotate_left(5) ^ w).wrapping_mul(Self::K);
+        let lane = &mut self.lanes[(self.words % 4) as usize];
+        *lane = Self::step(*lane, w);
+        self.words += 1;
     }
 
     fn floats(&mut self, v: &[f32]) {
@@ -329,8 +342,8 @@ impl Digest {
     }
 
     fn finish(&self) -> u64 {
+        let mut z = self.lanes.iter().fold(Self::step(0, self.words), |h, &lane| Self::step(h, lane));
         // splitmix64's finalizer, so that nearby inputs give unrelated outputs.
-        let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
         z ^ (z >> 31)

@@ -666,6 +666,50 @@ def test_fed_frames_are_checked_from_memory_and_every_change_is_seen(dq_skin, mo
     assert_same(obj, reference, f"the frame after {change}")
 
 
+# What a script may change of an armature's bones between two frames (both DQ Skin and the
+# reference deform with the armature).
+BONE_CHANGES = {
+    "nothing": lambda bones: None,
+    "a B-Bone's rest shape": lambda bones: setattr(bones["Bone2"], "bbone_easein", 1.7),
+    "a bone's deform flag": lambda bones: setattr(bones["Bone1"], "use_deform", False),
+}
+
+
+@pytest.mark.parametrize("change", sorted(BONE_CHANGES))
+def test_an_armature_updated_on_every_frame_is_checked_from_memory(dq_skin, monkeypatch, route, change):
+    """A Rigify rig's armature data is updated on every frame (its drivers), its bones
+    unchanged: the frame handler still checks a fed frame from the object's state in memory
+    (the bones compared by their binding signature, from the pose the feed read), not through
+    the Python API; a bone a script edits before the next frame is seen there (the frame equals
+    the Armature modifier's)."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = bpy.context.scene
+    # Keyed on the armature's data, as Rigify's drivers are: Blender updates it on every frame.
+    for frame, value in ((1, 0.0), (20, 1.0)):
+        arm.data["dq_skin_test_wiggle"] = value
+        arm.data.keyframe_insert('["dq_skin_test_wiggle"]', frame=frame)
+    updates = []
+    counting = lambda _scene, depsgraph: updates.extend(u.id.original == arm.data for u in depsgraph.updates)  # noqa: E731
+    bpy.app.handlers.frame_change_post.append(counting)
+    try:
+        for f in (4, 5):
+            scene.frame_set(f)
+        checked = checks_through_python(dq_skin, monkeypatch)
+        for f in (6, 7, 8):
+            scene.frame_set(f)
+            assert_same(obj, reference, f"frame {f}")
+    finally:
+        bpy.app.handlers.frame_change_post.remove(counting)
+    assert sum(updates) >= 3, "the armature's data was not updated on every frame: the test tests nothing"
+    assert checked == [], "frames where the armature's data was updated, its bones unchanged, were checked through the Python API"
+    BONE_CHANGES[change](arm.data.bones)
+    scene.frame_set(9)
+    assert_same(obj, reference, f"after {change}")
+    scene.frame_set(10)
+    assert_same(obj, reference, f"the frame after {change}")
+    assert status(dq_skin, obj).live
+
+
 def test_the_object_state_reader_is_checked_on_its_first_read(dq_skin, monkeypatch):
     """The object-state reader's first read in a session is compared with what Blender's
     Python API gives (`memory_check.object_state_differs`): it agrees on a character, catches

@@ -40,6 +40,9 @@ def fed_frame_stands(rec, ctx: Context, bones_changed: bool = False) -> bool:
     if ctx.render or ctx.session.exports.active():
         rec.fed_check = None
         return False
+    if bones_changed and _bones_as_checked(rec, ctx):
+        # (A Rigify rig's armature data is updated on every frame, its bones unchanged.)
+        bones_changed = False
     if not bones_changed and _stands_as_checked(rec, ctx):
         return True
     rec.fed_check = None
@@ -82,6 +85,26 @@ def _stands_as_checked(rec, ctx: Context) -> bool:
         ):
             return False
     return _state_unchanged(ctx, obj, check.digest)
+
+
+def _bones_as_checked(rec, ctx: Context) -> bool:
+    """Whether every DQ Skin `rec.fed_check` saw is still bound to its armature's bones as they
+    are (the bones' binding signature, from the pose the feed read in this evaluation): then an
+    update of the armature's data changed nothing the binding depends on."""
+    check: FedCheck | None = rec.fed_check
+    if check is None:
+        return False
+    for _key, st, *_rest in check.mods:
+        s, bound = st.settings.value, st.binding.key
+        arm = s.armature if s is not None else None
+        if arm is None or bound is None:
+            return False
+        try:
+            if arm.mode == "EDIT" or pose.armature_signature(arm.evaluated_get(ctx.depsgraph), ctx.reads) != bound.bones:
+                return False
+        except ReferenceError:  # (the armature was deleted: the full path says so)
+            return False
+    return True
 
 
 def _state_digest(ctx: Context, obj) -> bytes | None:

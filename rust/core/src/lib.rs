@@ -44,7 +44,7 @@ pub use quat_interp::{make_signs_continuous, slerp, Squad};
 pub use skin::{
     armature_spaces, centers_of_rotation, centers_of_rotation_interruptible, centers_of_rotation_update,
     centers_of_rotation_update_keeping, centers_of_rotation_with_progress, check_centers_inputs, deform_group_weights,
-    kernel_copies, set_kernel_copy, skin, skin_many, BBone, CenterSums, Centers, DeformGroups, Effective, Envelope,
-    Influence, Influences, ManyJob, Method, Pose, PreviousCenters, SkinError, SkinOptions, MAX_BONES,
-    MAX_INFLUENCES_PER_VERTEX,
+    first_not_finite, kernel_copies, set_kernel_copy, skin, skin_many, BBone, CenterSums, Centers, DeformGroups,
+    Effective, Envelope, Influence, Influences, ManyJob, Method, Pose, PreviousCenters, SkinError, SkinOptions,
+    MAX_BONES, MAX_INFLUENCES_PER_VERTEX,
 };

@@ -198,7 +198,7 @@ pub fn one_line(e: &PyErr, py: Python<'_>) -> String {
 
 /// Whether a float32 array has a NaN or infinity; names the first flat index.
 pub fn check_finite(name: &str, data: &[f32]) -> PyResult<()> {
-    match data.iter().position(|v| !v.is_finite()) {
+    match dqskin_core::first_not_finite(data) {
         Some(i) => Err(PyValueError::new_err(format!("{name} contains a NaN or infinite value (flat index {i})"))),
         None => Ok(()),
     }

@@ -925,7 +925,7 @@ pub(crate) fn batch_fixture(n: usize, bones: usize, k: usize) -> (Vec<[f32; 3]>,
 fn the_first_non_finite_center_is_found_in_every_block_and_on_the_pool() {
     for n in [1usize, 17, 1024, 1025, kernels::CHUNK, 3 * kernels::CHUNK + 5] {
         let clean = vec![[1.0f32, -2.0, 3.0e38]; n];
-        assert_eq!(first_not_finite(&clean), None);
+        assert_eq!(first_point_not_finite(&clean), None);
         for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
             for index in [0, n / 2, n - 1] {
                 for axis in 0..3 {
@@ -935,7 +935,8 @@ fn the_first_non_finite_center_is_found_in_every_block_and_on_the_pool() {
                     if index + 1 < n {
                         c[n - 1][2] = f32::NAN;
                     }
-                    assert_eq!(first_not_finite(&c), Some(index), "n {n}, index {index}, axis {axis}, {bad}");
+                    assert_eq!(first_point_not_finite(&c), Some(index), "n {n}, index {index}, axis {axis}, {bad}");
+                    assert_eq!(first_not_finite(c.as_flattened()), Some(3 * index + axis));
                 }
             }
         }

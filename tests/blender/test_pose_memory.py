@@ -390,6 +390,47 @@ def test_the_channel_matrices_alone_are_the_python_apis(dq_skin, monkeypatch):
     assert relative_deviation(evaluated_positions(obj), evaluated_positions(ref)) <= REL_TOL
 
 
+def test_the_reader_follows_bones_added_and_removed(dq_skin):
+    """The reader keeps each armature's channel count (Blender's API counts by visiting every
+    pose bone); a read after bones were added or removed walks them against the new count, for
+    the whole pose and the channel matrices alike, and another armature is never read with the
+    first one's count."""
+    _obj, arm, _ = bbone_rig()
+    reader = dq_skin.SESSION.readers._pose
+    assert reader is not None, dq_skin.SESSION.readers.pose_error
+
+    def evaluated():
+        return arm.evaluated_get(bpy.context.evaluated_depsgraph_get())
+
+    def read_both():
+        a = evaluated()
+        return reader.read(a), reader.channel_matrices(a)
+
+    def edit_bones(change):
+        bpy.context.view_layer.objects.active = arm
+        bpy.ops.object.mode_set(mode="EDIT")
+        change(arm.data.edit_bones)
+        bpy.ops.object.mode_set(mode="OBJECT")
+        bpy.context.view_layer.update()
+
+    def added(bones):
+        b = bones.new("Added")
+        b.head, b.tail = (0.0, 0.0, 5.0), (0.0, 0.0, 6.0)
+
+    for change, count in ((None, 6), (added, 7), (lambda bones: bones.remove(bones["Added"]), 6)):
+        if change is not None:
+            edit_bones(change)
+        for _ in range(2):  # (the second read with the count kept by the first)
+            data, matrices = read_both()
+            assert len(matrices) == len(arm.pose.bones) == count
+            assert data.bone_count == sum(b.use_deform for b in arm.data.bones)
+            np.testing.assert_array_equal(matrices, [_row_major(pb.matrix_channel) for pb in evaluated().pose.bones])
+    other = bpy.data.objects.new("Other rig", bpy.data.armatures.new("Other rig"))
+    link(other)
+    bpy.context.view_layer.update()
+    assert len(reader.channel_matrices(other.evaluated_get(bpy.context.evaluated_depsgraph_get()))) == 0
+
+
 def test_binding_and_pose_signatures(dq_skin):
     obj, arm, _ = bbone_rig()
     dg = bpy.context.evaluated_depsgraph_get()

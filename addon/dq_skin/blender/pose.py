@@ -79,7 +79,8 @@ class Bones:
     B-Bone's `segments + 1` joints, in bone order)."""
 
     deform: np.ndarray
-    rest: np.ndarray
+    rest: np.ndarray | None
+    """None where the caller reads them from `data` only if it needs them (the feed)."""
     key: PoseKey
     """Changes whenever the deformation may: the pose signature, or the matrices themselves."""
     data: dqskin.PoseData | None

@@ -91,15 +91,16 @@ class FedFrame:
             data = self.reads.read(arm_eval)
             if data is None or not pose.same_bones(data, bound) or data.binding_signature != old.pose.binding_signature:
                 return None
-            bones = pose.Bones(data.deform, data.rest, pose.memory_key(data), data)
+            # (The joints' rest matrices are made only where a new job needs them, below.)
+            bones = pose.Bones(data.deform, None, pose.memory_key(data), data)
             cache = st.binding
             influences = pose.influences(
                 bones, bound, arm_eval, positions, input_key, premat, s.use_vertex_groups, s.use_envelopes, cache.envelopes, cache.segments
             )
-            deform, rest, pose_key = bones.deform, bones.rest, bones.key
+            deform, rest_of, pose_key = bones.deform, lambda: data.rest, bones.key
         else:
             deform = self._pose_matrices(arm, arm_eval, bound)
-            influences, rest, pose_key = bound.influences, bound.rest, PoseKey.of_matrices(deform)
+            influences, rest_of, pose_key = bound.influences, lambda: bound.rest, PoseKey.of_matrices(deform)
         key = FrameKey(old.settings, input_key, pose_key, premat.tobytes(), old.result, old.mesh_version)
         if key == old:
             return None  # already this (what the carrier reads holds it)
@@ -109,7 +110,7 @@ class FedFrame:
         if influences is not job.influences:
             if s.method == dqskin.Method.CENTERS_OF_ROTATION:
                 return None  # other influences need their own centers: the full evaluation computes them
-            job = out.job = binding.job(st, s, positions, influences, deform, rest, premat, postmat, out=where)
+            job = out.job = binding.job(st, s, positions, influences, deform, rest_of(), premat, postmat, out=where)
         else:
             if job.positions is not positions:
                 job.positions = positions

@@ -284,7 +284,8 @@ unsafe fn bones_by_name<'a>(
         while let Some(mut bone) = pending.pop() {
             while bone != 0 {
                 if map.len() == limit {
-                    return Err(ReadError::Implausible("bone count"));
+                    // More bones than channels: the count the caller gave is not this pose's.
+                    return Err(ReadError::ChannelCount { expected: limit, found: limit + 1 });
                 }
                 map.insert(name_bytes(bone + layout.bone_name, layout.bone_name_size), bone);
                 pending.push(read(bone + childbase_first));

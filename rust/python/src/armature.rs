@@ -77,8 +77,9 @@ impl PyPoseMemory {
 
 impl PyPoseMemory {
     /// `read(address, channel count)` of `armature`, with the count this reader kept for it;
-    /// where the channels walked disagree with that count (bones added or removed, or another
-    /// object at a removed one's address), read again with the count Blender's API gives now.
+    /// where that read fails (the channels or bones walked disagree with the count: bones added
+    /// or removed, or another armature at a removed one's address), read again with the count
+    /// Blender's API gives now.
     fn counted<T>(
         &self,
         armature: &Bound<'_, PyAny>,
@@ -87,7 +88,7 @@ impl PyPoseMemory {
         let ptr = armature_address(armature)?;
         let kept = self.counts.lock().unwrap_or_else(|e| e.into_inner()).get(&ptr).copied();
         let found = match kept.map(|count| read(ptr, count)) {
-            Some(Err(ReadError::ChannelCount { .. })) | None => {
+            Some(Err(_)) | None => {
                 let count = channel_count(armature)?;
                 let mut counts = self.counts.lock().unwrap_or_else(|e| e.into_inner());
                 if counts.len() >= KEPT_COUNTS {

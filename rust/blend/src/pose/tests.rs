@@ -400,7 +400,7 @@ fn implausible_memory_is_refused() {
     f.bones[1].name = name("Other");
     assert_eq!(read_with(&f, 2, true), Err(ReadError::Implausible("pose channel without a bone")));
     let f = fixture();
-    assert_eq!(read_with(&f, 1, true), Err(ReadError::Implausible("bone count")));
+    assert_eq!(read_with(&f, 1, true), Err(ReadError::ChannelCount { expected: 1, found: 2 }));
     let mut f = fixture();
     f.object.data = core::ptr::null();
     assert!(matches!(read_with(&f, 2, true), Err(ReadError::NotAnArmature(_))));

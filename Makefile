@@ -75,6 +75,7 @@ test-format: $(STAMPS)/deps
 # random cases every run (and replays rust/core/proptest-regressions/ first).
 test-rust:
 	PROPTEST_RNG_SEED=20261122 cargo test --workspace --release
+	cargo run --release -q -p dqskin-bench -- --help >/dev/null  # make bench's first command starts
 
 # Lints with warnings as errors, among them that every `unsafe` block says why it is sound
 # (clippy::undocumented_unsafe_blocks, Cargo.toml); test-arm lints the aarch64 code too.

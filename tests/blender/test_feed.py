@@ -615,6 +615,18 @@ def checks_through_python(dq_skin, monkeypatch) -> list:
     return names_of_calls(monkeypatch, dq_skin.engine.playback, "_fed_frame_stands")
 
 
+def checks_while_playing(dq_skin, monkeypatch, obj, reference) -> list:
+    """Frames 4 and 5, then 6 to 8 each equal to `reference`: the objects whose fed frames were
+    checked through Blender's Python API in the last three (see `checks_through_python`)."""
+    for f in (4, 5):
+        bpy.context.scene.frame_set(f)
+    checked = checks_through_python(dq_skin, monkeypatch)
+    for f in (6, 7, 8):
+        bpy.context.scene.frame_set(f)
+        assert_same(obj, reference, f"frame {f}")
+    return checked
+
+
 def _reference_modifier(reference):
     return next(m for m in reference.modifiers if m.type == "ARMATURE")
 
@@ -651,12 +663,7 @@ def test_fed_frames_are_checked_from_memory_and_every_change_is_seen(dq_skin, mo
     followed at once (the frame equals the Armature modifier set up the same way)."""
     obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
     scene = bpy.context.scene
-    for f in (4, 5):
-        scene.frame_set(f)
-    checked = checks_through_python(dq_skin, monkeypatch)
-    for f in (6, 7, 8):
-        scene.frame_set(f)
-        assert_same(obj, reference, f"frame {f}")
+    checked = checks_while_playing(dq_skin, monkeypatch, obj, reference)
     assert checked == [], "frames where only the pose changed were checked through the Python API"
     assert dq_skin.SESSION.readers.object_state_checked
     SCRIPT_CHANGES[change](dq_skin, obj, reference, dq_skin_mods(obj)[0], arm)
@@ -692,12 +699,7 @@ def test_an_armature_updated_on_every_frame_is_checked_from_memory(dq_skin, monk
     counting = lambda _scene, depsgraph: updates.extend(u.id.original == arm.data for u in depsgraph.updates)  # noqa: E731
     bpy.app.handlers.frame_change_post.append(counting)
     try:
-        for f in (4, 5):
-            scene.frame_set(f)
-        checked = checks_through_python(dq_skin, monkeypatch)
-        for f in (6, 7, 8):
-            scene.frame_set(f)
-            assert_same(obj, reference, f"frame {f}")
+        checked = checks_while_playing(dq_skin, monkeypatch, obj, reference)
     finally:
         bpy.app.handlers.frame_change_post.remove(counting)
     assert sum(updates) >= 3, "the armature's data was not updated on every frame: the test tests nothing"

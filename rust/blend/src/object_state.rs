@@ -414,7 +414,8 @@ impl Walk<'_> {
                 }
             }
             self.int(-1); // (the end of the stack: a modifier's fields cannot be taken for what follows)
-                          // (Streamed: a copy of each name was a third of this read for a character's 160.)
+
+            // The names streamed: a copy of each was a third of this read for a character's 160.
             each_vertex_group(l, object, |name| self.bytes(name))?;
         }
         Ok(())

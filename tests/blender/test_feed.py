@@ -365,11 +365,14 @@ def test_a_hidden_character_costs_nothing_and_shows_when_shown(dq_skin, monkeypa
     hide(hidden, how, False)
     scene.frame_set(9)
     assert_same(hidden, reference, "shown, at the frame change")
+    # (Its own batch of the feed skins it from the frame change it shows at; the scene's batch,
+    # which it joins then, may skin the same frame once more.)
+    assert fed_runs(dq_skin, hidden) > runs[0], "the shown character is not fed at the frame it shows at"
     for f in (10, 11):
+        before = fed_runs(dq_skin, hidden)
         scene.frame_set(f)
         assert_same(hidden, reference, f"frame {f}")
-    # (Its own batch of the feed skins it from the frame change it shows at.)
-    assert fed_runs(dq_skin, hidden) == runs[0] + 3, "the shown character is fed again"
+        assert fed_runs(dq_skin, hidden) == before + 1, f"frame {f}: the shown character is not fed once"
     # Hidden by a script right before a frame change, shown in the interface.
     hide(hidden, how, True)
     scene.frame_set(12)
@@ -710,6 +713,125 @@ def test_an_armature_updated_on_every_frame_is_checked_from_memory(dq_skin, monk
     scene.frame_set(10)
     assert_same(obj, reference, f"the frame after {change}")
     assert status(dq_skin, obj).live
+
+
+def full_evaluations(dq_skin, monkeypatch) -> list:
+    """The objects DQ Skin evaluates fully (through Blender's Python API) from now on."""
+    return names_of_calls(monkeypatch, dq_skin.engine.pipeline, "evaluate_object")
+
+
+def updated_in_frames(objs) -> tuple[list, object]:
+    """A frame handler that lists which of `objs` Blender evaluated at each frame change (and
+    the handler, to remove)."""
+    seen = []
+
+    def handler(_scene, depsgraph):
+        seen.extend(u.id.original.name for u in depsgraph.updates if u.id.original in objs)
+
+    bpy.app.handlers.frame_change_post.append(handler)
+    return seen, handler
+
+
+def test_a_held_pose_is_neither_skinned_nor_evaluated_again(dq_skin, monkeypatch, route):
+    """Past its last key a rig holds its pose: Blender evaluates the bones again on every frame,
+    and the feed finds the frame it skinned last still standing: no kernel run on the carrier's
+    route (its file holds the frame), no full evaluation after it, the mesh equal to the
+    Armature modifier's."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = bpy.context.scene
+    scene.frame_set(21)  # (the last key is on frame 20)
+    runs = fed_runs(dq_skin, obj)
+    evaluated = full_evaluations(dq_skin, monkeypatch)
+    published = Publishes(dq_skin, monkeypatch)
+    for f in (22, 23, 25, 24):
+        scene.frame_set(f)
+        assert_same(obj, reference, f"frame {f}")
+    assert evaluated == [], "held frames were evaluated through the Python API"
+    assert published.count == 0
+    if route == "cache":
+        assert fed_runs(dq_skin, obj) == runs, "a held frame was skinned again"
+    else:  # the result object is evaluated again from its own mesh: skinned again
+        assert fed_runs(dq_skin, obj) == runs + 4
+    scene.frame_set(12)  # moving again
+    assert_same(obj, reference, "frame 12, after the held frames")
+    assert fed_runs(dq_skin, obj) > runs
+
+
+def _posed(dq, obj, ref, mod, arm):
+    arm.pose.bones["Bone2"].rotation_quaternion = (0.8, 0.2, 0.5, 0.1)
+
+
+def _vertex_moved(dq, obj, ref, mod, arm):
+    for o in (obj, ref):
+        o.data.vertices[5].co.x += 0.25
+
+
+def _object_moved(dq, obj, ref, mod, arm):
+    for o in (obj, ref):
+        o.location.y += 0.5
+
+
+# What a script may change on a character standing still before the next frame change.
+STILL_CHANGES = {**SCRIPT_CHANGES, "a bone posed": _posed, "a vertex moved": _vertex_moved, "the object moved": _object_moved}
+
+
+@pytest.mark.parametrize("change", sorted(STILL_CHANGES))
+def test_a_character_standing_still_costs_nothing_and_every_change_is_seen(dq_skin, monkeypatch, route, change):
+    """A rig with no animation: Blender evaluates neither it nor a mesh it deforms with the
+    Armature modifier at a frame change, and neither DQ Skin's feed nor its full evaluation
+    runs (the feed's driver runs only when what it follows changes); whatever a script changes
+    before the next frame change is seen then (the mesh equals the Armature modifier's)."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = bpy.context.scene
+    scene.frame_set(8)
+    arm.animation_data.action = None  # (the pose stays as frame 8 left it)
+    scene.frame_set(9)
+    assert_same(obj, reference, "frame 9, standing still")
+    runs = fed_runs(dq_skin, obj)
+    evaluated = full_evaluations(dq_skin, monkeypatch)
+    published = Publishes(dq_skin, monkeypatch)
+    seen, handler = updated_in_frames({obj, arm, reference})
+    try:
+        for f in (10, 11, 12):
+            scene.frame_set(f)
+            assert_same(obj, reference, f"frame {f}")
+    finally:
+        bpy.app.handlers.frame_change_post.remove(handler)
+    assert seen == [], "Blender evaluated the character standing still"
+    assert evaluated == [] and published.count == 0, "DQ Skin evaluated the character standing still"
+    assert fed_runs(dq_skin, obj) == runs
+    STILL_CHANGES[change](dq_skin, obj, reference, dq_skin_mods(obj)[0], arm)
+    scene.frame_set(13)
+    assert_same(obj, reference, f"after {change}")
+    scene.frame_set(14)
+    assert_same(obj, reference, f"the frame after {change}")
+    if change == "a bone posed":
+        assert fed_runs(dq_skin, obj) == runs + 1, "the new pose was not skinned by the feed"
+
+
+def test_a_character_standing_still_under_a_modifier_that_moves_with_time(dq_skin, monkeypatch, route):
+    """A Wave after DQ Skin: Blender evaluates the mesh on every frame, the rig standing still;
+    the carrier gives the frame DQ Skin skinned last (the feed does not run), and nothing is
+    evaluated through the Python API."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    for o in (obj, reference):
+        wave = o.modifiers.new("Wave", "WAVE")
+        wave.height, wave.time_offset = 0.2, -3.0
+    scene = bpy.context.scene
+    scene.frame_set(8)
+    arm.animation_data.action = None
+    scene.frame_set(9)
+    runs = fed_runs(dq_skin, obj)
+    evaluated = full_evaluations(dq_skin, monkeypatch)
+    seen, handler = updated_in_frames({obj})
+    try:
+        for f in (10, 11, 12):
+            scene.frame_set(f)
+            assert_same(obj, reference, f"frame {f}")
+    finally:
+        bpy.app.handlers.frame_change_post.remove(handler)
+    assert len(seen) == 3, "the Wave did not make Blender evaluate the mesh: the test tests nothing"
+    assert evaluated == [] and fed_runs(dq_skin, obj) == runs
 
 
 def test_the_object_state_reader_is_checked_on_its_first_read(dq_skin, monkeypatch):

@@ -18,6 +18,9 @@ from ..model.keys import FrameKey, InputKey, PoseKey, Source
 from ..model.state import Mode, RouteKind
 from . import binding, inputs
 
+# What `FedFrame._prepare` returns for a member whose carrier already holds this frame.
+CURRENT = object()
+
 
 class FedFrame:
     """One run of a batch's driver in one depsgraph."""
@@ -29,9 +32,10 @@ class FedFrame:
         self.reads = pose.PoseReads(readers.pose, readers.pose_error)
         self.poses: dict[int, np.ndarray] = {}
 
-    def run(self, members: list) -> list:
-        """Skins what it can of `members`; returns the members it skinned."""
-        skinned = []
+    def run(self, members: list) -> tuple[list, list]:
+        """Skins what it can of `members`; returns the members it skinned and those whose
+        carrier holds this frame already (a held pose)."""
+        skinned, current = [], []
         levels: dict[int, list] = {}
         for m in members:
             levels.setdefault(m.order, []).append(m)
@@ -40,7 +44,10 @@ class FedFrame:
             ready = []
             for m in levels[order]:
                 prepared = self._prepare(m, outputs)
-                if prepared is not None:
+                if prepared is CURRENT:
+                    outputs[id(m.target.st)] = m.target.st.output.buffer
+                    current.append(m)
+                elif prepared is not None:
                     ready.append((m, *prepared))
             if not ready:
                 continue
@@ -61,11 +68,12 @@ class FedFrame:
                 st.output.generation += 1
                 outputs[id(st)] = out
                 skinned.append(m)
-        return skinned
+        return skinned, current
 
     def _prepare(self, m, outputs: dict):
         """The member's job with this frame's inputs, the key of what it computes and where it
-        writes; None where the full evaluation must decide."""
+        writes; `CURRENT` where its carrier holds this frame already; None where the full
+        evaluation must decide."""
         target, dg = m.target, self.depsgraph
         st = target.st
         out = st.output
@@ -102,8 +110,10 @@ class FedFrame:
             deform = self._pose_matrices(arm, arm_eval, bound)
             influences, rest_of, pose_key = bound.influences, lambda: bound.rest, PoseKey.of_matrices(deform)
         key = FrameKey(old.settings, input_key, pose_key, premat.tobytes(), old.result, old.mesh_version)
-        if key == old:
-            return None  # already this (what the carrier reads holds it)
+        if key == old and m.kind is RouteKind.CACHE:
+            # A held pose: the carrier's file holds this frame already. (A result object is
+            # evaluated again with the batch, from its own mesh: it is written again below.)
+            return CURRENT
         where = self.session.routes.result.fed_out(target, dg) if m.kind is RouteKind.NODE else out.buffer
         if where is None:
             return None

@@ -73,7 +73,7 @@ def _stands_as_checked(rec, ctx: Context) -> bool:
     for key, st, settings_key, mesh_version, companion in check.mods:
         written = st.output.written
         if (
-            not feeds.skinned_with(key, ctx.fed_stamp)
+            not feeds.stands_with(key, ctx.fed_stamp)
             or states.find(key) is not st
             or written is None
             or written.settings != settings_key
@@ -133,7 +133,7 @@ def _fed_frame_stands(obj, ctx: Context, bones_changed: bool) -> list | None:
     checked = []
     for mod in mods:
         key = mod_key(obj, mod)
-        if not mod.show_viewport or not feeds.skinned_with(key, ctx.fed_stamp):
+        if not mod.show_viewport or not feeds.stands_with(key, ctx.fed_stamp):
             return None
         st = session.states.find(key)
         checked.append((key, st))

@@ -9,7 +9,10 @@ them; it skins every member of the batch in one call and writes each one's posit
 route's carrier reads them. Each carrier (a Mesh Cache on the character, or the deform-only
 modifier on a result object) has a driver Blender evaluates without Python that reads the
 batch's property, so it is evaluated after the batch: everything happens in the evaluation
-that posed the bones, and Blender never evaluates the scene a second time for it.
+that posed the bones, and Blender never evaluates the scene a second time for it. Its expression
+subscripts the function rather than calling it, so Blender runs it only when something it
+follows changed, not on every frame: a character standing still is not evaluated at all, as
+with the Armature modifier.
 
 Members Blender would not evaluate in the viewport on its own (disabled in viewports, or in
 excluded or disabled collections: `blender.visibility`) get no variable in the scene's batch,
@@ -59,6 +62,7 @@ class Member:
     # collection): its object's own batch feeds it, which only its carriers pull into a graph
     hidden: bool = False
     skinned: tuple = (0, 0)  # (frame change, depsgraph address) of its last skinning here
+    covered: int = 0  # the batch's run (`Batch.calls`) that last skinned it or found it current
     runs: int = 0  # frames skinned here (tests and the benchmark read it)
 
 
@@ -72,11 +76,14 @@ class Batch:
     dirty: bool = True  # its variables must be built again (`Feeds.commit`)
     layout: tuple = ()  # its scene's `visibility.layout` when its members' visibility was read
     runs: int = 0
+    calls: int = 0  # every time Blender ran its driver (a run that skinned nothing too)
+    called: tuple = (0, 0)  # the stamp of the last of them
 
 
 class Feeds:
     """Every batch of the session (owned by the session). `skin(members, depsgraph)` skins
-    members inside an evaluation and returns those it skinned (the engine's fed frame);
+    members inside an evaluation and returns those it skinned and those whose carrier held the
+    frame already (the engine's fed frame);
     `busy()` says whether the main thread is inside a Python operator (a rig rebuild, say:
     Blender evaluates the scene after each of its steps, and the handler skins once it is done)."""
 
@@ -149,8 +156,11 @@ class Feeds:
         driver.type = "SCRIPTED"
         # Set last: Blender compiles the expression now, while the function is known to it (with
         # Auto Run Python Scripts off it refuses names it does not know at compile time).
-        bpy.app.driver_namespace[FUNCTION] = self.run
-        driver.expression = f"{FUNCTION}({uid})"
+        bpy.app.driver_namespace[FUNCTION] = _Driver(self.run)
+        # A subscript, not a call: Blender runs a Python expression with a call in it on every
+        # frame ("may depend on time"); this one runs only when its variables' targets change,
+        # so a character standing still costs no evaluation at all (`stands_with`).
+        driver.expression = f"{FUNCTION}[{uid}]"
         return batch
 
     def leave(self, key: ModKey) -> None:
@@ -281,15 +291,20 @@ class Feeds:
         kept = self._kept
         return kept[1] if kept[0] == stamp else None
 
-    def skinned_now(self, key: ModKey, depsgraph) -> bool:
-        """Whether the batch skinned this member in this frame change's evaluation of `depsgraph`."""
-        return self.skinned_with(key, self.stamp(depsgraph))
-
-    def skinned_with(self, key: ModKey, stamp: tuple) -> bool:
-        """`skinned_now` with the evaluation's `stamp` (one per handler call, many members)."""
+    def stands_with(self, key: ModKey, stamp: tuple) -> bool:
+        """Whether what the member's carrier holds is this pose's skinning as far as the batch can
+        tell, in the evaluation `stamp` names (see `stamp`): the batch skinned it (or found it
+        current) in this evaluation, or Blender did not run the batch's driver in it and its
+        last run in this graph covered the member: then none of the bones, transforms and shape
+        keys its variables follow changed since (a character standing still, which Blender does
+        not evaluate again either)."""
         batch = self._of.get(key)
         m = batch.members.get(key) if batch is not None else None
-        return m is not None and m.skinned == stamp
+        if m is None:
+            return False
+        if m.skinned == stamp:
+            return True
+        return m.ordered and not batch.dirty and batch.called != stamp and batch.called[1] == stamp[1] and m.covered == batch.calls
 
     def runs(self, key: ModKey) -> int:
         m = self.member(key)
@@ -301,17 +316,37 @@ class Feeds:
         try:
             depsgraph = bpy.app.driver_namespace.get("depsgraph")
             batch = self._by_uid.get(uid)
-            if batch is not None and depsgraph is not None and self.skin is not None and not self._busy():
-                with self._lock:
+            if batch is None or depsgraph is None:
+                return 1.0
+            with self._lock:
+                # Counted first: a run that skins nothing (a Python operator is busy, a failure)
+                # leaves its members to the frame handler until a later run covers them.
+                batch.calls += 1
+                batch.called = stamp = self.stamp(depsgraph)
+                if self.skin is not None and not self._busy():
                     members = [m for m in batch.members.values() if m.ordered]
-                    stamp = self.stamp(depsgraph)
-                    for m in self.skin(members, depsgraph):
-                        m.skinned = stamp
+                    skinned, current = self.skin(members, depsgraph)
+                    for m in skinned:
                         m.runs += 1
+                    for m in (*skinned, *current):
+                        m.skinned = stamp
+                        m.covered = batch.calls
                     batch.runs += 1
         except Exception:  # the handler's full evaluation follows and reports what is wrong
             pass
         return 1.0
+
+
+class _Driver:
+    """What the batches' driver expression subscripts (`dq_skin_feed[uid]`): runs that batch."""
+
+    __slots__ = ("run",)
+
+    def __init__(self, run):
+        self.run = run
+
+    def __getitem__(self, uid: int) -> float:
+        return self.run(uid)
 
 
 def _alive(datablock) -> bool:

@@ -13,7 +13,8 @@ frees and allocates a large array page-faults afresh at random frames, whichever
 benchmark, not a test: it prints a row per case and writes JSON (default:
 target/bench-blender.json); docs/performance.md has the figures.
 
-Cases (as in the issues): a 3k grid, CesiumMan, 200 CesiumMen, grids of 250k and 1M vertices
+Cases (as in the issues): a 3k grid, CesiumMan, 200 CesiumMen (moving, and standing still), the
+Rigify character holding its pose, grids of 250k and 1M vertices
 (64 bones, 4 influences), 250k with Smooth and Corrective Smooth after the skinning modifier, a
 100k grid on 16 B-Bones of 8 segments, the Rigify character of the tests (its skinning share:
 each frame minus the rig alone's), Optimized Centers (precompute on the Rigify body and on a 52k
@@ -42,7 +43,7 @@ import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
 
 import addon_utils  # noqa: E402  (importable once bpy is)
 
-GROUPS = ("small", "cesium", "crowd", "grid", "later", "bbones", "rigify", "centers", "binding", "weights", "regenerate", "memory")
+GROUPS = ("small", "cesium", "crowd", "still", "grid", "later", "bbones", "rigify", "centers", "binding", "weights", "regenerate", "memory")
 
 
 def cpu_name() -> str:
@@ -100,6 +101,9 @@ def main() -> int:
             report(cases.case_rigify(method, q))
     if "crowd" in only:
         report(cases.case_crowd(50 if q else 200, q))
+    if "still" in only:
+        for row in cases.case_still(q):
+            report(row)
     if "later" in only:
         for later in ("smooth5", "corrective5"):
             report(cases.case_grid(250_000, "DUAL_QUATERNION", q, later=later, routes_too=False))

@@ -152,6 +152,11 @@ def other_rows(rows: list) -> str:
                 f"- {case}: precompute {r['precompute_s']:.2f} s, DQ Skin added to the first frame shown {r['add_and_first_frame_s']:.2f} s, "
                 f"a weight stroke until it shows {r['stroke_update_s']:.2f} s mean, {r['stroke_update_max_s']:.2f} s worst ({len(r['stroke_vertices'])} strokes)"
             )
+        elif case.startswith("still: "):
+            out.append(
+                f"- {case[len('still: ') :]}: a frame change {ms(r['armature_ms'])} ms with the Armature modifier, "
+                f"{ms(r['dq_skin_ms'])} ms with DQ Skin (same mesh within {r['max_deviation']:.1e})"
+            )
         elif case.startswith("dq_skin_add"):
             out.append(f"- {case}: {r['seconds']:.2f} s")
         elif case.startswith("weight change"):

@@ -11,8 +11,8 @@ import bpy
 import addon_utils
 
 from . import scenes
-from .compare import add_dq_skin, compare
-from .timing import ADDON, addon, show_only, timed_s
+from .compare import add_dq_skin, compare, positions
+from .timing import ADDON, addon, alternate, show_only, timed_s
 
 FRAMES = (5, 12, 19, 26, 33)
 
@@ -91,6 +91,41 @@ def case_rigify(method: str, quick: bool) -> dict:
         "method": method,
         **row,
     }
+
+
+def case_still(quick: bool) -> list[dict]:
+    """Frame changes where nothing moves: the Rigify character holding its pose past its last
+    key (Blender still evaluates its rig on every frame), and a crowd whose rigs have no
+    animation (Blender evaluates none of it): the Armature modifier against DQ Skin, each on
+    its own copy, alternating in one session, checked to show the same mesh first."""
+    rows = []
+    scenes.empty_scene()
+    body, rig = scenes.rigify()
+    rows.append(_still("Rigify character holding its pose, linear", [body], "LINEAR", (45, 50, 55, 58, 52), quick))
+    scenes.empty_scene()
+    pairs = scenes.crowd(50 if quick else 200)
+    label = f"{len(pairs)} CesiumMen standing still, dual_quaternion"
+    rows.append(_still(label, [m for m, _ in pairs], "DUAL_QUATERNION", (3, 9, 15, 21), quick, stop=[a for _, a in pairs]))
+    return rows
+
+
+def _still(label: str, meshes: list, method: str, frames, quick: bool, stop=()) -> dict:
+    """`meshes` (with their Armature modifiers) against copies with DQ Skin on `frames`; the
+    armatures `stop` lose their animation once DQ Skin is set up."""
+    for m in meshes:
+        next(x for x in m.modifiers if x.type == "ARMATURE").use_deform_preserve_volume = method == "DUAL_QUATERNION"
+    ours = [scenes.copy_of(m, f"{m.name} DQ Skin") for m in meshes]
+    show_only(*ours)
+    add_dq_skin(ours, method)
+    for f in FRAMES[:3]:
+        bpy.context.scene.frame_set(f)
+    for a in stop:
+        a.animation_data.action = None
+    bpy.context.scene.frame_set(frames[0])
+    show_only(*meshes, *ours)
+    deviation = max(float(np.abs(positions(m) - positions(o)).max()) for m, o in zip(meshes, ours))
+    times = alternate({"armature": meshes, "dq_skin": ours}, frames, *((2, 5) if quick else (5, 9)))
+    return {"case": f"still: {label}", "objects": len(meshes), "method": method, "max_deviation": deviation, **times}
 
 
 def case_centers(quick: bool) -> list[dict]:

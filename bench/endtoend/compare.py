@@ -111,6 +111,8 @@ def compare(
         show_only(*auto)
         with Parts() as parts:
             row.update(parts.measure(auto, frames, per_round * 2))
+        if chosen in ("cache", "node") and row["dq_skin_fed_ms"] == 0.0:
+            raise RuntimeError(f"{chosen} route: the feed did not skin a frame (the figures would time its fallback)")
         if floor is not None:
             row["floor_python_driver_calls"] = floor.python_calls
         if route_floor is not None:

@@ -310,10 +310,8 @@ class RouteFloor:
         self.saved = tracker.frame
         # (Only the feed's bookkeeping: characters just shown leave the batches of their own.)
         tracker.frame = lambda _self, _depsgraph: feeds.commit()
-        # (On the instance: the feed puts its `run` in the driver namespace again whenever it
-        # makes a batch, as showing and hiding characters does.)
+        # (On the instance: the batches' driver looks `run` up on it at each call.)
         feeds.run = self._nothing
-        bpy.app.driver_namespace[a.routes.feed.FUNCTION] = feeds.run
 
     def leave(self):
         if self.saved is None:
@@ -322,7 +320,6 @@ class RouteFloor:
         feeds = a.SESSION.routes.feeds
         a.engine.tracker.Tracker.frame = self.saved
         del feeds.run
-        bpy.app.driver_namespace[a.routes.feed.FUNCTION] = feeds.run
         self.saved = None
 
     @property

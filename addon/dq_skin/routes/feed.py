@@ -156,7 +156,7 @@ class Feeds:
         driver.type = "SCRIPTED"
         # Set last: Blender compiles the expression now, while the function is known to it (with
         # Auto Run Python Scripts off it refuses names it does not know at compile time).
-        bpy.app.driver_namespace[FUNCTION] = _Driver(self.run)
+        bpy.app.driver_namespace[FUNCTION] = _Driver(self)
         # A subscript, not a call: Blender runs a Python expression with a call in it on every
         # frame ("may depend on time"); this one runs only when its variables' targets change,
         # so a character standing still costs no evaluation at all (`stands_with`).
@@ -338,15 +338,16 @@ class Feeds:
 
 
 class _Driver:
-    """What the batches' driver expression subscripts (`dq_skin_feed[uid]`): runs that batch."""
+    """What the batches' driver expression subscripts (`dq_skin_feed[uid]`): runs that batch
+    (`Feeds.run`, looked up at each run)."""
 
-    __slots__ = ("run",)
+    __slots__ = ("feeds",)
 
-    def __init__(self, run):
-        self.run = run
+    def __init__(self, feeds: Feeds):
+        self.feeds = feeds
 
     def __getitem__(self, uid: int) -> float:
-        return self.run(uid)
+        return self.feeds.run(uid)
 
 
 def _alive(datablock) -> bool:

@@ -137,6 +137,16 @@ impl PoseLayout {
     }
 }
 
+/// What [`read_pose`] reads of an armature's pose channels (the parts of
+/// `dqskin_core::skin::ArmaturePose::from_bones`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseRead {
+    /// Every channel's deform flag, in `pose.bones` order.
+    pub deforms: Vec<bool>,
+    /// The deforming channels, in that order, each with its bone and B-Bone cache.
+    pub bones: Vec<PoseChannel>,
+}
+
 /// Reads the pose channels of the armature `Object` at `object` (`bpy.types.Object.as_pointer()`),
 /// which must have exactly `expected_channels` channels (`len(object.pose.bones)`).
 ///
@@ -148,11 +158,7 @@ impl PoseLayout {
 /// ordered after them), since Blender's other threads then only read them. The object type, the channel count and every B-Bone segment count are
 /// checked before anything they lead to is followed, so a mismatched layout is reported rather
 /// than followed far.
-pub unsafe fn read_pose(
-    layout: &PoseLayout,
-    object: usize,
-    expected_channels: usize,
-) -> Result<Vec<PoseChannel>, ReadError> {
+pub unsafe fn read_pose(layout: &PoseLayout, object: usize, expected_channels: usize) -> Result<PoseRead, ReadError> {
     // SAFETY: for all reads below, offsets come from the SDNA of this Blender and the object is
     // live (caller); the pose, channels, bones and B-Bone arrays are reached through pointers
     // read from it, each non-null, and the arrays' lengths come from segment counts checked
@@ -165,17 +171,22 @@ pub unsafe fn read_pose(
                 Some(bones_by_name(layout, read(object + object_data), expected_channels)?)
             }
         };
-        let mut channels = Vec::with_capacity(expected_channels);
+        // (Room for the bones of most rigs at once: a bone is a few hundred bytes, moved at each
+        // growth of the vector.)
+        let bones = Vec::with_capacity(expected_channels.min(256));
+        let mut found = PoseRead { deforms: Vec::with_capacity(expected_channels), bones };
         each_channel(layout, pose, expected_channels, |chan| {
             let bone = match (&bones_by_name, layout.bone_link) {
                 (None, BoneLink::Pointer { chan_bone }) => read(chan + chan_bone),
                 (Some(map), _) => map.get(name_bytes(chan + layout.chan_name, layout.name_size)).copied().unwrap_or(0),
                 (None, BoneLink::ByName { .. }) => unreachable!("the map is built for this link"),
             };
-            channels.push(read_channel(layout, chan, bone)?);
+            let channel = read_channel(layout, chan, bone)?;
+            found.deforms.push(channel.is_some());
+            found.bones.extend(channel);
             Ok(())
         })?;
-        Ok(channels)
+        Ok(found)
     }
 }
 
@@ -296,26 +307,25 @@ unsafe fn bones_by_name<'a>(
     Ok(map)
 }
 
-/// One `bPoseChannel` and its `Bone` at `bone` (for a bone that does not deform, only its name
-/// and flag: nothing deforms with it).
+/// One `bPoseChannel` and its `Bone` at `bone`; None for a bone that does not deform (nothing
+/// deforms with it, or looks it up by name: a rig has many more of them than of deforming
+/// ones, Rigify's 546 of 706, so only its flag is read).
 ///
 /// # Safety
 /// As [`read_pose`], for the channel at `chan`; `bone` is its bone's address or 0.
-unsafe fn read_channel(layout: &PoseLayout, chan: usize, bone: usize) -> Result<PoseChannel, ReadError> {
+unsafe fn read_channel(layout: &PoseLayout, chan: usize, bone: usize) -> Result<Option<PoseChannel>, ReadError> {
     // SAFETY: see `read_pose`.
     unsafe {
         if bone == 0 {
             return Err(ReadError::Implausible("pose channel without a bone"));
         }
+        let flag: i32 = read(bone + layout.bone_flag);
+        if flag & BONE_NO_DEFORM != 0 {
+            return Ok(None);
+        }
         let name = name_bytes(chan + layout.chan_name, layout.name_size);
         if name != name_bytes(bone + layout.bone_name, layout.bone_name_size) {
             return Err(ReadError::Implausible("pose channel named unlike its bone"));
-        }
-        let flag: i32 = read(bone + layout.bone_flag);
-        if flag & BONE_NO_DEFORM != 0 {
-            // No name: a rig has many more such bones than deforming ones (Rigify's 546 of
-            // 706), and a string for each, every frame, was a third of this read.
-            return Ok(PoseChannel::not_deforming(String::new()));
         }
         let name = String::from_utf8_lossy(name).into_owned();
         let segments: i16 = read(bone + layout.bone_segments);
@@ -331,7 +341,7 @@ unsafe fn read_channel(layout: &PoseLayout, chan: usize, bone: usize) -> Result<
         } else {
             None
         };
-        Ok(PoseChannel {
+        Ok(Some(PoseChannel {
             name,
             deform: true,
             channel: read_mat4(chan + layout.chan_mat),
@@ -349,7 +359,7 @@ unsafe fn read_channel(layout: &PoseLayout, chan: usize, bone: usize) -> Result<
             segments,
             curved: read::<u8>(bone + layout.bone_mapping_mode) == BBONE_MAPPING_CURVED,
             bbone,
-        })
+        }))
     }
 }
 

@@ -58,8 +58,10 @@ impl PyPoseMemory {
             // bone and each B-Bone's segments: `routes.feed.order_after_bones`); nothing else
             // writes a pose during an evaluation. See `read_pose`; the extension checks the first
             // read of a session against Blender's own data (`blender.memory_check`).
-            let channels = self.counted(armature, |ptr, count| unsafe { read_pose(&self.layout, ptr, count) })?;
-            ArmaturePose::new(channels).map(PyPoseData).map_err(|e| PyValueError::new_err(format!("armature: {e}")))
+            let read = self.counted(armature, |ptr, count| unsafe { read_pose(&self.layout, ptr, count) })?;
+            ArmaturePose::from_bones(read.deforms, read.bones)
+                .map(PyPoseData)
+                .map_err(|e| PyValueError::new_err(format!("armature: {e}")))
         })
     }
 

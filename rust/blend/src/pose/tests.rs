@@ -239,13 +239,13 @@ fn fixture() -> Box<Fixture> {
     f
 }
 
-fn read_with(f: &Fixture, expected: usize, by_name: bool) -> Result<Vec<PoseChannel>, ReadError> {
+fn read_with(f: &Fixture, expected: usize, by_name: bool) -> Result<PoseRead, ReadError> {
     let layout = PoseLayout::new(&pose_sdna(by_name)).unwrap();
     unsafe { read_pose(&layout, &f.object as *const _ as usize, expected) }
 }
 
 /// Reads through both links (the bone pointer and the bone of the same name), which must agree.
-fn read_fixture(f: &Fixture, expected: usize) -> Result<Vec<PoseChannel>, ReadError> {
+fn read_fixture(f: &Fixture, expected: usize) -> Result<PoseRead, ReadError> {
     let by_pointer = read_with(f, expected, false);
     let by_name = read_with(f, expected, true);
     if by_pointer.is_ok() || by_name.is_ok() {
@@ -278,10 +278,11 @@ fn layout_matches_the_c_structs() {
 fn reads_channels_bones_and_the_b_bone_cache() {
     let f = fixture();
     let got = read_fixture(&f, 2).unwrap();
-    let (root, spine) = (&got[0], &got[1]);
-    assert_eq!((root.name.as_str(), spine.name.as_str()), ("", "Spine"));
     // A bone that does not deform: its flag only (nothing deforms with it or looks it up by name).
-    assert_eq!(root, &PoseChannel::not_deforming(String::new()));
+    assert_eq!(got.deforms, [false, true]);
+    assert_eq!(got.bones.len(), 1);
+    let spine = &got.bones[0];
+    assert_eq!(spine.name, "Spine");
     assert!(spine.deform && !spine.envelope.multiply_groups);
     assert_eq!(spine.channel, Mat4::from_cols_array(&matrix(2.0)));
     assert_eq!(spine.rest, Mat4::from_cols_array(&matrix(100.0)));
@@ -293,7 +294,9 @@ fn reads_channels_bones_and_the_b_bone_cache() {
     // Multiply Vertex Group by Envelope on a deforming bone.
     let mut f = fixture();
     f.bones[0].flag = BONE_MULT_VG_ENV;
-    let root = read_fixture(&f, 2).unwrap().remove(0);
+    let both = read_fixture(&f, 2).unwrap();
+    assert_eq!(both.deforms, [true, true]);
+    let root = &both.bones[0];
     assert!(root.deform && root.envelope.multiply_groups);
     assert_eq!(root.channel, Mat4::from_cols_array(&matrix(1.0)));
     assert_eq!((root.segments, root.curved, root.bbone.is_none()), (1, false, true));
@@ -319,11 +322,11 @@ fn the_cache_is_read_only_where_blender_deforms_with_it() {
     // A cache for another segment count (the bone changed, the pose was not evaluated yet).
     let mut f = fixture();
     f.channels[1].runtime.segments = 2;
-    assert!(read_fixture(&f, 2).unwrap()[1].bbone.is_none());
+    assert!(read_fixture(&f, 2).unwrap().bones[0].bbone.is_none());
     // The Straight mapping keeps no boundaries.
     let mut f = fixture();
     f.channels[1].runtime.boundaries = core::ptr::null();
-    let spine = read_fixture(&f, 2).unwrap().remove(1);
+    let spine = read_fixture(&f, 2).unwrap().bones.remove(0);
     assert!(spine.bbone.unwrap().boundaries.is_empty());
 }
 
@@ -335,7 +338,7 @@ fn channel_matrices_alone_are_every_channels_in_order() {
     let got = unsafe { read_channel_matrices(&layout, object, 2) }.unwrap();
     let want = [matrix(1.0), matrix(2.0)].map(|m| Mat4::from_cols_array(&m));
     assert_eq!(got, want, "the non-deforming channel too");
-    assert_eq!(got[1], read_fixture(&f, 2).unwrap()[1].channel);
+    assert_eq!(got[1], read_fixture(&f, 2).unwrap().bones[0].channel);
     assert_eq!(
         unsafe { read_channel_matrices(&layout, object, 1) },
         Err(ReadError::ChannelCount { expected: 1, found: 2 })

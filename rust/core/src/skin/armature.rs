@@ -28,8 +28,7 @@ pub struct BBoneCache {
 
 /// One pose channel with its bone. For a bone that does not deform only `deform` matters
 /// (nothing deforms with it, and the Armature modifier looks up no vertex group's bone among
-/// them): [`PoseChannel::not_deforming`] leaves the rest at rest, and the memory reader gives it
-/// no name.
+/// them): [`ArmaturePose`] keeps nothing else of it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseChannel {
     pub name: String,
@@ -50,37 +49,17 @@ pub struct PoseChannel {
     pub bbone: Option<BBoneCache>,
 }
 
-impl PoseChannel {
-    /// A channel whose bone does not deform: identity matrices, no envelope, no B-Bone.
-    pub fn not_deforming(name: String) -> Self {
-        Self {
-            name,
-            deform: false,
-            channel: Mat4::IDENTITY,
-            rest: Mat4::IDENTITY,
-            length: 0.0,
-            envelope: Envelope {
-                head: glam::Vec3::ZERO,
-                tail: glam::Vec3::ZERO,
-                head_radius: 0.0,
-                tail_radius: 0.0,
-                distance: 0.0,
-                weight: 0.0,
-                multiply_groups: false,
-            },
-            segments: 1,
-            curved: false,
-            bbone: None,
-        }
-    }
-}
-
 /// The pose of an armature's channels, in `pose.bones` order; its *bones* are the deforming
-/// channels, in that order.
+/// channels, in that order. Only the bones are kept whole: of the other channels, only that they
+/// do not deform (a generated Rigify rig has 546 such channels to 160 bones).
 #[derive(Clone, Debug)]
 pub struct ArmaturePose {
-    channels: Vec<PoseChannel>,
-    bones: Vec<usize>,
+    /// Every channel's deform flag, in `pose.bones` order.
+    deforms: Vec<bool>,
+    /// The deforming channels, in order.
+    bones: Vec<PoseChannel>,
+    /// Each bone's index in `pose.bones`.
+    indices: Vec<usize>,
     /// First joint of each bone's B-Bone in the expanded bone list.
     starts: Vec<Option<u32>>,
     expanded: usize,
@@ -89,10 +68,27 @@ pub struct ArmaturePose {
 }
 
 impl ArmaturePose {
-    /// Checks that every matrix and envelope is finite and every B-Bone cache has one entry per
-    /// joint (`segments + 1`, the deform matrices and the Curved boundaries alike).
+    /// From every channel, in `pose.bones` order (see [`ArmaturePose::from_bones`]).
     pub fn new(channels: Vec<PoseChannel>) -> Result<Self, SkinError> {
-        for (i, c) in channels.iter().enumerate() {
+        let deforms = channels.iter().map(|c| c.deform).collect();
+        Self::from_bones(deforms, channels.into_iter().filter(|c| c.deform).collect())
+    }
+
+    /// From every channel's deform flag (`deforms`, in `pose.bones` order) and the deforming
+    /// channels alone (`bones`, in that order), as the memory reader gives them. Checks that they
+    /// agree, that every matrix and envelope is finite and every B-Bone cache has one entry per
+    /// joint (`segments + 1`, the deform matrices and the Curved boundaries alike).
+    pub fn from_bones(deforms: Vec<bool>, bones: Vec<PoseChannel>) -> Result<Self, SkinError> {
+        let indices: Vec<usize> = deforms.iter().enumerate().filter(|(_, &d)| d).map(|(i, _)| i).collect();
+        if indices.len() != bones.len() || bones.iter().any(|c| !c.deform) {
+            return Err(SkinError::InvalidInfluences(format!(
+                "{} deforming pose channels, but {} bones given (of which {} deform)",
+                indices.len(),
+                bones.len(),
+                bones.iter().filter(|c| c.deform).count()
+            )));
+        }
+        for (&i, c) in indices.iter().zip(&bones) {
             let bad = |problem: String| {
                 Err(SkinError::InvalidInfluences(format!("pose channel {i} ({}): {problem}", c.name)))
             };
@@ -127,28 +123,27 @@ impl ArmaturePose {
                 }
             }
         }
-        let bones: Vec<usize> = channels.iter().enumerate().filter(|(_, c)| c.deform).map(|(i, _)| i).collect();
-        let segments: Vec<u32> =
-            bones.iter().map(|&i| channels[i].bbone.as_ref().map_or(1, |_| channels[i].segments)).collect();
+        let segments: Vec<u32> = bones.iter().map(|c| c.bbone.as_ref().map_or(1, |_| c.segments)).collect();
         let (starts, expanded) = bbone_joint_starts(&segments);
-        let mut pose = Self { channels, bones, starts, expanded, binding_signature: 0, pose_signature: 0 };
+        let mut pose = Self { deforms, bones, indices, starts, expanded, binding_signature: 0, pose_signature: 0 };
         pose.binding_signature = pose.binding_digest();
         pose.pose_signature = pose.pose_digest();
         Ok(pose)
     }
 
-    pub fn channels(&self) -> &[PoseChannel] {
-        &self.channels
+    /// Every channel's deform flag, in `pose.bones` order.
+    pub fn deform_flags(&self) -> &[bool] {
+        &self.deforms
     }
 
     /// The deforming channels' indices in `pose.bones`.
     pub fn bone_indices(&self) -> &[usize] {
-        &self.bones
+        &self.indices
     }
 
     /// The deforming channels, in order: the bones influences refer to.
     pub fn bones(&self) -> impl ExactSizeIterator<Item = &PoseChannel> + '_ {
-        self.bones.iter().map(|&i| &self.channels[i])
+        self.bones.iter()
     }
 
     pub fn bone_count(&self) -> usize {
@@ -252,12 +247,13 @@ impl ArmaturePose {
 
     fn binding_digest(&self) -> u64 {
         let mut h = Digest::default();
-        h.word(self.channels.len() as u64);
-        for c in &self.channels {
-            h.word(u64::from(c.deform));
-            if !c.deform {
+        h.word(self.deforms.len() as u64);
+        let mut bones = self.bones.iter();
+        for &deform in &self.deforms {
+            h.word(u64::from(deform));
+            let Some(c) = deform.then(|| bones.next()).flatten() else {
                 continue;
-            }
+            };
             h.bytes(c.name.as_bytes());
             h.matrix(&c.rest);
             let e = &c.envelope;

@@ -55,37 +55,60 @@ fn bbone(name: &str, head: Vec3, segments: u32, curved: bool) -> PoseChannel {
     c
 }
 
-fn sample() -> ArmaturePose {
+fn sample_channels() -> Vec<PoseChannel> {
     let mut hidden = plain("Helper", Vec3::ZERO, 0.0);
     hidden.deform = false;
-    ArmaturePose::new(vec![
+    vec![
         plain("Root", Vec3::ZERO, 0.2),
         hidden,
         bbone("Spine", Vec3::Y, 3, false),
         bbone("Neck", 2.0 * Vec3::Y, 2, true),
-    ])
-    .unwrap()
+    ]
+}
+
+fn sample() -> ArmaturePose {
+    ArmaturePose::new(sample_channels()).unwrap()
+}
+
+#[test]
+fn the_bones_alone_with_every_channels_flag_make_the_same_pose() {
+    let channels = sample_channels();
+    let deforms: Vec<bool> = channels.iter().map(|c| c.deform).collect();
+    let bones: Vec<PoseChannel> = channels.iter().filter(|c| c.deform).cloned().collect();
+    let (whole, parts) = (sample(), ArmaturePose::from_bones(deforms.clone(), bones.clone()).unwrap());
+    assert_eq!(parts.deform_flags(), &[true, false, true, true]);
+    assert_eq!(parts.bone_indices(), whole.bone_indices());
+    assert_eq!(parts.binding_signature(), whole.binding_signature());
+    assert_eq!(parts.pose_signature(), whole.pose_signature());
+    assert_eq!(parts.deform_matrices(), whole.deform_matrices());
+    // Flags and bones that disagree are refused.
+    assert!(ArmaturePose::from_bones(deforms[..3].to_vec(), bones.clone()).is_err());
+    assert!(ArmaturePose::from_bones(vec![true, false, false, true], bones.clone()).is_err());
+    let mut not_deforming = bones;
+    not_deforming[0].deform = false;
+    assert!(ArmaturePose::from_bones(deforms, not_deforming).is_err());
 }
 
 #[test]
 fn bones_are_the_deforming_channels_and_joints_follow_them() {
     let pose = sample();
+    let channels = sample_channels();
     assert_eq!(pose.bone_indices(), &[0, 2, 3]);
     assert_eq!(pose.bone_count(), 3);
     assert_eq!(pose.segments(), vec![1, 3, 2]);
     assert_eq!(pose.expanded_bone_count(), 3 + 4 + 3);
     let deform = pose.deform_matrices();
     assert_eq!(deform.len(), 10);
-    assert_eq!(deform[0], pose.channels()[0].channel);
-    assert_eq!(deform[2], pose.channels()[3].channel);
-    let spine = pose.channels()[2].bbone.as_ref().unwrap();
+    assert_eq!(deform[0], channels[0].channel);
+    assert_eq!(deform[2], channels[3].channel);
+    let spine = channels[2].bbone.as_ref().unwrap();
     assert_eq!(&deform[3..7], &spine.deform[..]);
-    assert_eq!(&deform[7..10], &pose.channels()[3].bbone.as_ref().unwrap().deform[..]);
+    assert_eq!(&deform[7..10], &channels[3].bbone.as_ref().unwrap().deform[..]);
     let rest = pose.rest_matrices();
     assert_eq!(rest.len(), 10);
-    assert_eq!(rest[1], pose.channels()[2].rest);
+    assert_eq!(rest[1], channels[2].rest);
     // A joint's rest basis: the bone's rest times the joint's, with unit axes.
-    let want = pose.channels()[2].rest * spine.rest_joints[1];
+    let want = channels[2].rest * spine.rest_joints[1];
     assert!(rest[4].x_axis.abs_diff_eq(want.x_axis / 1.5, 1e-6));
     assert!(rest[4].z_axis.abs_diff_eq(want.z_axis / 0.5, 1e-6));
     assert_eq!(rest[4].w_axis, want.w_axis);
@@ -129,7 +152,7 @@ fn signatures_follow_what_they_cover() {
     assert_eq!(sample().binding_signature(), binding);
     assert_eq!(sample().pose_signature(), posed);
     let with = |f: &dyn Fn(&mut Vec<PoseChannel>)| {
-        let mut channels = base.channels().to_vec();
+        let mut channels = sample_channels();
         f(&mut channels);
         let p = ArmaturePose::new(channels).unwrap();
         (p.binding_signature() != binding, p.pose_signature() != posed)
@@ -161,20 +184,20 @@ fn signatures_follow_what_they_cover() {
 
 #[test]
 fn inconsistent_channels_are_refused() {
-    let mut channels = sample().channels().to_vec();
+    let mut channels = sample_channels();
     channels[2].bbone.as_mut().unwrap().deform.pop();
     let e = ArmaturePose::new(channels).unwrap_err().to_string();
     assert!(e.contains("pose channel 2 (Spine)") && e.contains("needs 4 joints"), "{e}");
-    let mut channels = sample().channels().to_vec();
+    let mut channels = sample_channels();
     channels[3].bbone.as_mut().unwrap().boundaries.pop();
     assert!(ArmaturePose::new(channels).unwrap_err().to_string().contains("boundaries"));
-    let mut channels = sample().channels().to_vec();
+    let mut channels = sample_channels();
     channels[0].channel.x_axis.x = f32::NAN;
     assert!(ArmaturePose::new(channels).unwrap_err().to_string().contains("NaN"));
-    let mut channels = sample().channels().to_vec();
+    let mut channels = sample_channels();
     channels[2].bbone.as_mut().unwrap().rest_joints[0].w_axis.x = f32::INFINITY;
     assert!(ArmaturePose::new(channels).is_err());
-    let mut channels = sample().channels().to_vec();
+    let mut channels = sample_channels();
     channels[2].segments = 1;
     assert!(ArmaturePose::new(channels).is_err());
 }

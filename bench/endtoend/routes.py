@@ -158,7 +158,7 @@ class ImportRoute:
             v.targets[0].data_path = '["serial"]'
             d.expression = "serial"
             binding, segments = st.binding.binding, st.binding.segments
-            self.variables += a.routes.feed.order_after_bones(driver, rig, list(binding.bone_names), prefix=f"c{k}_")
+            self.variables += a.routes.feed_drivers.order_after_bones(driver, rig, list(binding.bone_names), prefix=f"c{k}_")
             self.members.append((own, rig, binding, segments, st.needs_effective, prefix))
             self.objects.append(copy)
         self.header_of = {}
@@ -264,7 +264,7 @@ class Floors:
             m.deform_mode, m.interpolation = "OVERWRITE", "NONE"
             driver = m.driver_add("factor").driver
             driver.type = "SCRIPTED"
-            addon().routes.feed.order_after_bones(driver, rig, list(bone_names))
+            addon().routes.feed_drivers.order_after_bones(driver, rig, list(bone_names))
             driver.expression = f"{self.name}()" if kind == "floor_python_driver" else "1.0"
             if kind == "floor_carried":
                 a = addon()

@@ -834,6 +834,32 @@ def test_a_character_standing_still_under_a_modifier_that_moves_with_time(dq_ski
     assert evaluated == [] and fed_runs(dq_skin, obj) == runs
 
 
+@pytest.mark.parametrize("rig", ["standing still", "moving"])
+def test_shape_keys_a_script_adds_play(dq_skin, route, rig):
+    """A script adds shape keys to the mesh and keys a value: the mesh follows the shape key on
+    every frame, equal to the Armature modifier's (the feed's driver follows the shape keys
+    too, so a rig standing still does not hold them)."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    scene = bpy.context.scene
+    scene.frame_set(8)
+    if rig == "standing still":
+        arm.animation_data.action = None
+    for o in (obj, reference):
+        o.shape_key_add(name="Basis")
+        bulge = o.shape_key_add(name="Bulge")
+        for p in bulge.data:
+            p.co.x *= 1.4
+        for frame, value in ((10, 0.0), (14, 1.0)):
+            bulge.value = value
+            bulge.keyframe_insert("value", frame=frame)
+    scene.frame_set(9)
+    runs = fed_runs(dq_skin, obj)
+    for f in (10, 11, 12, 13):
+        scene.frame_set(f)
+        assert_same(obj, reference, f"frame {f}")
+    assert fed_runs(dq_skin, obj) >= runs + 3, "the shape keys' frames were not fed"
+
+
 def test_the_object_state_reader_is_checked_on_its_first_read(dq_skin, monkeypatch):
     """The object-state reader's first read in a session is compared with what Blender's
     Python API gives (`memory_check.object_state_differs`): it agrees on a character, catches

@@ -302,6 +302,17 @@ class MeshCache:
         data = None if uid in self._stale else self._cache.get(uid)
         return None if data is None or data.changed_under else data
 
+    def knows_shape_keys_of(self, mesh) -> bool:
+        """Whether the cached data of `mesh` (if any) has as many shape keys as the mesh has now
+        (none as none): shape keys added or removed by a script are a change of the mesh."""
+        data = self._cache.get(mesh.session_uid)
+        if data is None:
+            return True
+        key = mesh.shape_keys
+        if key is None:
+            return data.keys is None
+        return data.keys is not None and len(data.keys.data) == len(key.key_blocks)
+
     def peek_any(self, obj) -> MeshData | None:
         """The cached data of `obj`'s mesh, current or not (no read)."""
         return self._cache.get(obj.data.session_uid)

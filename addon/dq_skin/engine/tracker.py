@@ -319,9 +319,9 @@ class Tracker:
             elif orig.session_uid in self.watch:
                 if isinstance(orig, Mesh) and update.is_updated_geometry:
                     # A script edited the mesh before changing frames (animated shape keys also
-                    # flag it; then comparing costs a read, but nothing is recomputed).
+                    # flag it on every frame: then only shape keys added or removed count).
                     key = orig.shape_keys
-                    if key is None or key.animation_data is None:
+                    if key is None or key.animation_data is None or not meshes.knows_shape_keys_of(orig):
                         meshes.mark_stale(orig.session_uid)
                 elif isinstance(orig, Armature):
                     # A script edited bones (deform flags, B-Bone segments) before changing frames.

@@ -24,7 +24,7 @@ from ..blender.nodes import GROUP_TAG
 from ..model.state import ResultMode, RouteKind
 from . import pointcache
 from .base import Target
-from .feed import drive_carrier
+from .feed_drivers import drive_carrier
 from .result_route import set_mode
 
 NAME = "DQ Skin positions"

@@ -19,7 +19,7 @@ from ..blender import nodes
 from ..model.state import ResultMode, RouteKind
 from . import results
 from .base import Target
-from .feed import drive_carrier
+from .feed_drivers import drive_carrier
 
 
 class MeshSource:

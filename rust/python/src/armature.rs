@@ -55,7 +55,7 @@ impl PyPoseMemory {
             // extension reads it from a handler or operator, while Blender does not evaluate, or
             // from the feed's driver inside an evaluation, which Blender runs after every
             // operation writing what is read (the driver's variables order it after each bound
-            // bone and each B-Bone's segments: `routes.feed.order_after_bones`); nothing else
+            // bone and each B-Bone's segments: `routes.feed_drivers.order_after_bones`); nothing else
             // writes a pose during an evaluation. See `read_pose`; the extension checks the first
             // read of a session against Blender's own data (`blender.memory_check`).
             let read = self.counted(armature, |ptr, count| unsafe { read_pose(&self.layout, ptr, count) })?;

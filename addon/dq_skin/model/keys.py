@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import NamedTuple
 
 
-@dataclass(frozen=True)
-class ModKey:
+class ModKey(NamedTuple):
     """One DQ Skin modifier: its object's session uid and the modifier's persistent id (renames
-    keep it; a copied object or modifier gets its own)."""
+    keep it; a copied object or modifier gets its own). A named tuple: hashed and compared in C,
+    a few times per character and frame."""
 
     object_uid: int
     modifier_uid: str

@@ -860,6 +860,58 @@ def test_shape_keys_a_script_adds_play(dq_skin, route, rig):
     assert fed_runs(dq_skin, obj) >= runs + 3, "the shape keys' frames were not fed"
 
 
+def _autoexec_probe():
+    """An Empty whose property a driver sets to the frame through an attribute access, which
+    Blender refuses while Python scripts may not run automatically: it tells that mode."""
+    probe = bpy.data.objects.new("Auto-run probe", None)
+    bpy.context.scene.collection.objects.link(probe)
+    probe["frame"] = -1.0
+    driver = probe.driver_add('["frame"]').driver
+    driver.type = "SCRIPTED"
+    driver.expression = "frame.real"
+    return probe.name
+
+
+@pytest.mark.parametrize("rig", ["moving", "standing still"])
+def test_a_file_reopened_without_python_auto_execution_is_fed(dq_skin, tmp_path, route, rig):
+    """Files from elsewhere open with Python's auto-execution off, Blender's default: drivers may
+    call nothing Blender does not know. The feed's driver, made by the add-on after the file is
+    open, still runs: frames are skinned inside Blender's first evaluation, equal to the Armature
+    modifier, and a rig standing still is evaluated neither by Blender nor by DQ Skin."""
+    obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
+    names = obj.name, reference.name, arm.name, _autoexec_probe()
+    blend = tmp_path / "from elsewhere.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    prefs = bpy.context.preferences.filepaths
+    trusted = prefs.use_scripts_auto_execute
+    prefs.use_scripts_auto_execute = False
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(blend), use_scripts=False)
+        obj, reference, arm, probe = (bpy.data.objects[n] for n in names)
+        scene = bpy.context.scene
+        if rig == "standing still":
+            arm.animation_data.action = None
+        for f in (4, 5):
+            scene.frame_set(f)
+        probe_eval = probe.evaluated_get(bpy.context.evaluated_depsgraph_get())
+        assert probe_eval["frame"] != 5.0, "Python's auto-execution is on: the test tests nothing"
+        runs = fed_runs(dq_skin, obj)
+        seen, handler = updated_in_frames({obj, reference})
+        try:
+            for f in (6, 7, 8):
+                scene.frame_set(f)
+                assert_same(obj, reference, f"frame {f}")
+        finally:
+            bpy.app.handlers.frame_change_post.remove(handler)
+        assert route_of(dq_skin, obj) == route
+        if rig == "moving":
+            assert fed_runs(dq_skin, obj) == runs + 3, "frames were not skinned by the feed"
+        else:
+            assert seen == [] and fed_runs(dq_skin, obj) == runs
+    finally:
+        prefs.use_scripts_auto_execute = trusted
+
+
 def test_the_object_state_reader_is_checked_on_its_first_read(dq_skin, monkeypatch):
     """The object-state reader's first read in a session is compared with what Blender's
     Python API gives (`memory_check.object_state_differs`): it agrees on a character, catches

@@ -720,16 +720,29 @@ def full_evaluations(dq_skin, monkeypatch) -> list:
     return names_of_calls(monkeypatch, dq_skin.engine.pipeline, "evaluate_object")
 
 
-def updated_in_frames(objs) -> tuple[list, object]:
-    """A frame handler that lists which of `objs` Blender evaluated at each frame change (and
-    the handler, to remove)."""
+def play_watching(watched, obj, reference, frames) -> list:
+    """`frames`, each equal to `reference`: the names of the objects of `watched` Blender
+    evaluated at those frame changes."""
     seen = []
 
     def handler(_scene, depsgraph):
-        seen.extend(u.id.original.name for u in depsgraph.updates if u.id.original in objs)
+        seen.extend(u.id.original.name for u in depsgraph.updates if u.id.original in watched)
 
     bpy.app.handlers.frame_change_post.append(handler)
-    return seen, handler
+    try:
+        for f in frames:
+            bpy.context.scene.frame_set(f)
+            assert_same(obj, reference, f"frame {f}")
+    finally:
+        bpy.app.handlers.frame_change_post.remove(handler)
+    return seen
+
+
+def stand_still(arm) -> None:
+    """The rig keeps frame 8's pose and loses its animation; frame 9 shown."""
+    bpy.context.scene.frame_set(8)
+    arm.animation_data.action = None
+    bpy.context.scene.frame_set(9)
 
 
 def test_a_held_pose_is_neither_skinned_nor_evaluated_again(dq_skin, monkeypatch, route):
@@ -783,20 +796,12 @@ def test_a_character_standing_still_costs_nothing_and_every_change_is_seen(dq_sk
     before the next frame change is seen then (the mesh equals the Armature modifier's)."""
     obj, arm, reference = fed_character(dq_skin, "DUAL_QUATERNION")
     scene = bpy.context.scene
-    scene.frame_set(8)
-    arm.animation_data.action = None  # (the pose stays as frame 8 left it)
-    scene.frame_set(9)
+    stand_still(arm)
     assert_same(obj, reference, "frame 9, standing still")
     runs = fed_runs(dq_skin, obj)
     evaluated = full_evaluations(dq_skin, monkeypatch)
     published = Publishes(dq_skin, monkeypatch)
-    seen, handler = updated_in_frames({obj, arm, reference})
-    try:
-        for f in (10, 11, 12):
-            scene.frame_set(f)
-            assert_same(obj, reference, f"frame {f}")
-    finally:
-        bpy.app.handlers.frame_change_post.remove(handler)
+    seen = play_watching({obj, arm, reference}, obj, reference, (10, 11, 12))
     assert seen == [], "Blender evaluated the character standing still"
     assert evaluated == [] and published.count == 0, "DQ Skin evaluated the character standing still"
     assert fed_runs(dq_skin, obj) == runs
@@ -817,19 +822,10 @@ def test_a_character_standing_still_under_a_modifier_that_moves_with_time(dq_ski
     for o in (obj, reference):
         wave = o.modifiers.new("Wave", "WAVE")
         wave.height, wave.time_offset = 0.2, -3.0
-    scene = bpy.context.scene
-    scene.frame_set(8)
-    arm.animation_data.action = None
-    scene.frame_set(9)
+    stand_still(arm)
     runs = fed_runs(dq_skin, obj)
     evaluated = full_evaluations(dq_skin, monkeypatch)
-    seen, handler = updated_in_frames({obj})
-    try:
-        for f in (10, 11, 12):
-            scene.frame_set(f)
-            assert_same(obj, reference, f"frame {f}")
-    finally:
-        bpy.app.handlers.frame_change_post.remove(handler)
+    seen = play_watching({obj}, obj, reference, (10, 11, 12))
     assert len(seen) == 3, "the Wave did not make Blender evaluate the mesh: the test tests nothing"
     assert evaluated == [] and fed_runs(dq_skin, obj) == runs
 
@@ -896,13 +892,7 @@ def test_a_file_reopened_without_python_auto_execution_is_fed(dq_skin, tmp_path,
         probe_eval = probe.evaluated_get(bpy.context.evaluated_depsgraph_get())
         assert probe_eval["frame"] != 5.0, "Python's auto-execution is on: the test tests nothing"
         runs = fed_runs(dq_skin, obj)
-        seen, handler = updated_in_frames({obj, reference})
-        try:
-            for f in (6, 7, 8):
-                scene.frame_set(f)
-                assert_same(obj, reference, f"frame {f}")
-        finally:
-            bpy.app.handlers.frame_change_post.remove(handler)
+        seen = play_watching({obj, reference}, obj, reference, (6, 7, 8))
         assert route_of(dq_skin, obj) == route
         if rig == "moving":
             assert fed_runs(dq_skin, obj) == runs + 3, "frames were not skinned by the feed"

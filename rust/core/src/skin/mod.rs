@@ -314,8 +314,15 @@ pub fn skin_many(jobs: &mut [ManyJob<'_>]) -> Vec<Result<(), SkinError>> {
         let pose = Pose::with_tables(j.deform, j.rest, tables)?;
         skin_with(None, j.method, j.positions, j.influences, &pose, &j.options, j.out)
     };
-    if jobs.len() <= 1 {
-        return jobs.iter_mut().map(one).collect();
+    if let [job] = jobs {
+        // Tables and kernel in one visit to the pool where either runs on it: each visit wakes
+        // its threads (a few microseconds each, more on a virtual machine).
+        let pooled = job.influences.vertex_count() > kernels::CHUNK
+            || (job.deform.len() >= pose::PARALLEL_BONES && !matches!(job.method, Method::Linear));
+        return vec![if pooled { crate::pool::run(|| one(job)) } else { one(job) }];
+    }
+    if jobs.is_empty() {
+        return Vec::new();
     }
     crate::pool::run(|| jobs.par_iter_mut().with_max_len(1).map(one).collect())
 }

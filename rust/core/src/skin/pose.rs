@@ -8,7 +8,7 @@ use crate::dual_quat::{is_orthonormal, rotation_from_mat3};
 
 /// A bone's affine deform matrix as three rows `(m_r0, m_r1, m_r2, t_r)`, so `M·co` is three dot
 /// products with `(co, 1)`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C, align(16))]
 pub(crate) struct AffineRows {
     pub rows: [Vec4; 3],
@@ -47,7 +47,7 @@ pub(crate) struct LinearBone {
 
 /// A bone as Blender's Preserve Volume sees it: the unit rotation quaternion `real` (x, y, z, w)
 /// of its rigid part and the dual part `½·(0, t)·real` of its rigid translation.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C, align(32))]
 pub(crate) struct DqBone {
     pub real: Vec4,
@@ -59,7 +59,7 @@ pub(crate) struct DqBone {
 /// lands exactly where the full affine matrix `M` puts it (the "scale path" with the vertex as
 /// pivot, `add_weighted_dq_dq_pivot`). `translation` holds the rows of `(M₃ − R₃ | t_M)`; for
 /// rigid bones it is `(0 | t)`. One 64-byte line per bone.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct PivotBone {
     pub translation: AffineRows,
@@ -71,7 +71,7 @@ pub(crate) struct PivotBone {
 /// `t ↦ (w·t + t × v, −t·v)` of `q = (v, w)`. Rows: the dual part's x, y, z, w. Summed with the
 /// signed weights per vertex and applied once, it replaces one transform of `co` per influence
 /// (the SIMD kernels of `batch.rs`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct PivotDualBone {
     pub rows: [Vec4; 4],
@@ -92,7 +92,7 @@ impl PivotDualBone {
 /// loads: floats 0–7 the matrix rows 0 and 1, 8–11 the rotation (x, y, z, w), 12–15 matrix row
 /// 2, 16–23 `s00 s01 s02 s10 s11 s12 s20 s21`, 24 `s22`, then zeros. The kernels sum the rows
 /// without the rotation (floats 0–7 and 12–27: three pairs of rows).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C, align(64))]
 pub(crate) struct CorBone {
     /// Rows 0 and 1 of the deform matrix.
@@ -111,7 +111,7 @@ pub(crate) struct CorBone {
 /// translation (x, y, z, 0). 8 floats, so SIMD code loads a lane's record in one window; the
 /// kernels rotate the center by `real` rather than read a 3×3 matrix, and add `t/2` inside the
 /// rotation's `½·(R·c − c)` (see `rotation_offset` in `avx512/kept.rs`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C, align(32))]
 pub(crate) struct CorRigidBone {
     pub real: Vec4,
@@ -174,59 +174,64 @@ impl Pose {
         }
         let linear =
             deform.iter().map(|m| LinearBone { matrix: AffineRows::from_mat4(m), padding: [0.0; 4] }).collect();
-        let (mut dq, mut pivot, mut pivot_dual, mut cor, mut cor_rigid, mut scaled) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        if let Some(rest) = rest {
-            if rest.len() != deform.len() {
-                return Err(SkinError::LengthMismatch {
-                    what: "rest matrices",
-                    expected: deform.len(),
-                    got: rest.len(),
-                });
-            }
-            for (bone, (m, b)) in deform.iter().zip(rest).enumerate() {
-                check_affine("rest", bone, b)?;
-                if b.determinant().abs() < 1e-12 {
-                    return Err(SkinError::InvalidMatrix { what: "rest", bone, problem: "is not invertible" });
-                }
-                if tables == Tables::Linear {
-                    continue;
-                }
-                let (q, is_scaled) = blender_bone_rotation(m, b);
-                let q = q.normalize();
-                let t = m.w_axis.truncate();
-                let dual = Quat::from_xyzw(0.5 * t.x, 0.5 * t.y, 0.5 * t.z, 0.0) * q;
-                dq.push(DqBone { real: Vec4::from(q), dual: Vec4::from(dual) });
-                let delta = Mat3::from_mat4(*m) - Mat3::from_quat(q);
-                let p = Mat4::from_cols(
-                    delta.x_axis.extend(0.0),
-                    delta.y_axis.extend(0.0),
-                    delta.z_axis.extend(0.0),
-                    m.w_axis,
-                );
-                let pivot_bone = PivotBone { translation: AffineRows::from_mat4(&p), real: Vec4::from(q) };
-                pivot_dual.push(PivotDualBone::new(&pivot_bone));
-                pivot.push(pivot_bone);
-                scaled.push(is_scaled);
-                if tables != Tables::Centers {
-                    continue;
-                }
-                let stretch =
-                    if is_scaled { Mat3::from_quat(q).transpose() * Mat3::from_mat4(*m) } else { Mat3::IDENTITY };
-                let (s0, s1, s2) = (stretch.row(0), stretch.row(1), stretch.row(2));
-                let [r0, r1, r2] = AffineRows::from_mat4(m).rows;
-                cor.push(CorBone {
-                    rows01: [r0, r1],
-                    real: Vec4::from(q),
-                    row2: r2,
-                    stretch: [s0.x, s0.y, s0.z, s1.x, s1.y, s1.z, s2.x, s2.y],
-                    s22: s2.z,
-                    padding: [0.0; 7],
-                });
-                cor_rigid.push(CorRigidBone { real: Vec4::from(q), half_translation: (0.5 * t).extend(0.0) });
-            }
+        let Some(rest) = rest else {
+            return Ok(Self { linear, ..Self::empty_tables() });
+        };
+        if rest.len() != deform.len() {
+            return Err(SkinError::LengthMismatch { what: "rest matrices", expected: deform.len(), got: rest.len() });
         }
-        Ok(Self { linear, dq, pivot, pivot_dual, cor, cor_rigid, scaled })
+        if tables == Tables::Linear {
+            for (bone, b) in rest.iter().enumerate() {
+                check_rest(bone, b)?;
+            }
+            return Ok(Self { linear, ..Self::empty_tables() });
+        }
+        let n = deform.len();
+        let centers = tables == Tables::Centers;
+        let mut records = Self { linear, ..Self::empty_tables() };
+        records.dq = vec![DqBone::default(); n];
+        records.pivot = vec![PivotBone::default(); n];
+        records.pivot_dual = vec![PivotDualBone::default(); n];
+        records.scaled = vec![false; n];
+        if centers {
+            records.cor = vec![CorBone::default(); n];
+            records.cor_rigid = vec![CorRigidBone::default(); n];
+        }
+        records.fill_rotations(deform, rest)?;
+        Ok(records)
+    }
+
+    fn empty_tables() -> Self {
+        Self {
+            linear: Vec::new(),
+            dq: Vec::new(),
+            pivot: Vec::new(),
+            pivot_dual: Vec::new(),
+            cor: Vec::new(),
+            cor_rigid: Vec::new(),
+            scaled: Vec::new(),
+        }
+    }
+
+    /// Fills the tables sized by [`Pose::with_tables`] (the centers' left empty where not
+    /// asked for), bones in chunks: on the pool for rigs of many bones, where a bone's rotation
+    /// costs about 130 ns on one thread (a Rigify rig's 720 expanded bones: 94 µs, a third of a
+    /// DQS call; see docs/performance.md). The first rest matrix that cannot be used is the
+    /// error, as a serial check would find it.
+    fn fill_rotations(&mut self, deform: &[Mat4], rest: &[Mat4]) -> Result<(), SkinError> {
+        let chunks = Chunks {
+            dq: &mut self.dq,
+            pivot: &mut self.pivot,
+            pivot_dual: &mut self.pivot_dual,
+            scaled: &mut self.scaled,
+            cor: &mut self.cor,
+            cor_rigid: &mut self.cor_rigid,
+        };
+        if deform.len() < PARALLEL_BONES || crate::pool::num_threads() <= 1 {
+            return chunks.fill(0, deform, rest);
+        }
+        // (On the crate's pool: where the caller is one of its threads, right there.)
+        crate::pool::run(|| chunks.fill_parallel(deform, rest))
     }
 
     /// Number of bones.
@@ -263,6 +268,115 @@ impl Pose {
     pub fn bone_rotation(&self, bone: usize) -> Option<Quat> {
         self.dq.get(bone).map(|b| Quat::from_vec4(b.real))
     }
+}
+
+/// Rigs with at least this many bones have their rotation tables filled on the pool, in
+/// chunks of [`BONE_CHUNK`] bones.
+pub(crate) const PARALLEL_BONES: usize = 256;
+const BONE_CHUNK: usize = 64;
+
+/// One run of bones' records (the centers' empty where not asked for).
+struct Chunks<'a> {
+    dq: &'a mut [DqBone],
+    pivot: &'a mut [PivotBone],
+    pivot_dual: &'a mut [PivotDualBone],
+    scaled: &'a mut [bool],
+    cor: &'a mut [CorBone],
+    cor_rigid: &'a mut [CorRigidBone],
+}
+
+impl Chunks<'_> {
+    /// [`Chunks::fill`] in chunks of [`BONE_CHUNK`] bones on the current pool.
+    fn fill_parallel(self, deform: &[Mat4], rest: &[Mat4]) -> Result<(), SkinError> {
+        use rayon::prelude::*;
+        let c = BONE_CHUNK;
+        let results: Vec<Result<(), SkinError>> = if self.cor.is_empty() {
+            (
+                self.dq.par_chunks_mut(c),
+                self.pivot.par_chunks_mut(c),
+                self.pivot_dual.par_chunks_mut(c),
+                self.scaled.par_chunks_mut(c),
+            )
+                .into_par_iter()
+                .enumerate()
+                .map(|(k, (dq, pivot, pivot_dual, scaled))| {
+                    let (start, end) = (k * c, k * c + dq.len());
+                    Chunks { dq, pivot, pivot_dual, scaled, cor: &mut [], cor_rigid: &mut [] }.fill(
+                        start,
+                        &deform[start..end],
+                        &rest[start..end],
+                    )
+                })
+                .collect()
+        } else {
+            (
+                self.dq.par_chunks_mut(c),
+                self.pivot.par_chunks_mut(c),
+                self.pivot_dual.par_chunks_mut(c),
+                self.scaled.par_chunks_mut(c),
+                self.cor.par_chunks_mut(c),
+                self.cor_rigid.par_chunks_mut(c),
+            )
+                .into_par_iter()
+                .enumerate()
+                .map(|(k, (dq, pivot, pivot_dual, scaled, cor, cor_rigid))| {
+                    let (start, end) = (k * c, k * c + dq.len());
+                    Chunks { dq, pivot, pivot_dual, scaled, cor, cor_rigid }.fill(
+                        start,
+                        &deform[start..end],
+                        &rest[start..end],
+                    )
+                })
+                .collect()
+        };
+        // (The chunks' results in bone order: the first error is the first bone's.)
+        results.into_iter().collect()
+    }
+
+    /// The records of bones `first..first + deform.len()`.
+    fn fill(self, first: usize, deform: &[Mat4], rest: &[Mat4]) -> Result<(), SkinError> {
+        let centers = !self.cor.is_empty();
+        for (i, (m, b)) in deform.iter().zip(rest).enumerate() {
+            check_rest(first + i, b)?;
+            let (q, is_scaled) = blender_bone_rotation(m, b);
+            let q = q.normalize();
+            let t = m.w_axis.truncate();
+            let dual = Quat::from_xyzw(0.5 * t.x, 0.5 * t.y, 0.5 * t.z, 0.0) * q;
+            self.dq[i] = DqBone { real: Vec4::from(q), dual: Vec4::from(dual) };
+            let delta = Mat3::from_mat4(*m) - Mat3::from_quat(q);
+            let p =
+                Mat4::from_cols(delta.x_axis.extend(0.0), delta.y_axis.extend(0.0), delta.z_axis.extend(0.0), m.w_axis);
+            let pivot = PivotBone { translation: AffineRows::from_mat4(&p), real: Vec4::from(q) };
+            self.pivot_dual[i] = PivotDualBone::new(&pivot);
+            self.pivot[i] = pivot;
+            self.scaled[i] = is_scaled;
+            if !centers {
+                continue;
+            }
+            let stretch = if is_scaled { Mat3::from_quat(q).transpose() * Mat3::from_mat4(*m) } else { Mat3::IDENTITY };
+            let (s0, s1, s2) = (stretch.row(0), stretch.row(1), stretch.row(2));
+            let [r0, r1, r2] = AffineRows::from_mat4(m).rows;
+            self.cor[i] = CorBone {
+                rows01: [r0, r1],
+                real: Vec4::from(q),
+                row2: r2,
+                stretch: [s0.x, s0.y, s0.z, s1.x, s1.y, s1.z, s2.x, s2.y],
+                s22: s2.z,
+                padding: [0.0; 7],
+            };
+            self.cor_rigid[i] = CorRigidBone { real: Vec4::from(q), half_translation: (0.5 * t).extend(0.0) };
+        }
+        Ok(())
+    }
+}
+
+/// A rest matrix DQS can use: affine, finite and invertible.
+fn check_rest(bone: usize, b: &Mat4) -> Result<(), SkinError> {
+    check_affine("rest", bone, b)?;
+    if b.determinant().abs() < 1e-12 {
+        return Err(SkinError::InvalidMatrix { what: "rest", bone, problem: "is not invertible" });
+    }
+    Ok(())
 }
 
 fn check_affine(what: &'static str, bone: usize, m: &Mat4) -> Result<(), SkinError> {
@@ -374,6 +488,49 @@ mod tests {
             let rows = pose.pivot_dual[0].rows;
             let got = Vec4::new(rows[0].dot(h), rows[1].dot(h), rows[2].dot(h), rows[3].dot(h));
             assert!(got.abs_diff_eq(Vec4::from(dual), 1e-5), "{got} vs {dual}");
+        }
+    }
+
+    /// Rigs of many bones fill their tables in parallel chunks: the same records as bone by
+    /// bone, and the first unusable rest matrix is the error.
+    #[test]
+    fn many_bones_give_the_records_of_each_bone_alone() {
+        let n = PARALLEL_BONES + 3 * BONE_CHUNK + 5;
+        let bone = |i: usize| {
+            let f = i as f32;
+            let rest = Mat4::from_rotation_translation(Quat::from_rotation_z(0.01 * f), Vec3::new(0.0, f, 0.0));
+            let scale = if i % 3 == 0 { Vec3::new(1.0, 1.5, 0.7) } else { Vec3::ONE };
+            let posed = Mat4::from_scale_rotation_translation(
+                scale,
+                Quat::from_euler(glam::EulerRot::XYZ, 0.1 * f, -0.03 * f, 0.2),
+                Vec3::new(0.5, f, -0.1 * f),
+            );
+            (posed * rest.inverse(), rest)
+        };
+        let (deform, rest): (Vec<Mat4>, Vec<Mat4>) = (0..n).map(bone).unzip();
+        assert!(crate::pool::num_threads() > 1, "the test needs a pool of more than one thread");
+        for tables in [Tables::DualQuaternion, Tables::Centers] {
+            let pose = Pose::with_tables(&deform, Some(&rest), tables).unwrap();
+            for i in 0..n {
+                let one = Pose::with_tables(&deform[i..=i], Some(&rest[i..=i]), tables).unwrap();
+                assert_eq!(
+                    (pose.dq[i], pose.pivot[i], pose.pivot_dual[i], pose.scaled[i]),
+                    (one.dq[0], one.pivot[0], one.pivot_dual[0], one.scaled[0])
+                );
+                if tables == Tables::Centers {
+                    assert_eq!((pose.cor[i], pose.cor_rigid[i]), (one.cor[0], one.cor_rigid[0]));
+                } else {
+                    assert!(pose.cor.is_empty() && pose.cor_rigid.is_empty());
+                }
+            }
+            assert!(pose.any_scaled());
+            let mut bad = rest.clone();
+            bad[n - 2] = Mat4::ZERO;
+            bad[BONE_CHUNK + 7] = Mat4::from_translation(Vec3::new(f32::NAN, 0.0, 0.0));
+            assert!(matches!(
+                Pose::with_tables(&deform, Some(&bad), tables),
+                Err(SkinError::InvalidMatrix { what: "rest", bone, .. }) if bone == BONE_CHUNK + 7
+            ));
         }
     }
 

@@ -39,5 +39,5 @@ pub use mesh::{positions_in_memory, read_deform_verts, read_positions, DeformVer
 pub use object_state::{
     describe_object, read_object_state, ModifierSummary, ObjectStateLayout, ObjectSummary, PropertyValue,
 };
-pub use pose::{read_channel_matrices, read_pose, PoseLayout, PoseRead, MAX_CHANNELS};
+pub use pose::{read_channel_matrices, read_pose, PoseLayout, PoseRead, ReadHints, MAX_CHANNELS};
 pub use sdna::{DnaError, Field, Sdna};

@@ -21,6 +21,9 @@ use std::collections::HashMap;
 use crate::memory::{name_bytes, read, ReadError};
 use crate::sdna::{DnaError, Sdna};
 
+mod prefetch;
+pub use prefetch::ReadHints;
+
 /// `eObjectType::OB_ARMATURE`, unchanged since Blender 2.5.
 const OB_ARMATURE: i16 = 25;
 /// `eBone_Flag` bits.
@@ -158,13 +161,23 @@ pub struct PoseRead {
 /// ordered after them), since Blender's other threads then only read them. The object type, the channel count and every B-Bone segment count are
 /// checked before anything they lead to is followed, so a mismatched layout is reported rather
 /// than followed far.
-pub unsafe fn read_pose(layout: &PoseLayout, object: usize, expected_channels: usize) -> Result<PoseRead, ReadError> {
+///
+/// `hints` are where the last read of this armature went (empty for none): they are prefetched
+/// first, and replaced by where this read goes ([`ReadHints`]).
+pub unsafe fn read_pose(
+    layout: &PoseLayout,
+    object: usize,
+    expected_channels: usize,
+    hints: &mut ReadHints,
+) -> Result<PoseRead, ReadError> {
     // SAFETY: for all reads below, offsets come from the SDNA of this Blender and the object is
     // live (caller); the pose, channels, bones and B-Bone arrays are reached through pointers
     // read from it, each non-null, and the arrays' lengths come from segment counts checked
     // against Blender's maximum and against each other.
     unsafe {
         let pose = pose_of(layout, object, expected_channels)?;
+        hints.prefetch(layout);
+        hints.clear();
         let bones_by_name = match layout.bone_link {
             BoneLink::Pointer { .. } => None,
             BoneLink::ByName { object_data, .. } => {
@@ -182,6 +195,7 @@ pub unsafe fn read_pose(layout: &PoseLayout, object: usize, expected_channels: u
                 (None, BoneLink::ByName { .. }) => unreachable!("the map is built for this link"),
             };
             let channel = read_channel(layout, chan, bone)?;
+            hints.visited(chan, bone, channel.is_some());
             found.deforms.push(channel.is_some());
             found.bones.extend(channel);
             Ok(())
@@ -257,13 +271,17 @@ pub unsafe fn read_channel_matrices(
     layout: &PoseLayout,
     object: usize,
     expected_channels: usize,
+    hints: &mut ReadHints,
 ) -> Result<Vec<Mat4>, ReadError> {
     // SAFETY: as in `read_pose`: offsets from this Blender's SDNA, a live armature object
     // (checked by its type), channels reached through its pose's list.
     unsafe {
         let pose = pose_of(layout, object, expected_channels)?;
+        hints.prefetch(layout);
+        hints.clear();
         let mut matrices = Vec::with_capacity(expected_channels);
         each_channel(layout, pose, expected_channels, |chan| {
+            hints.visited(chan, 0, true);
             matrices.push(read_mat4(chan + layout.chan_mat));
             Ok(())
         })?;

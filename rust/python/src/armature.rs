@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 use std::sync::Mutex;
 
-use dqskin_blend::{read_channel_matrices, read_pose, PoseLayout, ReadError};
+use dqskin_blend::{read_channel_matrices, read_pose, PoseLayout, ReadError, ReadHints};
 use dqskin_core::glam::Mat4;
 use dqskin_core::skin::ArmaturePose;
 use dqskin_core::{Envelope, Influences};
@@ -30,19 +30,26 @@ pub struct PyPoseMemory {
     layout: PoseLayout,
     /// Each armature object's channel count (by address) as Blender's Python API last gave it. A
     /// read walks the channels against it and asks the API again only where they disagree: the
-    /// API counts by visiting every pose bone (12 µs for a Rigify rig's 706, every frame).
-    counts: Mutex<HashMap<usize, usize>>,
+    /// API counts by visiting every pose bone (12 µs for a Rigify rig's 706, every frame). And
+    /// where its last read went, prefetched before the next one ([`ReadHints`]).
+    kept: Mutex<HashMap<usize, Kept>>,
 }
 
-/// Armature objects whose channel counts a reader keeps at most (addresses of removed ones
-/// are forgotten when it is full).
-const KEPT_COUNTS: usize = 1024;
+/// What a reader keeps of an armature between reads.
+struct Kept {
+    count: usize,
+    hints: ReadHints,
+}
+
+/// Armature objects a reader keeps counts and hints of at most (addresses of removed ones are
+/// forgotten when it is full).
+const KEPT_ARMATURES: usize = 1024;
 
 #[pymethods]
 impl PyPoseMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| layout_of(blend_file, PoseLayout::new).map(|layout| Self { layout, counts: Mutex::default() }))
+        guard(|| layout_of(blend_file, PoseLayout::new).map(|layout| Self { layout, kept: Mutex::default() }))
     }
 
     /// The pose of ``armature``, a ``bpy.types.Object`` of type ``'ARMATURE'`` with a pose
@@ -58,7 +65,8 @@ impl PyPoseMemory {
             // bone and each B-Bone's segments: `routes.feed_drivers.order_after_bones`); nothing else
             // writes a pose during an evaluation. See `read_pose`; the extension checks the first
             // read of a session against Blender's own data (`blender.memory_check`).
-            let read = self.counted(armature, |ptr, count| unsafe { read_pose(&self.layout, ptr, count) })?;
+            let read =
+                self.counted(armature, |ptr, count, hints| unsafe { read_pose(&self.layout, ptr, count, hints) })?;
             ArmaturePose::from_bones(read.deforms, read.bones)
                 .map(PyPoseData)
                 .map_err(|e| PyValueError::new_err(format!("armature: {e}")))
@@ -70,8 +78,9 @@ impl PyPoseMemory {
     fn channel_matrices<'py>(&self, armature: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
         guard(|| {
             // SAFETY: as for `read`.
-            let matrices =
-                self.counted(armature, |ptr, count| unsafe { read_channel_matrices(&self.layout, ptr, count) })?;
+            let matrices = self.counted(armature, |ptr, count, hints| unsafe {
+                read_channel_matrices(&self.layout, ptr, count, hints)
+            })?;
             matrices_array(armature.py(), &matrices)
         })
     }
@@ -85,23 +94,28 @@ impl PyPoseMemory {
     fn counted<T>(
         &self,
         armature: &Bound<'_, PyAny>,
-        read: impl Fn(usize, usize) -> Result<T, ReadError>,
+        read: impl Fn(usize, usize, &mut ReadHints) -> Result<T, ReadError>,
     ) -> PyResult<T> {
         let ptr = armature_address(armature)?;
-        let kept = self.counts.lock().unwrap_or_else(|e| e.into_inner()).get(&ptr).copied();
-        let found = match kept.map(|count| read(ptr, count)) {
-            Some(Err(_)) | None => {
+        let lock = || self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        // (Taken out for the read: a reader on another thread reads without them meanwhile.)
+        let (count, mut hints) = match lock().get_mut(&ptr) {
+            Some(k) => (Some(k.count), std::mem::take(&mut k.hints)),
+            None => (None, ReadHints::default()),
+        };
+        let (found, count) = match count.map(|count| (read(ptr, count, &mut hints), count)) {
+            Some((Err(_), _)) | None => {
                 let count = channel_count(armature)?;
-                let mut counts = self.counts.lock().unwrap_or_else(|e| e.into_inner());
-                if counts.len() >= KEPT_COUNTS {
-                    counts.clear();
-                }
-                counts.insert(ptr, count);
-                drop(counts);
-                read(ptr, count)
+                (read(ptr, count, &mut hints), count)
             }
             Some(done) => done,
         };
+        let mut kept = lock();
+        if kept.len() >= KEPT_ARMATURES && !kept.contains_key(&ptr) {
+            kept.clear();
+        }
+        kept.insert(ptr, Kept { count, hints });
+        drop(kept);
         found.map_err(|e| PyValueError::new_err(format!("armature: {e}")))
     }
 }

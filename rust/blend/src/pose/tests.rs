@@ -239,9 +239,20 @@ fn fixture() -> Box<Fixture> {
     f
 }
 
+/// Reads `f` three times: without hints, with those of that read, and with those of a read of
+/// another fixture since freed (stale addresses): the hints never change what is read.
 fn read_with(f: &Fixture, expected: usize, by_name: bool) -> Result<PoseRead, ReadError> {
     let layout = PoseLayout::new(&pose_sdna(by_name)).unwrap();
-    unsafe { read_pose(&layout, &f.object as *const _ as usize, expected) }
+    let read = |f: &Fixture, hints: &mut ReadHints| unsafe {
+        read_pose(&layout, &f.object as *const _ as usize, expected, hints)
+    };
+    let mut hints = ReadHints::default();
+    let first = read(f, &mut hints);
+    assert_eq!(read(f, &mut hints), first);
+    let mut stale = ReadHints::default();
+    let _ = read(&fixture(), &mut stale);
+    assert_eq!(read(f, &mut stale), first);
+    first
 }
 
 /// Reads through both links (the bone pointer and the bone of the same name), which must agree.
@@ -335,30 +346,36 @@ fn channel_matrices_alone_are_every_channels_in_order() {
     let f = fixture();
     let layout = PoseLayout::new(&pose_sdna(false)).unwrap();
     let object = &f.object as *const _ as usize;
-    let got = unsafe { read_channel_matrices(&layout, object, 2) }.unwrap();
+    let got = unsafe { read_channel_matrices(&layout, object, 2, &mut ReadHints::default()) }.unwrap();
     let want = [matrix(1.0), matrix(2.0)].map(|m| Mat4::from_cols_array(&m));
     assert_eq!(got, want, "the non-deforming channel too");
     assert_eq!(got[1], read_fixture(&f, 2).unwrap().bones[0].channel);
     assert_eq!(
-        unsafe { read_channel_matrices(&layout, object, 1) },
+        unsafe { read_channel_matrices(&layout, object, 1, &mut ReadHints::default()) },
         Err(ReadError::ChannelCount { expected: 1, found: 2 })
     );
     assert_eq!(
-        unsafe { read_channel_matrices(&layout, object, 3) },
+        unsafe { read_channel_matrices(&layout, object, 3, &mut ReadHints::default()) },
         Err(ReadError::ChannelCount { expected: 3, found: 2 })
     );
     assert_eq!(
-        unsafe { read_channel_matrices(&layout, object, MAX_CHANNELS + 1) },
+        unsafe { read_channel_matrices(&layout, object, MAX_CHANNELS + 1, &mut ReadHints::default()) },
         Err(ReadError::Implausible("channel count"))
     );
-    assert_eq!(unsafe { read_channel_matrices(&layout, 0, 2) }, Err(ReadError::Null));
+    assert_eq!(unsafe { read_channel_matrices(&layout, 0, 2, &mut ReadHints::default()) }, Err(ReadError::Null));
     let mut f = fixture();
     f.object.ty = 1;
     let object = &f.object as *const _ as usize;
-    assert!(matches!(unsafe { read_channel_matrices(&layout, object, 2) }, Err(ReadError::NotAnArmature(_))));
+    assert!(matches!(
+        unsafe { read_channel_matrices(&layout, object, 2, &mut ReadHints::default()) },
+        Err(ReadError::NotAnArmature(_))
+    ));
     f.object.ty = OB_ARMATURE;
     f.object.pose = core::ptr::null();
-    assert!(matches!(unsafe { read_channel_matrices(&layout, object, 2) }, Err(ReadError::NotAnArmature(_))));
+    assert!(matches!(
+        unsafe { read_channel_matrices(&layout, object, 2, &mut ReadHints::default()) },
+        Err(ReadError::NotAnArmature(_))
+    ));
 }
 
 #[test]
@@ -368,7 +385,7 @@ fn wrong_objects_and_counts_are_refused() {
     assert_eq!(read_fixture(&f, 3), Err(ReadError::ChannelCount { expected: 3, found: 2 }));
     assert_eq!(read_fixture(&f, MAX_CHANNELS + 1), Err(ReadError::Implausible("channel count")));
     let layout = PoseLayout::new(&pose_sdna(false)).unwrap();
-    assert_eq!(unsafe { read_pose(&layout, 0, 2) }, Err(ReadError::Null));
+    assert_eq!(unsafe { read_pose(&layout, 0, 2, &mut ReadHints::default()) }, Err(ReadError::Null));
     let mut f = fixture();
     f.object.ty = 1;
     assert!(matches!(read_fixture(&f, 2), Err(ReadError::NotAnArmature(_))));

@@ -2,7 +2,8 @@
 //! which belongs to the host application), sized by [`set_num_threads`], else by the
 //! `DQSKIN_NUM_THREADS` environment variable, else by the number of available cores.
 
-use std::sync::{Arc, RwLock};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, RwLock};
 
 use rayon::{ThreadPool, ThreadPoolBuilder};
 
@@ -98,4 +99,95 @@ pub fn num_threads() -> usize {
 /// Runs `f` inside the pool (so rayon calls in `f` use it) and waits for it.
 pub fn run<R: Send>(f: impl FnOnce() -> R + Send) -> R {
     pool().install(f)
+}
+
+/// Runs `task(i)` for every `i` in `0..count` on the pool's threads with the calling thread
+/// taking tasks too, each task once. From outside the pool the caller hands it at most one
+/// helper per thread but one and works meanwhile, instead of handing all of it over and
+/// sleeping until it is done: each hand-over wakes threads (on a virtual machine, tens of
+/// microseconds), which inside Blender's evaluation cost as much as a Rigify character's
+/// kernel gained from its second thread (see docs/performance.md). Inside the pool (a batch's
+/// jobs, each on a worker) it is rayon's parallel loop.
+pub fn share(count: usize, task: impl Fn(usize) + Sync) {
+    if count <= 1 {
+        (0..count).for_each(task);
+        return;
+    }
+    let pool = pool();
+    if pool.current_thread_index().is_some() {
+        use rayon::prelude::*;
+        (0..count).into_par_iter().with_max_len(1).for_each(&task);
+        return;
+    }
+    let next = AtomicUsize::new(0);
+    let drain = || loop {
+        let i = next.fetch_add(1, Ordering::Relaxed);
+        if i >= count {
+            break;
+        }
+        task(i);
+    };
+    let helpers = pool.current_num_threads().min(count) - 1;
+    pool.in_place_scope(|scope| {
+        for _ in 0..helpers {
+            scope.spawn(|_| drain());
+        }
+        drain();
+    });
+}
+
+/// [`share`] over `parts`: `task(i, part)` for each, each part to one task.
+pub fn share_parts<T: Send>(parts: Vec<T>, task: impl Fn(usize, T) + Sync) {
+    let parts: Vec<Mutex<Option<T>>> = parts.into_iter().map(|p| Mutex::new(Some(p))).collect();
+    share(parts.len(), |i| {
+        let part = parts[i].lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some(part) = part {
+            task(i, part);
+        }
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::AtomicU32;
+
+    /// Every task runs exactly once, called from outside the pool and from one of its threads.
+    #[test]
+    fn share_runs_each_task_once() {
+        for count in [0, 1, 2, 3, 100] {
+            let check = |runs: Vec<AtomicU32>| assert!(runs.iter().all(|r| r.load(Ordering::Relaxed) == 1), "{count}");
+            let runs: Vec<AtomicU32> = (0..count).map(|_| AtomicU32::new(0)).collect();
+            share(count, |i| {
+                runs[i].fetch_add(1, Ordering::Relaxed);
+            });
+            check(runs);
+            let runs: Vec<AtomicU32> = (0..count).map(|_| AtomicU32::new(0)).collect();
+            run(|| {
+                share(count, |i| {
+                    runs[i].fetch_add(1, Ordering::Relaxed);
+                })
+            });
+            check(runs);
+        }
+        let mut parts = vec![0u8; 10];
+        share_parts(parts.chunks_mut(3).collect(), |i, part| part.fill(i as u8 + 1));
+        assert_eq!(parts, [1, 1, 1, 2, 2, 2, 3, 3, 3, 4]);
+    }
+
+    /// A task that panics, on the caller or on a helper, panics the call (it does not abort the
+    /// process or hang it).
+    #[test]
+    fn a_panicking_task_panics_the_call() {
+        for bad in [0, 99] {
+            let result = std::panic::catch_unwind(|| {
+                share(100, |i| {
+                    if i == bad {
+                        panic!("task {i}");
+                    }
+                })
+            });
+            assert!(result.is_err(), "task {bad}");
+        }
+    }
 }

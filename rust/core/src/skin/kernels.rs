@@ -11,7 +11,6 @@
 //! `isa.rs`.
 
 use glam::Affine3A;
-use rayon::prelude::*;
 
 use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{BoneIndex, LaneSlots, Slot, LANES, WINDOW};
@@ -43,11 +42,11 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
         _ => None,
     };
     let folded = Folded { linear: linear.as_deref(), dq: dq.as_deref(), cor_rigid: cor_rigid.as_deref() };
-    let task = |(i, chunk): (usize, &mut [[f32; 3]])| run_chunk(simd, job, folded, i * CHUNK, chunk);
-    if rayon::current_num_threads() <= 1 || out.len() <= CHUNK {
-        out.chunks_mut(CHUNK).enumerate().for_each(task);
+    let task = |i: usize, chunk: &mut [[f32; 3]]| run_chunk(simd, job, folded, i * CHUNK, chunk);
+    if out.len() <= CHUNK {
+        task(0, out);
     } else {
-        out.par_chunks_mut(CHUNK).enumerate().for_each(task);
+        crate::pool::share_parts(out.chunks_mut(CHUNK).collect(), task);
     }
 }
 

@@ -269,15 +269,9 @@ fn skin_with(
     job.blend_amount = blend_amount;
     job.blend_factor = blend_factor;
     job.centers = centers;
-    let mut run = |simd| {
-        if n <= kernels::CHUNK {
-            // One task's worth: run it here. Handing it to the pool would cost more than the
-            // work (a thread wake-up), which matters for scenes with many small meshes.
-            kernels::run(&job, out, simd);
-        } else {
-            crate::pool::run(|| kernels::run(&job, out, simd));
-        }
-    };
+    // (One task's worth of vertices runs here alone: a thread wake-up would cost more than the
+    // work, which matters for scenes with many small meshes. More share the work with the pool.)
+    let mut run = |simd| kernels::run(&job, out, simd);
     match simd {
         Some(simd) => run(simd),
         None => {
@@ -314,15 +308,9 @@ pub fn skin_many(jobs: &mut [ManyJob<'_>]) -> Vec<Result<(), SkinError>> {
         let pose = Pose::with_tables(j.deform, j.rest, tables)?;
         skin_with(None, j.method, j.positions, j.influences, &pose, &j.options, j.out)
     };
-    if let [job] = jobs {
-        // Tables and kernel in one visit to the pool where either runs on it: each visit wakes
-        // its threads (a few microseconds each, more on a virtual machine).
-        let pooled = job.influences.vertex_count() > kernels::CHUNK
-            || (job.deform.len() >= pose::PARALLEL_BONES && !matches!(job.method, Method::Linear));
-        return vec![if pooled { crate::pool::run(|| one(job)) } else { one(job) }];
-    }
-    if jobs.is_empty() {
-        return Vec::new();
+    if jobs.len() <= 1 {
+        // (Its tables and kernel share their work with the pool from here: `pool::share`.)
+        return jobs.iter_mut().map(one).collect();
     }
     crate::pool::run(|| jobs.par_iter_mut().with_max_len(1).map(one).collect())
 }

@@ -230,8 +230,7 @@ impl Pose {
         if deform.len() < PARALLEL_BONES || crate::pool::num_threads() <= 1 {
             return chunks.fill(0, deform, rest);
         }
-        // (On the crate's pool: where the caller is one of its threads, right there.)
-        crate::pool::run(|| chunks.fill_parallel(deform, rest))
+        chunks.fill_shared(deform, rest)
     }
 
     /// Number of bones.
@@ -270,9 +269,9 @@ impl Pose {
     }
 }
 
-/// Rigs with at least this many bones have their rotation tables filled on the pool, in
-/// chunks of [`BONE_CHUNK`] bones.
-pub(crate) const PARALLEL_BONES: usize = 256;
+/// Rigs with at least this many bones have their rotation tables filled in chunks of
+/// [`BONE_CHUNK`] bones shared with the pool.
+const PARALLEL_BONES: usize = 256;
 const BONE_CHUNK: usize = 64;
 
 /// One run of bones' records (the centers' empty where not asked for).
@@ -285,52 +284,35 @@ struct Chunks<'a> {
     cor_rigid: &'a mut [CorRigidBone],
 }
 
-impl Chunks<'_> {
-    /// [`Chunks::fill`] in chunks of [`BONE_CHUNK`] bones on the current pool.
-    fn fill_parallel(self, deform: &[Mat4], rest: &[Mat4]) -> Result<(), SkinError> {
-        use rayon::prelude::*;
-        let c = BONE_CHUNK;
-        let results: Vec<Result<(), SkinError>> = if self.cor.is_empty() {
-            (
-                self.dq.par_chunks_mut(c),
-                self.pivot.par_chunks_mut(c),
-                self.pivot_dual.par_chunks_mut(c),
-                self.scaled.par_chunks_mut(c),
-            )
-                .into_par_iter()
-                .enumerate()
-                .map(|(k, (dq, pivot, pivot_dual, scaled))| {
-                    let (start, end) = (k * c, k * c + dq.len());
-                    Chunks { dq, pivot, pivot_dual, scaled, cor: &mut [], cor_rigid: &mut [] }.fill(
-                        start,
-                        &deform[start..end],
-                        &rest[start..end],
-                    )
-                })
-                .collect()
-        } else {
-            (
-                self.dq.par_chunks_mut(c),
-                self.pivot.par_chunks_mut(c),
-                self.pivot_dual.par_chunks_mut(c),
-                self.scaled.par_chunks_mut(c),
-                self.cor.par_chunks_mut(c),
-                self.cor_rigid.par_chunks_mut(c),
-            )
-                .into_par_iter()
-                .enumerate()
-                .map(|(k, (dq, pivot, pivot_dual, scaled, cor, cor_rigid))| {
-                    let (start, end) = (k * c, k * c + dq.len());
-                    Chunks { dq, pivot, pivot_dual, scaled, cor, cor_rigid }.fill(
-                        start,
-                        &deform[start..end],
-                        &rest[start..end],
-                    )
-                })
-                .collect()
-        };
-        // (The chunks' results in bone order: the first error is the first bone's.)
-        results.into_iter().collect()
+impl<'a> Chunks<'a> {
+    /// [`Chunks::fill`] in chunks of [`BONE_CHUNK`] bones, shared with the pool.
+    fn fill_shared(self, deform: &[Mat4], rest: &[Mat4]) -> Result<(), SkinError> {
+        let errors = std::sync::Mutex::new(Vec::new());
+        crate::pool::share_parts(self.split(BONE_CHUNK), |k, part| {
+            let (start, end) = (k * BONE_CHUNK, k * BONE_CHUNK + part.dq.len());
+            if let Err(e) = part.fill(start, &deform[start..end], &rest[start..end]) {
+                errors.lock().unwrap_or_else(|e| e.into_inner()).push((k, e));
+            }
+        });
+        // (The first chunk's error is the first bone's.)
+        let errors = errors.into_inner().unwrap_or_else(|e| e.into_inner());
+        errors.into_iter().min_by_key(|&(k, _)| k).map_or(Ok(()), |(_, e)| Err(e))
+    }
+
+    /// The records in runs of `c` bones.
+    fn split(self, c: usize) -> Vec<Self> {
+        let (mut cor, mut cor_rigid) = (self.cor.chunks_mut(c), self.cor_rigid.chunks_mut(c));
+        let runs = self.dq.chunks_mut(c).zip(self.pivot.chunks_mut(c)).zip(self.pivot_dual.chunks_mut(c));
+        runs.zip(self.scaled.chunks_mut(c))
+            .map(|(((dq, pivot), pivot_dual), scaled)| Chunks {
+                dq,
+                pivot,
+                pivot_dual,
+                scaled,
+                cor: cor.next().unwrap_or_default(),
+                cor_rigid: cor_rigid.next().unwrap_or_default(),
+            })
+            .collect()
     }
 
     /// The records of bones `first..first + deform.len()`.

@@ -214,7 +214,7 @@ impl Pose {
     }
 
     /// Fills the tables sized by [`Pose::with_tables`] (the centers' left empty where not
-    /// asked for), bones in chunks: on the pool for rigs of many bones, where a bone's rotation
+    /// asked for); for rigs of many bones in chunks shared with the pool, where a bone's rotation
     /// costs about 130 ns on one thread (a Rigify rig's 720 expanded bones: 94 µs, a third of a
     /// DQS call; see docs/performance.md). The first rest matrix that cannot be used is the
     /// error, as a serial check would find it.

@@ -37,7 +37,7 @@ mod test_dna;
 pub use memory::ReadError;
 pub use mesh::{positions_in_memory, read_deform_verts, read_positions, DeformVerts, MeshLayout};
 pub use object_state::{
-    describe_object, read_object_state, ModifierSummary, ObjectStateLayout, ObjectSummary, PropertyValue,
+    describe_object, read_object_state, ModifierSummary, ObjectStateLayout, ObjectSummary, PropertyValue, StateHints,
 };
 pub use pose::{read_channel_matrices, read_pose, PoseLayout, PoseRead, ReadHints, MAX_CHANNELS};
 pub use sdna::{DnaError, Field, Sdna};

@@ -55,3 +55,16 @@ pub(crate) unsafe fn name_bytes<'a>(address: usize, size: usize) -> &'a [u8] {
     let end = bytes.iter().position(|&b| b == 0).unwrap_or(size);
     &bytes[..end]
 }
+
+/// Asks the CPU for the cache line at `address` ahead of a read: only a hint, which never
+/// faults and never changes what is read, whatever the address (a stale one too).
+#[inline(always)]
+pub(crate) fn prefetch(address: usize) {
+    // SAFETY: SSE is part of every x86_64 CPU, and a prefetch reads nothing.
+    #[cfg(target_arch = "x86_64")]
+    unsafe {
+        core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(address as *const i8)
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = address;
+}

@@ -16,6 +16,10 @@
 use crate::memory::{name_bytes, read, ReadError};
 use crate::sdna::{DnaError, Sdna};
 
+mod prefetch;
+use prefetch::Kind;
+pub use prefetch::StateHints;
+
 /// `eModifierType` values (stored in files, so they never change).
 const MODIFIER_ARMATURE: i32 = 8;
 const MODIFIER_NODES: i32 = 57;
@@ -154,15 +158,24 @@ pub struct ObjectSummary {
     pub vertex_groups: Vec<Vec<u8>>,
 }
 
-/// Writes the state of the object at `object` to `out` (cleared first).
+/// Writes the state of the object at `object` to `out` (cleared first). `hints` are where the
+/// last read of this object went (empty for none): they are prefetched first, then replaced by
+/// where this read goes (`object_state/prefetch.rs`); they never change what is read.
 ///
 /// # Safety
 /// `object` must be the address of a live `Object` of the Blender whose SDNA built `layout`,
 /// with nothing writing to it, its modifiers, their node groups, the objects their inputs
 /// point to or its mesh during the call.
-pub unsafe fn read_object_state(layout: &ObjectStateLayout, object: usize, out: &mut Vec<u8>) -> Result<(), ReadError> {
+pub unsafe fn read_object_state(
+    layout: &ObjectStateLayout,
+    object: usize,
+    out: &mut Vec<u8>,
+    hints: &mut StateHints,
+) -> Result<(), ReadError> {
     out.clear();
-    let mut walk = Walk { layout, out, properties: 0 };
+    hints.prefetch(layout);
+    hints.clear();
+    let mut walk = Walk { layout, out, properties: 0, hints };
     // SAFETY: the caller's contract, passed on.
     unsafe { walk.object(object) }
 }
@@ -266,19 +279,19 @@ unsafe fn modifiers_of(l: &ObjectStateLayout, object: usize) -> Result<Vec<usize
 unsafe fn vertex_groups(l: &ObjectStateLayout, object: usize) -> Result<Vec<Vec<u8>>, ReadError> {
     let mut names = Vec::new();
     // SAFETY: the caller's guarantee.
-    unsafe { each_vertex_group(l, object, |name| names.push(name.to_vec())) }?;
+    unsafe { each_vertex_group(l, object, |_, name| names.push(name.to_vec())) }?;
     Ok(names)
 }
 
-/// Calls `each` with the name of every vertex group of the object's mesh, in order (none unless
-/// it is a mesh object), without copying them.
+/// Calls `each` with the address and name of every vertex group of the object's mesh, in order
+/// (none unless it is a mesh object), without copying the names.
 ///
 /// # Safety
 /// As for [`read_object_state`].
 unsafe fn each_vertex_group(
     l: &ObjectStateLayout,
     object: usize,
-    mut each: impl FnMut(&[u8]),
+    mut each: impl FnMut(usize, &[u8]),
 ) -> Result<(), ReadError> {
     // SAFETY: the caller's guarantee.
     unsafe {
@@ -287,7 +300,7 @@ unsafe fn each_vertex_group(
             return Ok(());
         }
         each_in_list(read(mesh + l.mesh_groups), l.group_next, MAX_VERTEX_GROUPS, |g| {
-            each(name_bytes(g + l.group_name.0, l.group_name.1))
+            each(g, name_bytes(g + l.group_name.0, l.group_name.1))
         })
     }
 }
@@ -367,6 +380,7 @@ struct Walk<'a> {
     layout: &'a ObjectStateLayout,
     out: &'a mut Vec<u8>,
     properties: usize,
+    hints: &'a mut StateHints,
 }
 
 impl Walk<'_> {
@@ -388,9 +402,12 @@ impl Walk<'_> {
         let l = self.layout;
         // SAFETY: (all reads) the caller's contract, as in `describe_object`.
         unsafe {
+            self.hints.visited(object, Kind::Object);
             self.int(read::<i32>(object + l.object_mode).into());
-            self.int(read::<usize>(object + l.object_data) as i64);
+            let data: usize = read(object + l.object_data);
+            self.int(data as i64);
             for md in modifiers_of(l, object)? {
+                self.hints.visited(md, Kind::Modifier);
                 let kind: i32 = read(md + l.modifier_type);
                 self.int(kind.into());
                 self.int(read::<i32>(md + l.modifier_mode).into());
@@ -416,7 +433,11 @@ impl Walk<'_> {
             self.int(-1); // (the end of the stack: a modifier's fields cannot be taken for what follows)
 
             // The names streamed: a copy of each was a third of this read for a character's 160.
-            each_vertex_group(l, object, |name| self.bytes(name))?;
+            self.hints.visited(data, Kind::Mesh);
+            each_vertex_group(l, object, |g, name| {
+                self.hints.visited(g, Kind::VertexGroup);
+                self.bytes(name);
+            })?;
         }
         Ok(())
     }
@@ -431,6 +452,7 @@ impl Walk<'_> {
         let l = self.layout;
         // SAFETY: the caller's guarantee; an ID's name begins with its two-letter type code.
         unsafe {
+            self.hints.visited(id, Kind::Object);
             if id != 0 && name_bytes(id + l.id_name, 2) == b"OB" {
                 self.int(read::<i32>(id + l.object_mode).into());
             }
@@ -452,9 +474,11 @@ impl Walk<'_> {
         }
         // SAFETY: (all reads) the caller's guarantee; lengths are bounded before use.
         unsafe {
+            self.hints.visited(group, Kind::Property);
             let children = list(read(group + l.property_group), l.property_next, MAX_PROPERTIES)?;
             self.int(children.len() as i64);
             for p in children {
+                self.hints.visited(p, Kind::Property);
                 self.properties += 1;
                 if self.properties > MAX_PROPERTIES {
                     return Err(ReadError::Implausible("ID property count"));
@@ -467,7 +491,13 @@ impl Walk<'_> {
                     IDP_INT | IDP_FLOAT | IDP_BOOLEAN => self.int(read::<i32>(p + l.property_val).into()),
                     IDP_DOUBLE => self.int(read::<i64>(p + l.property_val)),
                     IDP_ID => self.id(read(p + l.property_pointer)),
-                    IDP_STRING => self.bytes(string(l, p)?),
+                    IDP_STRING => {
+                        let text = string(l, p)?;
+                        if !text.is_empty() {
+                            self.hints.visited(text.as_ptr() as usize, Kind::Bytes);
+                        }
+                        self.bytes(text);
+                    }
                     IDP_GROUP => self.group(p, depth + 1)?,
                     IDP_ARRAY => {
                         let item = match subtype {
@@ -481,6 +511,7 @@ impl Walk<'_> {
                         if at == 0 && len != 0 {
                             return Err(ReadError::Implausible("ID property array"));
                         }
+                        self.hints.visited(at, Kind::Bytes);
                         self.bytes(if len == 0 { &[] } else { core::slice::from_raw_parts(at as *const u8, len) });
                     }
                     _ => return Err(ReadError::Implausible("ID property type")),

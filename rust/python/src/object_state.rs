@@ -2,8 +2,10 @@
 //! read from Blender's memory in one call (`dqskin_blend::read_object_state`).
 
 use std::cell::RefCell;
+use std::collections::HashMap;
+use std::sync::Mutex;
 
-use dqskin_blend::{describe_object, read_object_state, ObjectStateLayout, PropertyValue};
+use dqskin_blend::{describe_object, read_object_state, ObjectStateLayout, PropertyValue, StateHints};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
@@ -25,13 +27,23 @@ thread_local! {
 /// Built from the bytes of any uncompressed ``.blend`` file that this Blender wrote (its SDNA
 /// describes the structs in memory). Internal to the DQ Skin extension.
 #[pyclass(name = "ObjectStateMemory", module = "dqskin.memory", frozen)]
-pub struct PyObjectStateMemory(ObjectStateLayout);
+pub struct PyObjectStateMemory {
+    layout: ObjectStateLayout,
+    /// Where the last read of each object (by address) went, prefetched before the next one
+    /// ([`StateHints`]: the frame handler reads each character once a frame, right after
+    /// Blender's evaluation has moved what it walks out of the caches).
+    kept: Mutex<HashMap<usize, StateHints>>,
+}
+
+/// Objects a reader keeps hints of at most (all are forgotten when it is full: addresses of
+/// removed objects are not told apart from live ones).
+const KEPT_OBJECTS: usize = 4096;
 
 #[pymethods]
 impl PyObjectStateMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| layout_of(blend_file, ObjectStateLayout::new).map(Self))
+        guard(|| layout_of(blend_file, ObjectStateLayout::new).map(|layout| Self { layout, kept: Mutex::default() }))
     }
 
     /// The digest of the state of ``obj`` (a ``bpy.types.Object``): 16 bytes.
@@ -53,7 +65,8 @@ impl PyObjectStateMemory {
             let py = obj.py();
             let ptr = object_pointer(obj)?;
             // SAFETY: as in `read`.
-            let s = unsafe { describe_object(&self.0, ptr) }.map_err(|e| PyValueError::new_err(format!("obj: {e}")))?;
+            let s = unsafe { describe_object(&self.layout, ptr) }
+                .map_err(|e| PyValueError::new_err(format!("obj: {e}")))?;
             let modifiers = PyList::empty(py);
             for m in &s.modifiers {
                 let d = PyDict::new(py);
@@ -100,17 +113,26 @@ impl PyObjectStateMemory {
     /// The digest of the state of `obj`.
     fn read(&self, obj: &Bound<'_, PyAny>) -> PyResult<[u8; 16]> {
         let ptr = object_pointer(obj)?;
-        SCRATCH.with_borrow_mut(|state| {
+        let lock = || self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        // (Taken out for the read: a reader on another thread reads without them meanwhile.)
+        let mut hints = lock().get_mut(&ptr).map(std::mem::take).unwrap_or_default();
+        let digest = SCRATCH.with_borrow_mut(|state| {
             // SAFETY: the address is `Object.as_pointer()` of a live object (checked above to be
             // a `bpy.types.Object`; a removed one raises there). The extension reads it from its
             // frame handler, while Blender does not evaluate or edit anything; every pointer
             // followed is one Blender keeps valid (its lists, and ID pointers, which it clears
             // or remaps when the data-block goes). The extension checks the first read of a
             // session against Blender's own data (`blender.memory_check`).
-            unsafe { read_object_state(&self.0, ptr, state) }
+            unsafe { read_object_state(&self.layout, ptr, state, &mut hints) }
                 .map_err(|e| PyValueError::new_err(format!("obj: {e}")))?;
             Ok(digest_of_bytes(state))
-        })
+        });
+        let mut kept = lock();
+        if kept.len() >= KEPT_OBJECTS && !kept.contains_key(&ptr) {
+            kept.clear();
+        }
+        kept.insert(ptr, hints);
+        digest
     }
 }
 

@@ -298,9 +298,20 @@ fn state(f: &Fixture) -> Result<Vec<u8>, ReadError> {
     state_with(f, &layout())
 }
 
+/// Reads `f` three times: without hints, with those of that read, and with those of a read of
+/// another fixture since freed (stale addresses): the hints never change what is read.
 fn state_with(f: &Fixture, layout: &ObjectStateLayout) -> Result<Vec<u8>, ReadError> {
-    let mut out = vec![1, 2, 3]; // (cleared by the read)
-    unsafe { read_object_state(layout, &f.object as *const FakeObject as usize, &mut out) }.map(|()| out)
+    let read = |f: &Fixture, hints: &mut StateHints| {
+        let mut out = vec![1, 2, 3]; // (cleared by the read)
+        unsafe { read_object_state(layout, &f.object as *const FakeObject as usize, &mut out, hints) }.map(|()| out)
+    };
+    let mut hints = StateHints::default();
+    let first = read(f, &mut hints);
+    assert_eq!(read(f, &mut hints), first);
+    let mut stale = StateHints::default();
+    let _ = read(&fixture(), &mut stale);
+    assert_eq!(read(f, &mut stale), first);
+    first
 }
 
 #[test]
@@ -397,7 +408,10 @@ fn every_change_the_fast_check_must_see_changes_the_state() {
 
 #[test]
 fn implausible_memory_is_refused() {
-    assert_eq!(unsafe { read_object_state(&layout(), 0, &mut Vec::new()) }, Err(ReadError::Null));
+    assert_eq!(
+        unsafe { read_object_state(&layout(), 0, &mut Vec::new(), &mut StateHints::default()) },
+        Err(ReadError::Null)
+    );
     type Spoil = fn(&mut Fixture);
     let cases: [(&str, Spoil); 6] = [
         ("list length", |f| {
@@ -437,4 +451,27 @@ fn inputs_in_system_properties_are_read_as_from_blender_5_2() {
     let before = state_with(&moved, &system).unwrap();
     moved.input[1].val = 1;
     assert_ne!(state_with(&moved, &system).unwrap(), before, "an input in the system properties");
+}
+
+#[test]
+fn a_read_keeps_where_it_went_for_the_next() {
+    let l = layout();
+    let mut f = fixture();
+    let object = &f.object as *const FakeObject as usize;
+    let mut hints = StateHints::default();
+    let mut out = Vec::new();
+    unsafe { read_object_state(&l, object, &mut out, &mut hints) }.unwrap();
+    // The object, its 3 modifiers, the armature the companion points to; the inputs' group,
+    // its 5 properties, the string's bytes, the armature the ID input points to, the nested
+    // group (again as a group) and its 2 properties, the array's bytes; the mesh and its 2
+    // vertex groups.
+    assert_eq!(hints.len(), 20);
+    let before = out.clone();
+    // The Mesh Cache removed: the hints still name it, and what is read is the stack as it is.
+    f.companion.modifier.next = null();
+    f.object.last = &f.companion.modifier;
+    unsafe { read_object_state(&l, object, &mut out, &mut hints) }.unwrap();
+    assert_ne!(out, before);
+    assert_eq!(hints.len(), 19);
+    assert_eq!(Ok(out), state(&f));
 }

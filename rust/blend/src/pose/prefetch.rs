@@ -9,6 +9,7 @@
 //! changes what is read.
 
 use super::{BoneLink, PoseLayout};
+use crate::memory::prefetch;
 
 /// Where one read of an armature's pose went (see the module), for the next read of it.
 #[derive(Clone, Debug, Default)]
@@ -78,16 +79,4 @@ impl ReadHints {
     pub(super) fn visited(&mut self, channel: usize, bone: usize, whole: bool) {
         self.visits.push(Visit { channel, bone, whole });
     }
-}
-
-#[inline(always)]
-fn prefetch(address: usize) {
-    // SAFETY: SSE is part of every x86_64 CPU, and a prefetch reads nothing: it never faults,
-    // whatever the address.
-    #[cfg(target_arch = "x86_64")]
-    unsafe {
-        core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(address as *const i8)
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = address;
 }

@@ -163,7 +163,7 @@ class ImportRoute:
             self.objects.append(copy)
         self.header_of = {}
         namespace = bpy.app.driver_namespace
-        pose, rig_module, skin_many = a.blender.pose, a.blender.rig, a.dqskin.skin_many
+        pose, rig_module, skin_many, share_from = a.blender.pose, a.blender.rig, a.dqskin.skin_many, a.engine.fed.SHARE_FROM
         readers = a.SESSION.readers
 
         def skin(*_):
@@ -178,7 +178,7 @@ class ImportRoute:
                     deform = rig_module.pose_matrices(arm_eval)
                     job.deform = deform if len(deform) == len(binding.bone_indices) else np.ascontiguousarray(deform[binding.bone_indices])
                 jobs.append(job)
-            skin_many(jobs)
+            skin_many(jobs, share_from=share_from)  # (as the feed's driver)
             self.serial += 1
             for job, *_, prefix in self.members:
                 self._write(prefix, self.serial, job.out)

@@ -288,9 +288,10 @@ class SkinJob:
     @property
     def centers(self) -> F32Array | None: ...
 
-def skin_many(jobs: Sequence[SkinJob]) -> list[str | None]:
+def skin_many(jobs: Sequence[SkinJob], *, share_from: int | None = None) -> list[str | None]:
     """Runs the jobs at once, in parallel across meshes; returns None or the error message per
-    job (a failed job's ``out`` is untouched)."""
+    job (a failed job's ``out`` is untouched). Below ``share_from`` vertices over all the jobs
+    the calling thread runs them alone (None: the work is always shared with the pool)."""
 
 @overload
 def centers_of_rotation(

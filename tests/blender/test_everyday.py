@@ -611,7 +611,7 @@ def test_rigify_regenerate_with_dq_skin_characters_skins_once_when_it_settles(dq
     bpy.context.scene.frame_set(8)
     skinned = []
     real = dq_skin.dqskin.skin_many
-    monkeypatch.setattr(dq_skin.dqskin, "skin_many", lambda jobs: skinned.append(len(jobs)) or real(jobs))
+    monkeypatch.setattr(dq_skin.dqskin, "skin_many", lambda jobs, **kw: skinned.append(len(jobs)) or real(jobs, **kw))
     select_only(metarig)
     assert bpy.ops.pose.rigify_generate() == {"FINISHED"}  # (an override of the context would pin Rigify's)
     assert sum(skinned) == 0, f"skinned {sum(skinned)} times while the rig was rebuilt"

@@ -50,6 +50,33 @@ def test_each_job_equals_a_skin_call(method):
     assert dqskin.skin_many([]) == []
 
 
+@pytest.mark.parametrize("method", ["linear", "dual_quaternion"])
+def test_share_from_gives_the_same_bits_on_the_calling_thread_alone(method):
+    """Below `share_from` vertices over all the jobs the calling thread runs them alone (the
+    Rust pool's test checks which thread): every job as shared, in every chunk of a large one."""
+    rng = np.random.default_rng(8)
+    meshes = [mesh(rng, v, bones) for v, bones in ((40000, 30), (3000, 300), (17, 3))]
+    total = sum(len(p) for p, *_ in meshes)
+    results = {}
+    for share_from in (None, 0, total, total + 1, 10**12):
+        jobs = [dqskin.SkinJob(p, inf, d, r, method=method, out=np.full((len(p), 3), 9.0, F)) for p, inf, d, r in meshes]
+        assert dqskin.skin_many(jobs, share_from=share_from) == [None] * len(jobs)
+        results[share_from] = [j.out.copy() for j in jobs]
+    for share_from, outs in results.items():
+        for got, (p, inf, d, r) in zip(outs, meshes):
+            np.testing.assert_array_equal(got, dqskin.skin(p, inf, d, r, method=method), err_msg=str(share_from))
+
+
+@pytest.mark.parametrize("share_from, error", [(-1, ValueError), (1.5, TypeError), ("10", TypeError), (True, TypeError), ([1], TypeError)])
+def test_a_bad_share_from_is_refused_naming_it(share_from, error):
+    rng = np.random.default_rng(9)
+    p, inf, d, r = mesh(rng, 10, 2)
+    job = dqskin.SkinJob(p, inf, d, r, out=np.zeros((10, 3), F))
+    with pytest.raises(error, match="share_from"):
+        dqskin.skin_many([job], share_from=share_from)
+    assert not job.out.any()
+
+
 def test_a_job_keeps_its_arrays_and_allocates_out_when_not_given():
     rng = np.random.default_rng(4)
     p, inf, d, r = mesh(rng, 30, 3)

@@ -21,6 +21,11 @@ from . import binding, inputs
 # What `FedFrame._prepare` returns for a member whose carrier already holds this frame.
 CURRENT = object()
 
+# Vertices (over a level's jobs) from which the kernel shares its work with the pool's threads
+# inside Blender's evaluation. Below, the driver's thread skins alone: Blender's own threads hold
+# the other cores there, and waking a helper cost more than it gained (docs/performance.md).
+SHARE_FROM = 40_000
+
 
 class FedFrame:
     """One run of a batch's driver in one depsgraph."""
@@ -51,7 +56,7 @@ class FedFrame:
                     ready.append((m, *prepared))
             if not ready:
                 continue
-            errors = dqskin.skin_many([job for _m, job, _key, _out in ready])
+            errors = dqskin.skin_many([job for _m, job, _key, _out in ready], share_from=SHARE_FROM)
             for (m, job, key, out), error in zip(ready, errors):
                 st = m.target.st
                 if error is None and m.kind is RouteKind.NODE and m.alone:

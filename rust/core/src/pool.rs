@@ -2,12 +2,18 @@
 //! which belongs to the host application), sized by [`set_num_threads`], else by the
 //! `DQSKIN_NUM_THREADS` environment variable, else by the number of available cores.
 
+use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, RwLock};
 
 use rayon::{ThreadPool, ThreadPoolBuilder};
 
 static POOL: RwLock<Option<Arc<ThreadPool>>> = RwLock::new(None);
+
+thread_local! {
+    /// Inside [`alone`] on this thread: [`share`] runs every task here.
+    static ALONE: Cell<bool> = const { Cell::new(false) };
+}
 
 /// Why the thread count could not be set.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -109,7 +115,7 @@ pub fn run<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 /// kernel gained from its second thread (see docs/performance.md). Inside the pool (a batch's
 /// jobs, each on a worker) it is rayon's parallel loop.
 pub fn share(count: usize, task: impl Fn(usize) + Sync) {
-    if count <= 1 {
+    if count <= 1 || is_alone() {
         (0..count).for_each(task);
         return;
     }
@@ -152,6 +158,26 @@ pub fn share(count: usize, task: impl Fn(usize) + Sync) {
     });
 }
 
+/// Runs `f` with every [`share`] it makes on the calling thread alone, no helper woken (the
+/// pool's own loops, [`run`], still hand their work over). For a host that calls from inside
+/// its own multithreaded work (Blender's evaluation, whose threads hold the other cores): there
+/// a helper's wake-up costs more than it gains on small meshes (docs/performance.md).
+pub fn alone<R>(f: impl FnOnce() -> R) -> R {
+    struct Restore(bool);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            ALONE.set(self.0);
+        }
+    }
+    let _restore = Restore(ALONE.replace(true));
+    f()
+}
+
+/// Whether the calling thread is inside [`alone`].
+pub fn is_alone() -> bool {
+    ALONE.get()
+}
+
 /// [`share`] over `parts`: `task(i, part)` for each, each part to one task.
 pub fn share_parts<T: Send>(parts: Vec<T>, task: impl Fn(usize, T) + Sync) {
     let parts: Vec<Mutex<Option<T>>> = parts.into_iter().map(|p| Mutex::new(Some(p))).collect();
@@ -189,6 +215,34 @@ mod tests {
         let mut parts = vec![0u8; 10];
         share_parts(parts.chunks_mut(3).collect(), |i, part| part.fill(i as u8 + 1));
         assert_eq!(parts, [1, 1, 1, 2, 2, 2, 3, 3, 3, 4]);
+    }
+
+    /// Inside `alone`, every task of a share runs on the calling thread, in order; after it (a
+    /// panic too), shares use the pool again.
+    #[test]
+    fn alone_runs_every_task_on_the_caller() {
+        let caller = std::thread::current().id();
+        let order = Mutex::new(Vec::new());
+        alone(|| {
+            share(50, |i| {
+                assert_eq!(std::thread::current().id(), caller);
+                order.lock().unwrap().push(i);
+            })
+        });
+        assert_eq!(order.into_inner().unwrap(), (0..50).collect::<Vec<_>>());
+        assert!(!is_alone());
+        assert!(std::panic::catch_unwind(|| alone(|| panic!("inside"))).is_err());
+        assert!(!is_alone());
+        if num_threads() > 1 {
+            // (Two tasks that each wait for the other finish only on two threads at once.)
+            let met = AtomicUsize::new(0);
+            share(2, |_| {
+                met.fetch_add(1, Ordering::SeqCst);
+                while met.load(Ordering::SeqCst) < 2 {
+                    std::hint::spin_loop();
+                }
+            });
+        }
     }
 
     /// A task that panics, on the caller or on a helper, panics the call (it does not abort the

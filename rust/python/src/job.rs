@@ -583,9 +583,23 @@ impl SkinJob {
 /// error message of a job that failed (its ``out`` untouched). A job whose arrays no longer
 /// pass its checks (reshaped in place, or sharing an ``out`` with another job) raises at once,
 /// naming the job and the argument, before any job runs. The GIL is released while they run.
+///
+/// ``share_from``: the least number of vertices, over all the jobs, for which the call shares
+/// its work with the pool's threads; below it the calling thread runs every job alone (None:
+/// it always shares). Inside a host's own multithreaded evaluation (Blender's, whose threads
+/// hold the other cores) waking a helper costs more than it gains on small meshes.
 #[pyfunction]
-fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, PyAny>) -> PyResult<Vec<Option<String>>> {
+#[pyo3(signature = (jobs, *, share_from=None))]
+fn skin_many<'py>(
+    py: Python<'py>,
+    jobs: &Bound<'py, PyAny>,
+    share_from: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Vec<Option<String>>> {
     guard(|| {
+        let share_from = match share_from.filter(|s| !s.is_none()) {
+            Some(s) => crate::args::int(s, "share_from", 0, i64::MAX)? as usize,
+            None => 0,
+        };
         let jobs = jobs.cast::<PySequence>().map_err(|_| {
             let ty = jobs.get_type().name().map(|n| n.to_string()).unwrap_or_default();
             PyTypeError::new_err(format!("jobs must be a list of dqskin.SkinJob, got {ty}"))
@@ -610,7 +624,14 @@ fn skin_many<'py>(py: Python<'py>, jobs: &Bound<'py, PyAny>) -> PyResult<Vec<Opt
             .filter(|(_, e)| e.is_none())
             .map(|(b, _)| b.job())
             .collect::<PyResult<Vec<_>>>()?;
-        let results = py.detach(|| dqskin_core::skin_many(&mut many));
+        let vertices: usize = many.iter().map(|j| j.positions.len()).sum();
+        let results = py.detach(|| {
+            if vertices < share_from {
+                dqskin_core::pool::alone(|| dqskin_core::skin_many(&mut many))
+            } else {
+                dqskin_core::skin_many(&mut many)
+            }
+        });
         for (i, r) in runs.into_iter().zip(results) {
             entries[i] = r.err().map(|e| e.to_string());
         }

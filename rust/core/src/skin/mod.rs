@@ -308,7 +308,7 @@ pub fn skin_many(jobs: &mut [ManyJob<'_>]) -> Vec<Result<(), SkinError>> {
         let pose = Pose::with_tables(j.deform, j.rest, tables)?;
         skin_with(None, j.method, j.positions, j.influences, &pose, &j.options, j.out)
     };
-    if jobs.len() <= 1 {
+    if jobs.len() <= 1 || crate::pool::is_alone() {
         // (Its tables and kernel share their work with the pool from here: `pool::share`.)
         return jobs.iter_mut().map(one).collect();
     }
@@ -348,7 +348,7 @@ fn first_in_block(values: &[f32], block: usize) -> Option<usize> {
 /// and does not shrink with more threads.
 fn first_point_not_finite(points: &[[f32; 3]]) -> Option<usize> {
     let values = points.as_flattened();
-    if points.len() <= kernels::CHUNK {
+    if points.len() <= kernels::CHUNK || crate::pool::is_alone() {
         return first_not_finite(values).map(|i| i / 3);
     }
     use rayon::prelude::*;

@@ -23,6 +23,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod blend;
+pub mod digest;
 pub mod dual_quat;
 pub mod hierarchy;
 pub mod pool;

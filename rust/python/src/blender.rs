@@ -2,9 +2,8 @@
 //! Blender's math that come before skinning (shape keys, the armature spaces). Not Blender
 //! specific in their math; the memory reader is the only code that knows Blender's layout.
 
-use std::hash::Hasher;
-
 use dqskin_blend::{positions_in_memory, read_deform_verts, read_positions, DnaError, MeshLayout, Sdna};
+use dqskin_core::digest::Digest;
 use dqskin_core::shape_keys::{self, KeyBlock};
 use dqskin_core::{DeformGroups, Influences};
 use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
@@ -185,32 +184,22 @@ fn positions_digest<'py>(py: Python<'py>, positions: &Bound<'py, PyAny>) -> PyRe
     })
 }
 
-/// Two SipHash-1-3 sums with different keys over the values' bits and their count.
+/// Two fast digests with different seeds over the values' bits and their count
+/// (`dqskin_core::digest`: only ever compared with an earlier one, nothing adversarial).
 fn digest_of(values: &[f32]) -> [u8; 16] {
-    let mut bytes = [0u8; 4096];
-    two_sums(values.len(), |h| {
-        for chunk in values.chunks(bytes.len() / 4) {
-            let used = &mut bytes[..chunk.len() * 4];
-            for (b, v) in used.chunks_exact_mut(4).zip(chunk) {
-                b.copy_from_slice(&v.to_bits().to_le_bytes());
-            }
-            h.write(used);
-        }
-    })
+    two_digests(|h| h.floats(values))
 }
 
-/// Two SipHash-1-3 sums with different keys over `bytes` and their count.
+/// Two fast digests with different seeds over `bytes` and their count.
 pub(crate) fn digest_of_bytes(bytes: &[u8]) -> [u8; 16] {
-    two_sums(bytes.len(), |h| h.write(bytes))
+    two_digests(|h| h.bytes(bytes))
 }
 
-/// 16 bytes: two SipHash-1-3 sums, keyed 0 and 1, of `len` and what `feed` writes.
-fn two_sums(len: usize, mut feed: impl FnMut(&mut std::hash::DefaultHasher)) -> [u8; 16] {
+/// 16 bytes: two digests, seeded 0 and 1, of what `feed` writes.
+fn two_digests(feed: impl Fn(&mut Digest)) -> [u8; 16] {
     let mut out = [0u8; 16];
-    for (key, part) in out.chunks_exact_mut(8).enumerate() {
-        let mut h = std::hash::DefaultHasher::new();
-        h.write_u64(key as u64);
-        h.write_usize(len);
+    for (seed, part) in out.chunks_exact_mut(8).enumerate() {
+        let mut h = Digest::seeded(seed as u64);
         feed(&mut h);
         part.copy_from_slice(&h.finish().to_le_bytes());
     }

@@ -8,6 +8,7 @@ use glam::Mat4;
 
 use super::bbone::{bbone_joint_starts, joint_rest, BBone, Mapping, SegmentBoundary};
 use super::{Effective, Envelope, Influences, SkinError};
+use crate::digest::Digest;
 
 /// Blender's runtime B-Bone cache of one pose channel (`bPoseChannel_Runtime`), for a bone of
 /// `N` segments.
@@ -289,60 +290,6 @@ impl ArmaturePose {
             }
         }
         h.finish()
-    }
-}
-
-/// A fast word-by-word digest: FxHash's step on four interleaved lanes (word `i` into lane
-/// `i % 4`, so that four steps are in flight rather than one chain), the lanes then stepped into
-/// one, with a final mix. Each step is a bijection of the state for a fixed word and of the word
-/// for a fixed state, so changing any single word always changes the result; unrelated inputs
-/// collide with probability about 2⁻⁶⁴.
-#[derive(Default)]
-struct Digest {
-    lanes: [u64; 4],
-    words: u64,
-}
-
-impl Digest {
-    const K: u64 = 0x517c_c1b7_2722_0a95;
-
-    fn step(state: u64, w: u64) -> u64 {
-        (state.rotate_left(5) ^ w).wrapping_mul(Self::K)
-    }
-
-    fn word(&mut self, w: u64) {
-        let lane = &mut self.lanes[(self.words % 4) as usize];
-        *lane = Self::step(*lane, w);
-        self.words += 1;
-    }
-
-    fn floats(&mut self, v: &[f32]) {
-        for pair in v.chunks(2) {
-            let hi = pair.get(1).map_or(0, |f| u64::from(f.to_bits()));
-            self.word(u64::from(pair[0].to_bits()) | hi << 32);
-        }
-        self.word(v.len() as u64);
-    }
-
-    fn matrix(&mut self, m: &Mat4) {
-        self.floats(&m.to_cols_array());
-    }
-
-    fn bytes(&mut self, b: &[u8]) {
-        for chunk in b.chunks(8) {
-            let mut w = [0u8; 8];
-            w[..chunk.len()].copy_from_slice(chunk);
-            self.word(u64::from_le_bytes(w));
-        }
-        self.word(b.len() as u64);
-    }
-
-    fn finish(&self) -> u64 {
-        let mut z = self.lanes.iter().fold(Self::step(0, self.words), |h, &lane| Self::step(h, lane));
-        // splitmix64's finalizer, so that nearby inputs give unrelated outputs.
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
     }
 }
 

@@ -15,6 +15,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -196,6 +197,11 @@ def run_jobs(targets: dict[str, Target], jobs: list[tuple[str, Path]]) -> dict[t
         env = dict(os.environ)
         if target.user is not None:
             env["DQSKIN_BLENDER_USER"] = str(target.user)
+        # A temporary directory of the file's own, removed after it: each bpy process makes a
+        # session directory there (Blender's `blender_XXXXXX`) that it does not remove when pytest
+        # ends it, and the tests' Blender subprocesses theirs (thousands a run otherwise left in /tmp).
+        tmp = tempfile.mkdtemp(prefix="dqs-")  # (short: the tests check messages that name paths)
+        env["TMPDIR"] = tmp
         cmd = [str(target.python), "-m", "pytest", "-q", "-p", "no:cacheprovider", str(path.relative_to(ROOT))]
         t = time.perf_counter()
         with log.open("w") as out:
@@ -203,6 +209,8 @@ def run_jobs(targets: dict[str, Target], jobs: list[tuple[str, Path]]) -> dict[t
                 code = subprocess.run(cmd, cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT, timeout=FILE_TIMEOUT).returncode
             except subprocess.TimeoutExpired:  # (subprocess.run kills the process)
                 code = f"timed out after {FILE_TIMEOUT} s"
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
         seconds = time.perf_counter() - t
         lines = log.read_text(errors="replace").splitlines()
         summary = next((line.strip() for line in reversed(lines) if line.strip()), "")  # pytest's "N passed in …"

@@ -1,9 +1,6 @@
 //! Armature poses from Blender's memory (`dqskin.memory.PoseMemory`, `PoseData`) and the per-frame
 //! influences that use them (`Influences.effective`).
 
-use std::collections::HashMap;
-use std::sync::Mutex;
-
 use dqskin_blend::{read_channel_matrices, read_pose, PoseLayout, ReadError, ReadHints};
 use dqskin_core::glam::Mat4;
 use dqskin_core::skin::ArmaturePose;
@@ -17,6 +14,7 @@ use crate::args;
 use crate::arrays::{self, mat4_to_row_major};
 use crate::blender::layout_of;
 use crate::guard;
+use crate::kept::KeptByAddress;
 use crate::skinning::{matrices, skin_error, space, PyInfluences};
 
 /// Reads armature poses straight from the memory of the running Blender: the channel matrices,
@@ -32,7 +30,7 @@ pub struct PyPoseMemory {
     /// read walks the channels against it and asks the API again only where they disagree: the
     /// API counts by visiting every pose bone (12 µs for a Rigify rig's 706, every frame). And
     /// where its last read went, prefetched before the next one ([`ReadHints`]).
-    kept: Mutex<HashMap<usize, Kept>>,
+    kept: KeptByAddress<Kept>,
 }
 
 /// What a reader keeps of an armature between reads.
@@ -49,7 +47,10 @@ const KEPT_ARMATURES: usize = 1024;
 impl PyPoseMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| layout_of(blend_file, PoseLayout::new).map(|layout| Self { layout, kept: Mutex::default() }))
+        guard(|| {
+            layout_of(blend_file, PoseLayout::new)
+                .map(|layout| Self { layout, kept: KeptByAddress::new(KEPT_ARMATURES) })
+        })
     }
 
     /// The pose of ``armature``, a ``bpy.types.Object`` of type ``'ARMATURE'`` with a pose
@@ -97,12 +98,11 @@ impl PyPoseMemory {
         read: impl Fn(usize, usize, &mut ReadHints) -> Result<T, ReadError>,
     ) -> PyResult<T> {
         let ptr = armature_address(armature)?;
-        let lock = || self.kept.lock().unwrap_or_else(|e| e.into_inner());
-        // (Taken out for the read: a reader on another thread reads without them meanwhile.)
-        let (count, mut hints) = match lock().get_mut(&ptr) {
+        // (The hints taken out for the read: a reader on another thread reads without them meanwhile.)
+        let (count, mut hints) = self.kept.with(ptr, |k| match k {
             Some(k) => (Some(k.count), std::mem::take(&mut k.hints)),
             None => (None, ReadHints::default()),
-        };
+        });
         let (found, count) = match count.map(|count| (read(ptr, count, &mut hints), count)) {
             Some((Err(_), _)) | None => {
                 let count = channel_count(armature)?;
@@ -110,12 +110,7 @@ impl PyPoseMemory {
             }
             Some(done) => done,
         };
-        let mut kept = lock();
-        if kept.len() >= KEPT_ARMATURES && !kept.contains_key(&ptr) {
-            kept.clear();
-        }
-        kept.insert(ptr, Kept { count, hints });
-        drop(kept);
+        self.kept.put(ptr, Kept { count, hints });
         found.map_err(|e| PyValueError::new_err(format!("armature: {e}")))
     }
 }

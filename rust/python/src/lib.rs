@@ -17,6 +17,7 @@ mod blending;
 mod centers_job;
 mod dual_quat;
 mod job;
+mod kept;
 mod method;
 mod object_state;
 mod rigs;

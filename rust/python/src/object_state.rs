@@ -2,8 +2,6 @@
 //! read from Blender's memory in one call (`dqskin_blend::read_object_state`).
 
 use std::cell::RefCell;
-use std::collections::HashMap;
-use std::sync::Mutex;
 
 use dqskin_blend::{describe_object, read_object_state, ObjectStateLayout, PropertyValue, StateHints};
 use pyo3::exceptions::PyValueError;
@@ -12,6 +10,7 @@ use pyo3::types::{PyBytes, PyDict, PyList};
 
 use crate::blender::{digest_of_bytes, layout_of, require_bpy_type};
 use crate::guard;
+use crate::kept::KeptByAddress;
 
 thread_local! {
     /// The buffer a state is read into (no allocation per call once it has grown).
@@ -32,18 +31,20 @@ pub struct PyObjectStateMemory {
     /// Where the last read of each object (by address) went, prefetched before the next one
     /// ([`StateHints`]: the frame handler reads each character once a frame, right after
     /// Blender's evaluation has moved what it walks out of the caches).
-    kept: Mutex<HashMap<usize, StateHints>>,
+    kept: KeptByAddress<StateHints>,
 }
 
-/// Objects a reader keeps hints of at most (all are forgotten when it is full: addresses of
-/// removed objects are not told apart from live ones).
+/// Objects a reader keeps hints of at most.
 const KEPT_OBJECTS: usize = 4096;
 
 #[pymethods]
 impl PyObjectStateMemory {
     #[new]
     fn new(blend_file: &Bound<'_, PyAny>) -> PyResult<Self> {
-        guard(|| layout_of(blend_file, ObjectStateLayout::new).map(|layout| Self { layout, kept: Mutex::default() }))
+        guard(|| {
+            layout_of(blend_file, ObjectStateLayout::new)
+                .map(|layout| Self { layout, kept: KeptByAddress::new(KEPT_OBJECTS) })
+        })
     }
 
     /// The digest of the state of ``obj`` (a ``bpy.types.Object``): 16 bytes.
@@ -113,9 +114,8 @@ impl PyObjectStateMemory {
     /// The digest of the state of `obj`.
     fn read(&self, obj: &Bound<'_, PyAny>) -> PyResult<[u8; 16]> {
         let ptr = object_pointer(obj)?;
-        let lock = || self.kept.lock().unwrap_or_else(|e| e.into_inner());
         // (Taken out for the read: a reader on another thread reads without them meanwhile.)
-        let mut hints = lock().get_mut(&ptr).map(std::mem::take).unwrap_or_default();
+        let mut hints = self.kept.with(ptr, |h| h.map(std::mem::take).unwrap_or_default());
         let digest = SCRATCH.with_borrow_mut(|state| {
             // SAFETY: the address is `Object.as_pointer()` of a live object (checked above to be
             // a `bpy.types.Object`; a removed one raises there). The extension reads it from its
@@ -127,11 +127,7 @@ impl PyObjectStateMemory {
                 .map_err(|e| PyValueError::new_err(format!("obj: {e}")))?;
             Ok(digest_of_bytes(state))
         });
-        let mut kept = lock();
-        if kept.len() >= KEPT_OBJECTS && !kept.contains_key(&ptr) {
-            kept.clear();
-        }
-        kept.insert(ptr, hints);
+        self.kept.put(ptr, hints);
         digest
     }
 }

@@ -53,9 +53,11 @@ fn checked<'a, 'py, T: Element>(
     shape: Shape<'_>,
     names: &[&str],
 ) -> PyResult<&'a Bound<'py, PyArrayDyn<T>>> {
-    let want = std::any::type_name::<T>().replace("f32", "float32").replace("u32", "uint32").replace("i32", "int32");
-    let arr = as_numpy(obj, name, &want)?;
+    // (Spelled out only for an error: every skinning call checks several arrays.)
+    let want = || std::any::type_name::<T>().replace("f32", "float32").replace("u32", "uint32").replace("i32", "int32");
+    let arr = obj.cast::<PyUntypedArray>().or_else(|_| as_numpy(obj, name, &want()))?;
     if !arr.dtype().is_equiv_to(&dtype::<T>(obj.py())) {
+        let want = want();
         return Err(PyTypeError::new_err(format!(
             "{name} must have dtype {want}, got {} (convert with np.asarray({name}, dtype=np.{want}))",
             arr.dtype()

@@ -8,7 +8,16 @@ use std::sync::{Arc, Mutex, RwLock};
 
 use rayon::{ThreadPool, ThreadPoolBuilder};
 
-static POOL: RwLock<Option<Arc<ThreadPool>>> = RwLock::new(None);
+mod placement;
+use placement::Placement;
+
+/// The pool's threads and where they may run.
+struct Pool {
+    threads: ThreadPool,
+    placement: Arc<Placement>,
+}
+
+static POOL: RwLock<Option<Arc<Pool>>> = RwLock::new(None);
 
 thread_local! {
     /// Inside [`alone`] on this thread: [`share`] runs every task here.
@@ -61,15 +70,20 @@ fn default_threads() -> usize {
         .unwrap_or_else(cores)
 }
 
-fn build(threads: usize) -> Result<ThreadPool, PoolError> {
-    ThreadPoolBuilder::new()
+fn build(threads: usize) -> Result<Pool, PoolError> {
+    let placement = Arc::new(Placement::new());
+    let (starts, exits) = (Arc::clone(&placement), Arc::clone(&placement));
+    let threads = ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("dqskin-{i}"))
+        .start_handler(move |_| starts.register())
+        .exit_handler(move |_| exits.leave())
         .build()
-        .map_err(|e| PoolError::Spawn(e.to_string()))
+        .map_err(|e| PoolError::Spawn(e.to_string()))?;
+    Ok(Pool { threads, placement })
 }
 
-fn pool() -> Arc<ThreadPool> {
+fn pool() -> Arc<Pool> {
     if let Some(p) = POOL.read().unwrap_or_else(|e| e.into_inner()).as_ref() {
         return Arc::clone(p);
     }
@@ -99,12 +113,14 @@ pub fn set_num_threads(threads: usize) -> Result<(), PoolError> {
 
 /// The number of worker threads kernels use.
 pub fn num_threads() -> usize {
-    pool().current_num_threads()
+    pool().threads.current_num_threads()
 }
 
 /// Runs `f` inside the pool (so rayon calls in `f` use it) and waits for it.
 pub fn run<R: Send>(f: impl FnOnce() -> R + Send) -> R {
-    pool().install(f)
+    let pool = pool();
+    pool.placement.free();
+    pool.threads.install(f)
 }
 
 /// Runs `task(i)` for every `i` in `0..count` on the pool's threads with the calling thread
@@ -112,20 +128,28 @@ pub fn run<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 /// helper per thread but one and works meanwhile, instead of handing all of it over and
 /// sleeping until it is done: each hand-over wakes threads (on a virtual machine, tens of
 /// microseconds), which inside Blender's evaluation cost as much as a Rigify character's
-/// kernel gained from its second thread (see docs/performance.md). Inside the pool (a batch's
-/// jobs, each on a worker) it is rayon's parallel loop.
+/// kernel gained from its second thread (see docs/performance.md). Meanwhile the helpers are
+/// kept off the caller's CPU (`placement.rs`). Inside the pool (a batch's jobs, each on a
+/// worker) it is rayon's parallel loop.
 pub fn share(count: usize, task: impl Fn(usize) + Sync) {
     if count <= 1 || is_alone() {
         (0..count).for_each(task);
         return;
     }
-    let pool = pool();
-    if pool.current_thread_index().is_some() {
+    share_on(&pool(), count, task);
+}
+
+fn share_on(pool: &Pool, count: usize, task: impl Fn(usize) + Sync) {
+    let threads = &pool.threads;
+    if threads.current_thread_index().is_some() {
         use rayon::prelude::*;
         (0..count).into_par_iter().with_max_len(1).for_each(&task);
         return;
     }
-    let helpers = pool.current_num_threads().min(count) - 1;
+    let helpers = threads.current_num_threads().min(count) - 1;
+    if helpers > 0 {
+        pool.placement.keep_off_caller();
+    }
     // Guided: each claim takes a run of tasks in order, a share of what is left (at least one),
     // so that a large job's participants each stream long runs of memory, and the last claims
     // are small enough to balance. (Claiming one task at a time cost large meshes about 10 %:
@@ -150,7 +174,7 @@ pub fn share(count: usize, task: impl Fn(usize) + Sync) {
             run.for_each(&task);
         }
     };
-    pool.in_place_scope(|scope| {
+    threads.in_place_scope(|scope| {
         for _ in 0..helpers {
             scope.spawn(|_| drain());
         }
@@ -234,6 +258,42 @@ mod tests {
         assert!(!is_alone());
         assert!(std::panic::catch_unwind(|| alone(|| panic!("inside"))).is_err());
         assert!(!is_alone());
+    }
+
+    /// While a caller outside the pool shares, the pool's threads are kept off one CPU (the
+    /// caller's, where a helper would only take turns with it), and the pool's own loops give
+    /// them back every CPU they started with. A pool of its own: other tests replace the global
+    /// one.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn helpers_are_kept_off_the_callers_cpu_while_it_shares() {
+        let pool = build(2).unwrap();
+        let started = std::time::Instant::now();
+        while pool.placement.current().len() < 2 {
+            assert!(started.elapsed().as_secs() < 10, "the pool's threads did not start");
+            std::thread::yield_now();
+        }
+        let cpus = |set: &libc::cpu_set_t| unsafe { libc::CPU_COUNT(set) };
+        if pool.placement.current().iter().any(|(own, _)| cpus(own) < 2) {
+            return; // (one CPU: nowhere else to keep them)
+        }
+        let runs = AtomicU32::new(0);
+        share_on(&pool, 64, |_| {
+            runs.fetch_add(1, Ordering::Relaxed);
+        });
+        assert_eq!(runs.load(Ordering::Relaxed), 64);
+        let kept_off = pool.placement.kept_off().expect("kept off a CPU");
+        for (own, now) in pool.placement.current() {
+            assert!(unsafe { libc::CPU_ISSET(kept_off, &own) });
+            assert!(!unsafe { libc::CPU_ISSET(kept_off, &now) });
+            assert_eq!(cpus(&now), cpus(&own) - 1);
+        }
+        pool.placement.free();
+        assert_eq!(pool.placement.kept_off(), None);
+        for (own, now) in pool.placement.current() {
+            assert_eq!(cpus(&now), cpus(&own));
+            assert!(unsafe { libc::CPU_ISSET(kept_off, &now) });
+        }
     }
 
     /// A task that panics, on the caller or on a helper, panics the call (it does not abort the

@@ -23,11 +23,12 @@ def steady_allocator() -> bool:
     and heap trimming), so that a large array Blender frees and allocates again every frame
     does not page-fault afresh at random frames: without it, 250k vertices with Corrective
     Smooth took 48 or 63 ms a frame at random, with the Armature modifier and with DQ Skin
-    alike. Blender's own Linux builds allocate with jemalloc, which keeps freed extents for
-    reuse (`build_files/cmake/config/blender_release.cmake`); the `bpy` module cannot
-    (`bpy_module.cmake`: jemalloc does not work when Python loads the module), so this is the
-    closer of glibc's behaviours. Every variant of a run gets the same allocator. Returns whether
-    it applied (glibc)."""
+    alike. Blender's own Linux builds allocate with jemalloc
+    (`build_files/cmake/config/blender_release.cmake`), which keeps freed blocks for reuse below
+    8 MB and hands larger ones back at once; the `bpy` module cannot (`bpy_module.cmake`:
+    jemalloc does not work when Python loads the module). Every variant of a run gets the same
+    allocator; `bench/allocators.py` measures how the allocators move the 1M grid. Returns
+    whether it applied (glibc)."""
     try:
         libc = ctypes.CDLL("libc.so.6")
         mallopt = libc.mallopt

@@ -135,8 +135,7 @@ mod linux {
     /// `own` without `cpu`, or `own` itself where `cpu` is its only CPU.
     fn without(own: &libc::cpu_set_t, cpu: i32) -> libc::cpu_set_t {
         let mut set = *own;
-        // SAFETY: `cpu` is below CPU_SETSIZE (checked by the callers' source, sched_getcpu's
-        // range check in `keep_off_caller`).
+        // SAFETY: `cpu` is below CPU_SETSIZE: `keep_off_caller` checks it before keeping a CPU.
         unsafe { libc::CPU_CLR(cpu as usize, &mut set) };
         // SAFETY: `set` is a valid cpu_set_t.
         if unsafe { libc::CPU_COUNT(&set) } == 0 {

@@ -11,8 +11,10 @@ use core::arch::x86_64::*;
 use super::batch::{assert_row_pairs, VectorOps};
 use super::influences::{lane_record, BoneIndex, Slot, LANES};
 
+mod bone_window;
 mod kept;
 
+pub(super) use bone_window::MoveColumns;
 pub(super) use kept::{centers_rigid_batch, linear_batch};
 
 const _: () = assert!(LANES == 16);

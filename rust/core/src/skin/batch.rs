@@ -147,6 +147,9 @@ pub(super) struct BatchJob<'a> {
     /// Each bone's move in mesh space (`spaces.rs`), when the job's spaces fold: LBS then reads
     /// these rather than `linear`, and has no `premat` or `postmat`.
     pub linear_moves: Option<&'a [LinearBone]>,
+    /// The same moves by component (the AVX-512 copy's LBS, `avx512/bone_window.rs`).
+    #[cfg(target_arch = "x86_64")]
+    pub linear_columns: Option<&'a super::avx512::MoveColumns>,
     pub premat: Option<&'a Affine3A>,
     pub postmat: Option<&'a Affine3A>,
     pub blend_factor: f32,

@@ -24,6 +24,13 @@ use super::spaces::{fold_rigid_centers, fold_rigid_spaces, fold_spaces, Fold};
 pub(crate) const CHUNK: usize = 4096;
 const _: () = assert!(CHUNK.is_multiple_of(LANES) && CHUNK.is_multiple_of(WINDOW));
 
+/// The fewest vertices a bone for which the AVX-512 LBS makes the moves by component
+/// (`avx512/bone_window.rs`): a bone's entries cost about what the bone windows save on eight
+/// vertices (docs/performance.md), so from sixteen they pay back at least twice where the
+/// batches have windows.
+#[cfg(target_arch = "x86_64")]
+const VERTICES_A_BONE_FOR_COLUMNS: usize = 16;
+
 pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     assert_eq!(out.len(), job.positions.len(), "one output point per vertex");
     assert!(job.kind() != Kind::CentersOfRotation || job.centers.is_some(), "centers of rotation need the centers");
@@ -41,7 +48,24 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
         Kind::Blend if dq.is_some() => fold_spaces(pose, premat, postmat, Fold::Matrices),
         _ => None,
     };
-    let folded = Folded { linear: linear.as_deref(), dq: dq.as_deref(), cor_rigid: cor_rigid.as_deref() };
+    // The moves by component too for the AVX-512 LBS's batches whose bones lie close together,
+    // where the mesh has enough vertices a bone to repay making them.
+    #[cfg(target_arch = "x86_64")]
+    let linear_columns = match (&linear, simd.instruction_set()) {
+        (Some(moves), InstructionSet::Avx512)
+            if job.kind() == Kind::Linear && job.positions.len() >= VERTICES_A_BONE_FOR_COLUMNS * moves.len() =>
+        {
+            super::avx512::MoveColumns::new(moves)
+        }
+        _ => None,
+    };
+    let folded = Folded {
+        linear: linear.as_deref(),
+        #[cfg(target_arch = "x86_64")]
+        linear_columns: linear_columns.as_ref(),
+        dq: dq.as_deref(),
+        cor_rigid: cor_rigid.as_deref(),
+    };
     let task = |i: usize, chunk: &mut [[f32; 3]]| run_chunk(simd, job, folded, i * CHUNK, chunk);
     if out.len() <= CHUNK {
         task(0, out);
@@ -65,6 +89,9 @@ const ISA_NEON: u8 = 3;
 struct Folded<'a> {
     /// LBS's records: the bones' moves, or for the baseline's LBS (and Blend's) their matrices.
     linear: Option<&'a [LinearBone]>,
+    /// LBS's moves by component, for the AVX-512 copy's (`avx512/bone_window.rs`).
+    #[cfg(target_arch = "x86_64")]
+    linear_columns: Option<&'a super::avx512::MoveColumns>,
     /// DQS's and Blend's dual quaternions, for poses without scale.
     dq: Option<&'a [DqBone]>,
     /// The centers' records, for poses without scale.
@@ -188,6 +215,8 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
         cor: &pose.cor,
         cor_rigid: folded.cor_rigid.unwrap_or(&pose.cor_rigid),
         linear_moves: moves,
+        #[cfg(target_arch = "x86_64")]
+        linear_columns: folded.linear_columns.filter(|_| reads_moves),
         premat: premat.as_ref(),
         postmat: postmat.as_ref(),
         blend_factor: job.blend_factor,
@@ -287,7 +316,9 @@ impl<I: BoneIndex> BatchRun<'_, '_, I> {
         for (k, out) in out.chunks_mut(LANES).enumerate() {
             let first = k * LANES;
             let n = out.len();
-            let slots = job.influences().batch(self.all_slots, (at + first) / LANES);
+            let batch = (at + first) / LANES;
+            let (slots, bone_window) =
+                (job.influences().batch(self.all_slots, batch), job.influences().bone_window(batch));
             prefetch_ahead(streams, first, slots);
             if ISA == ISA_BASELINE && KIND == LINEAR {
                 // The baseline's hand-written LBS, where it measures faster than the one body.
@@ -319,6 +350,7 @@ impl<I: BoneIndex> BatchRun<'_, '_, I> {
                     blend_amount: streams.blend_amount.map(|a| full(a, first)),
                     centers: streams.centers.map(|c| full(c, first)),
                     slots,
+                    bone_window,
                 };
                 // SAFETY: `ISA` is the copy `Simd::chunk` chose from a `Simd`, whose instruction
                 // sets were detected; the job's influences and pose fit together (`Job::new`), so
@@ -357,6 +389,7 @@ impl<I: BoneIndex> BatchRun<'_, '_, I> {
                     blend_amount: blend_amount.as_ref(),
                     centers: centers.as_ref(),
                     slots,
+                    bone_window,
                 };
                 let mut padded = [[0.0f32; 3]; LANES];
                 // SAFETY: as for a full batch; the padding lanes' bone indices are 0, which
@@ -416,6 +449,8 @@ struct BatchInputs<'a, I: BoneIndex> {
     blend_amount: Option<&'a [f32; LANES]>,
     centers: Option<&'a [[f32; 3]; LANES]>,
     slots: &'a [Slot<I>],
+    /// The slots' bone window (`Influences::bone_window`).
+    bone_window: Option<u32>,
 }
 
 /// One full batch with the SIMD kernels of the copy `ISA`.
@@ -430,14 +465,18 @@ unsafe fn full_batch<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: 
     out: &mut [[f32; 3]; LANES],
     scratch: &mut Scratch,
 ) {
-    let BatchInputs { positions, strength, blend_amount, centers, slots } = inputs;
+    let BatchInputs { positions, strength, blend_amount, centers, slots, bone_window } = inputs;
     // The hand-written AVX-512 kernels where they measure faster than the one body
     // (docs/performance.md); every other method runs the one body of `batch.rs`.
     #[cfg(target_arch = "x86_64")]
     if let (ISA_AVX512, LINEAR, Some(moves)) = (ISA, KIND, simd_job.linear_moves) {
-        // SAFETY: the caller's contract (the moves are one per bone of the pose).
-        return unsafe { super::avx512::linear_batch(moves, positions, out, slots, strength) };
+        let window = simd_job.linear_columns.zip(bone_window);
+        // SAFETY: the caller's contract (the moves are one per bone of the pose); the columns
+        // are these moves by component (`run`), the window the batch's (`Influences`).
+        return unsafe { super::avx512::linear_batch(moves, window, positions, out, slots, strength) };
     }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = bone_window; // Only the AVX-512 LBS sums by bone window.
     #[cfg(target_arch = "x86_64")]
     if let (ISA_AVX512, CENTERS, false, Some(centers)) = (ISA, KIND, SCALED, centers) {
         // SAFETY: the caller's contract.

@@ -649,6 +649,77 @@ fn vertices_with_too_little_weight_stay_put_but_go_through_the_spaces() {
     assert!(out.iter().all(|p| (p[0] - 2.0).abs() < 1e-5));
 }
 
+/// The AVX-512 LBS sums a batch whose weighted bones lie within sixteen consecutive indices by
+/// picking each component from those sixteen records (`avx512/bone_window.rs`), and a wider one
+/// per lane; both must give every copy's bits. Batches of every kind, in both index widths: the
+/// lowest bone in lane 0 or elsewhere, exactly sixteen bones wide and seventeen, at the table's
+/// end, with padded and weightless lanes (whose records may then be another bone's), zero
+/// weights on far bones, nothing weighted at all.
+#[test]
+fn linear_batches_within_sixteen_bones_give_the_same_bits_as_wider_ones() {
+    for bones in [40usize, 300] {
+        let n = 16 * 8 * 5;
+        let (positions, _, deform, rest) = batch_fixture(n, bones, 1);
+        let top = bones as u32 - 1;
+        let lists: Vec<Vec<(u32, f32)>> = (0..n)
+            .map(|v| {
+                let (batch, l) = (v / 16, (v % 16) as u32);
+                let b = (batch as u32 * 7) % (top - 20);
+                let w = |k: u32| 0.1 + ((v as u32 * 3 + k) % 7) as f32 * 0.15;
+                match batch % 8 {
+                    0 => vec![(b, w(0)), (b + 4 + l % 3, w(1)), (b + 10 - l % 2, w(2))],
+                    1 if l == 0 => vec![(b + 9, w(0)), (b + 12, w(1)), (b + 15, w(2))],
+                    1 => vec![(b + l % 16, w(0)), (b + 3, w(1)), (b + 6, w(2))],
+                    2 => vec![(b + 15 * (l % 2), w(0)), (b + 7, w(1)), (b + 15, w(2))],
+                    3 => vec![(b + 16 * (l % 2), w(0)), (b + 7, w(1)), (b + 1, w(2))],
+                    4 => vec![(top - l % 3, w(0)), (top - 2, w(1)), (top, w(2))],
+                    5 => (0..l % 4).map(|k| (b + 5 + k, w(k))).collect(),
+                    6 => vec![(b + 2, w(0)), (0, 0.0), (top, 0.0)],
+                    _ => vec![(b + l, 0.0), (top, 0.0), (3, 0.0)],
+                }
+            })
+            .collect();
+        let mask: Vec<f32> = (0..n).map(|v| [1.0, 0.0, 0.5, 0.25, 1.0][v % 5]).collect();
+        let premat = Mat4::from_rotation_translation(Quat::from_rotation_z(0.3), Vec3::new(0.1, 0.2, 0.3));
+        let rig = Rig { rest, deform };
+        // The copies' bits are compared inside `run`; the float64 reference checks the sums.
+        for mask in [None, Some(&mask[..])] {
+            let options = SkinOptions { premat: Some(premat), postmat: Some(premat.inverse()), mask };
+            let inputs = reference::Inputs {
+                positions: &positions,
+                lists: &lists,
+                deform: &rig.deform,
+                rest: &rig.rest,
+                premat,
+                postmat: premat.inverse(),
+                mask,
+            };
+            let got = run(Method::Linear, &positions, &lists, &rig, &options);
+            assert_close(&got, &reference::skin(&inputs, false), 2e-5).unwrap();
+        }
+    }
+}
+
+/// Each batch keeps the first of sixteen consecutive bones holding all its weighted bones (the
+/// AVX-512 LBS's bone window); bones with weight 0 (and padding) do not count.
+#[test]
+fn each_batch_keeps_the_sixteen_bones_its_weights_lie_in() {
+    let batch = |list: &dyn Fn(usize) -> Vec<(u32, f32)>| (0..16).map(list).collect::<Vec<_>>();
+    for bones in [64u32, 300] {
+        let top = bones - 1;
+        let mut lists = Vec::new();
+        lists.extend(batch(&|l| vec![(5 + l as u32, 0.5), (0, 0.0), (top, 0.0)]));
+        lists.extend(batch(&|l| vec![(5 + 16 * (l as u32 % 2), 0.5), (6, 0.5), (7, 0.0)]));
+        lists.extend(batch(&|_| vec![(9, 0.0), (top, 0.0), (1, 0.0)]));
+        lists.extend(batch(&|l| vec![(top - l as u32 % 16, 0.5), (top, 0.1), (top - 3, 1.0)]));
+        lists.extend((0..3).map(|l| vec![(top - l, 0.5), (top - 2, 0.2), (top - 1, 0.1)]));
+        let influences = Influences::from_lists(&lists, bones as usize).unwrap();
+        assert!(influences.lane_positions().is_none(), "vertex order, as the lists");
+        let windows: Vec<_> = (0..5).map(|b| influences.bone_window(b)).collect();
+        assert_eq!(windows, [Some(5), None, Some(0), Some(top - 15), Some(top - 2)], "{bones} bones");
+    }
+}
+
 #[test]
 fn unnormalized_weights_are_divided_by_their_sum() {
     let rig = Rig {

@@ -11,6 +11,7 @@ use core::arch::x86_64::*;
 use super::super::batch::{apply, centers_rigid, rotation_terms, BatchJob, RigidCenterSums};
 use super::super::influences::{BoneIndex, Slot, LANES};
 use super::super::pose::LinearBone;
+use super::bone_window::{self, MoveColumns};
 use super::{idx, join, load_points, scalar_record, store_points, transpose_blocks, Avx512};
 
 /// Transposes eight rows `[record l | record l + 8]` (8 floats each) into eight 16-lane
@@ -144,16 +145,26 @@ unsafe fn moved_point(rows: __m512, point: *const f32) -> __m512 {
 /// transpose was a fifth of the kernel's time on a Zen 4) and the results come out in the order
 /// points are stored.
 ///
+/// A batch with a bone window (its weighted bones within sixteen consecutive ones from the
+/// window's first) takes `bone_window.rs`'s way where the call has the same moves by component:
+/// the same bits, fewer loads.
+///
 /// # Safety
-/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `moves`.
+/// The CPU must support AVX-512F, AVX2 and FMA; every bone index in `slots` must index `moves`;
+/// `window`, if any, holds `moves` by component and the batch's bone window.
 #[target_feature(enable = "avx512f,avx2,fma")]
 pub(in crate::skin) unsafe fn linear_batch<I: BoneIndex>(
     moves: &[LinearBone],
+    window: Option<(&MoveColumns, u32)>,
     positions: &[[f32; 3]; LANES],
     out: &mut [[f32; 3]; LANES],
     slots: &[Slot<I>],
     strength: Option<&[f32; LANES]>,
 ) {
+    if let Some((columns, start)) = window {
+        // SAFETY: as this function's own contract.
+        return unsafe { bone_window::linear_batch(columns, start, positions, out, slots, strength) };
+    }
     // SAFETY: as this function's own contract.
     let (lanes, contrib) = unsafe { lane_moves(slots, moves) };
     let points = positions.as_ptr().cast::<f32>();

@@ -568,8 +568,7 @@ def test_influences_keep_each_vertex_count_and_bone_in_as_few_bits_as_the_larges
     in_window = sum(by_count[b : b + 16].max() for b in range(0, 101, 16))
     ordered = (in_order - in_window) * slot_bytes > 101
     slots = in_window if ordered else in_order
-    # Slots, batch starts, each batch's bone window, lane positions.
-    lanes = slot_bytes * slots + 4 * (7 + 1) + 2 * 7 + (101 if ordered else 0)
+    lanes = slot_bytes * slots + 4 * (7 + 1) + (101 if ordered else 0)  # slots, batch starts, lane positions
     per_vertex = {3: 0.5, 15: 0.5, 16: 1, 255: 1, 256: 2}[most]
     assert infl.nbytes == lanes + int(np.ceil(101 * per_vertex))
 

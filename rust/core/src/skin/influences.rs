@@ -2,8 +2,11 @@
 
 use super::SkinError;
 
+mod bone_windows;
 mod counts;
 mod lane_order;
+pub(crate) use bone_windows::bone_window;
+use bone_windows::BoneWindows;
 use counts::Counts;
 pub(crate) use lane_order::WINDOW;
 
@@ -160,10 +163,8 @@ pub struct Influences {
     /// slots `batch_starts[b]..batch_starts[b+1]`, as many as its vertex with the most influences.
     slots: LaneSlots,
     batch_starts: Vec<u32>,
-    /// Each batch's bone window: the lowest of its weighted bones where they all lie within
-    /// [`LANES`] consecutive bones, else [`NO_BONE_WINDOW`] (the AVX-512 LBS sums such a batch
-    /// from that window's records, `avx512/bone_window.rs`). Two bytes a batch of sixteen.
-    bone_windows: Vec<u16>,
+    /// Each batch's bone window, made for the AVX-512 LBS on its first call (`bone_windows.rs`).
+    bone_windows: BoneWindows,
     /// Each vertex's lane position within its window of [`WINDOW`] vertices, where the lanes
     /// take them by decreasing count (`lane_order.rs`); `None`: in vertex order.
     lane_positions: Option<Box<[u8]>>,
@@ -232,17 +233,26 @@ impl Influences {
         let slot_bytes = if narrow { core::mem::size_of::<Slot<u8>>() } else { core::mem::size_of::<Slot<u16>>() };
         let lane_positions = lane_order::choose(&counts, slot_bytes);
         let vertex_at = lane_order::vertex_at(lane_positions.as_deref(), counts.len());
-        let (slots, Packed { batch_starts, bone_windows }) = if narrow {
-            let (slots, packed) = pack_lanes::<u8>(offsets, &entries, &vertex_at)?;
-            (LaneSlots::Narrow(slots), packed)
+        let (slots, batch_starts) = if narrow {
+            let (slots, starts) = pack_lanes::<u8>(offsets, &entries, &vertex_at)?;
+            (LaneSlots::Narrow(slots), starts)
         } else {
-            let (slots, packed) = pack_lanes::<u16>(offsets, &entries, &vertex_at)?;
-            (LaneSlots::Wide(slots), packed)
+            let (slots, starts) = pack_lanes::<u16>(offsets, &entries, &vertex_at)?;
+            (LaneSlots::Wide(slots), starts)
         };
         // Only the lane order is kept: a vertex's pairs are read back from its lane (a crowd
         // keeps one set of influences per character).
         let counts = Counts::pack(counts.into_iter(), max_per_vertex);
-        Ok(Self { counts, pairs: total, bone_count, max_per_vertex, slots, batch_starts, bone_windows, lane_positions })
+        Ok(Self {
+            counts,
+            pairs: total,
+            bone_count,
+            max_per_vertex,
+            slots,
+            batch_starts,
+            bone_windows: BoneWindows::default(),
+            lane_positions,
+        })
     }
 
     /// From dense rows, as glTF stores joints and weights: vertex `v` lists the `per_vertex`
@@ -372,17 +382,17 @@ impl Influences {
     pub fn byte_size(&self) -> usize {
         self.slots.len() * self.slots.slot_bytes()
             + self.batch_starts.len() * 4
-            + self.bone_windows.len() * 2
             + self.lane_positions.as_ref().map_or(0, |p| p.len())
     }
 
-    /// The bytes they hold on the heap (counts, lane-ordered slots, batch starts and windows): for memory
+    /// The bytes they hold on the heap (counts, lane-ordered slots, batch starts, bone windows
+    /// once made): for memory
     /// accounting.
     pub fn heap_bytes(&self) -> usize {
         self.counts.heap_bytes()
             + self.slots.capacity_bytes()
             + self.batch_starts.capacity() * 4
-            + self.bone_windows.capacity() * 2
+            + self.bone_windows.heap_bytes()
             + self.lane_positions.as_ref().map_or(0, |p| p.len())
     }
 
@@ -413,34 +423,9 @@ impl Influences {
         &slots[self.batch_starts[b] as usize..self.batch_starts[b + 1] as usize]
     }
 
-    /// The first of [`LANES`] consecutive bones that hold every weighted bone of batch `b`, if
-    /// there are such (0 for a batch with no weight at all).
-    #[inline]
-    pub(crate) fn bone_window(&self, b: usize) -> Option<u32> {
-        let first = self.bone_windows[b];
-        (first != NO_BONE_WINDOW).then_some(u32::from(first))
-    }
-}
-
-/// A batch whose weighted bones lie further apart than [`LANES`] consecutive ones.
-const NO_BONE_WINDOW: u16 = u16::MAX;
-
-/// What [`pack_lanes`] gives besides the slots: where each batch's slots start (and, last,
-/// where the slots end) and each batch's bone window.
-struct Packed {
-    batch_starts: Vec<u32>,
-    bone_windows: Vec<u16>,
-}
-
-/// The bone window of a batch whose weighted bones are `lowest..=highest` (`None`: no weight).
-fn bone_window(span: Option<(u32, u32)>) -> u16 {
-    match span {
-        None => 0,
-        // A window at bone 65535 would read as none: such a batch is summed per lane.
-        Some((lowest, highest)) if highest - lowest < LANES as u32 && lowest < u32::from(NO_BONE_WINDOW) => {
-            lowest as u16
-        }
-        Some(_) => NO_BONE_WINDOW,
+    /// Each batch's bone window, for [`bone_window`]: made on the first call, then kept.
+    pub(crate) fn bone_windows(&self) -> &[u16] {
+        self.bone_windows.get(&self.slots, &self.batch_starts)
     }
 }
 
@@ -450,7 +435,7 @@ fn pack_lanes<I: BoneIndex>(
     offsets: &[u32],
     entries: &[Influence],
     vertex_at: &[u32],
-) -> Result<(Vec<Slot<I>>, Packed), SkinError> {
+) -> Result<(Vec<Slot<I>>, Vec<u32>), SkinError> {
     let vertices = offsets.len() - 1;
     let batches = vertices.div_ceil(LANES);
     let count = |p: usize| {
@@ -463,9 +448,7 @@ fn pack_lanes<I: BoneIndex>(
     let mut slots = Vec::with_capacity((0..batches).map(longest).sum());
     let mut batch_starts = Vec::with_capacity(batches + 1);
     batch_starts.push(0u32);
-    let mut bone_windows = Vec::with_capacity(batches);
     for b in 0..batches {
-        let mut span: Option<(u32, u32)> = None;
         let first = b * LANES;
         let last = (first + LANES).min(vertices);
         let longest = longest(b);
@@ -478,17 +461,13 @@ fn pack_lanes<I: BoneIndex>(
                 // Below the bone count, which the width `I` was chosen for (validated).
                 slots[base + k].bones[lane] = I::narrow(e.bone);
                 slots[base + k].weights[lane] = e.weight;
-                if e.weight != 0.0 {
-                    span = Some(span.map_or((e.bone, e.bone), |(lo, hi)| (lo.min(e.bone), hi.max(e.bone))));
-                }
             }
         }
-        bone_windows.push(bone_window(span));
         batch_starts.push(
             u32::try_from(slots.len()).map_err(|_| {
                 SkinError::InvalidInfluences("too many influences to pack (more than 2^32 slots)".into())
             })?,
         );
     }
-    Ok((slots, Packed { batch_starts, bone_windows }))
+    Ok((slots, batch_starts))
 }

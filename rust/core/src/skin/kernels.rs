@@ -13,7 +13,7 @@
 use glam::Affine3A;
 
 use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
-use super::influences::{BoneIndex, LaneSlots, Slot, LANES, WINDOW};
+use super::influences::{bone_window, BoneIndex, LaneSlots, Slot, LANES, WINDOW};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
 use super::pose::{CorRigidBone, DqBone, LinearBone};
@@ -221,8 +221,17 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
         postmat: postmat.as_ref(),
         blend_factor: job.blend_factor,
     };
-    let mut run =
-        BatchRun { job, simd_job: &simd_job, all_slots, scratch: Scratch::new(job.influences().max_per_vertex()) };
+    #[cfg(target_arch = "x86_64")]
+    let bone_windows = simd_job.linear_columns.map(|_| job.influences().bone_windows());
+    #[cfg(not(target_arch = "x86_64"))]
+    let bone_windows = None;
+    let mut run = BatchRun {
+        job,
+        simd_job: &simd_job,
+        all_slots,
+        bone_windows,
+        scratch: Scratch::new(job.influences().max_per_vertex()),
+    };
     let Some(lane_positions) = job.influences().lane_positions() else {
         let streams = Streams {
             positions: &job.positions[start..],
@@ -299,6 +308,8 @@ struct BatchRun<'a, 'j, I: BoneIndex> {
     job: &'a Job<'j>,
     simd_job: &'a BatchJob<'a>,
     all_slots: &'a [Slot<I>],
+    /// The batches' bone windows, where the job's kernel reads them (the AVX-512 LBS).
+    bone_windows: Option<&'a [u16]>,
     scratch: Scratch,
 }
 
@@ -317,8 +328,8 @@ impl<I: BoneIndex> BatchRun<'_, '_, I> {
             let first = k * LANES;
             let n = out.len();
             let batch = (at + first) / LANES;
-            let (slots, bone_window) =
-                (job.influences().batch(self.all_slots, batch), job.influences().bone_window(batch));
+            let slots = job.influences().batch(self.all_slots, batch);
+            let bone_window = self.bone_windows.and_then(|w| bone_window(w, batch));
             prefetch_ahead(streams, first, slots);
             if ISA == ISA_BASELINE && KIND == LINEAR {
                 // The baseline's hand-written LBS, where it measures faster than the one body.
@@ -449,7 +460,7 @@ struct BatchInputs<'a, I: BoneIndex> {
     blend_amount: Option<&'a [f32; LANES]>,
     centers: Option<&'a [[f32; 3]; LANES]>,
     slots: &'a [Slot<I>],
-    /// The slots' bone window (`Influences::bone_window`).
+    /// The slots' bone window (`influences/bone_windows.rs`).
     bone_window: Option<u32>,
 }
 
@@ -472,7 +483,7 @@ unsafe fn full_batch<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: 
     if let (ISA_AVX512, LINEAR, Some(moves)) = (ISA, KIND, simd_job.linear_moves) {
         let window = simd_job.linear_columns.zip(bone_window);
         // SAFETY: the caller's contract (the moves are one per bone of the pose); the columns
-        // are these moves by component (`run`), the window the batch's (`Influences`).
+        // are these moves by component (`run`), the window the batch's (`bone_windows.rs`).
         return unsafe { super::avx512::linear_batch(moves, window, positions, out, slots, strength) };
     }
     #[cfg(not(target_arch = "x86_64"))]

@@ -3,9 +3,9 @@
 //! sixteen records, one `vpermps` a component, out of the call's moves stored by component
 //! ([`MoveColumns`]). Each lane adds the same products in the same order as `kept.rs`'s LBS and
 //! applies its sum with the same operations, so both give the same bits; the batches whose bones
-//! spread wider take `kept.rs`'s way. Each batch's window is found once, when its influences are
-//! packed (`Influences::bone_window`): found per call, its reduction across lanes held every
-//! batch's loads back. On a Zen 4 the picks and the multiply-adds issue on overlapping pipes and
+//! spread wider take `kept.rs`'s way. Each batch's window is found once and kept with its
+//! influences (`influences/bone_windows.rs`): found per call, its reduction across lanes held
+//! every batch's loads back. On a Zen 4 the picks and the multiply-adds issue on overlapping pipes and
 //! no lane's sums need gathering into coordinates at the end (docs/performance.md has the
 //! figures).
 
@@ -66,7 +66,7 @@ unsafe fn bone_lanes<I: BoneIndex>(slot: &Slot<I>) -> __m512i {
 }
 
 /// LBS on one full batch of 16 vertices whose weighted bones are among bones
-/// `start..start + 16` (the batch's bone window, `Influences::bone_window`):
+/// `start..start + 16` (the batch's bone window, `influences/bone_windows.rs`):
 /// `co + (a/contrib)·Σ wᵢ·Dᵢ·co`, as `kept::linear_batch` computes it.
 ///
 /// # Safety

@@ -424,6 +424,7 @@ impl Influences {
     }
 
     /// Each batch's bone window, for [`bone_window`]: made on the first call, then kept.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code, reason = "only the AVX-512 LBS reads them"))]
     pub(crate) fn bone_windows(&self) -> &[u16] {
         self.bone_windows.get(&self.slots, &self.batch_starts)
     }

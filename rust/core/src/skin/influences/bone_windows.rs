@@ -24,6 +24,7 @@ impl PartialEq for BoneWindows {
 
 impl BoneWindows {
     /// Each batch's window (see [`bone_window`]), made on the first call.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code, reason = "only the AVX-512 LBS reads them"))]
     pub(super) fn get(&self, slots: &LaneSlots, batch_starts: &[u32]) -> &[u16] {
         self.0.get_or_init(|| match slots {
             LaneSlots::Narrow(s) => make(s, batch_starts),
@@ -45,6 +46,7 @@ pub(crate) fn bone_window(windows: &[u16], b: usize) -> Option<u32> {
     (first != NONE).then_some(u32::from(first))
 }
 
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code, reason = "only the AVX-512 LBS reads them"))]
 fn make<I: BoneIndex>(slots: &[Slot<I>], batch_starts: &[u32]) -> Box<[u16]> {
     batch_starts
         .windows(2)

@@ -386,8 +386,7 @@ impl Influences {
     }
 
     /// The bytes they hold on the heap (counts, lane-ordered slots, batch starts, bone windows
-    /// once made): for memory
-    /// accounting.
+    /// once made): for memory accounting.
     pub fn heap_bytes(&self) -> usize {
         self.counts.heap_bytes()
             + self.slots.capacity_bytes()

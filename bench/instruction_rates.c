@@ -51,6 +51,7 @@ static double ghz_of(const char *name, double ns, double ghz) {
 #define PERMPS_MEM(k) "vpermps " #k "*32(%1),%%ymm15,%%ymm" #k "\n"
 #define PERMILPS(k) "vpermilps %%ymm14,%%ymm15,%%ymm" #k "\n"
 #define PERM2F128(k) "vperm2f128 $0x31,%%ymm14,%%ymm15,%%ymm" #k "\n"
+#define INSERT_MEM(k) "vinsertf128 $1," #k "*16(%1),%%ymm15,%%ymm" #k "\n"
 #define UNPCK(k) "vunpcklps %%ymm14,%%ymm15,%%ymm" #k "\n"
 #define BLEND(k) "vblendps $0xf0,%%ymm14,%%ymm15,%%ymm" #k "\n"
 /* The LBS sums' pattern for one lane (`avx2.rs`, `window_sums`): its weight broadcast, then the
@@ -79,6 +80,7 @@ int main(void) {
     CASE("eight vpermps from memory", EIGHT(PERMPS_MEM));
     CASE("eight vpermilps", EIGHT(PERMILPS));
     CASE("eight vperm2f128", EIGHT(PERM2F128));
+    CASE("eight vinsertf128 from memory", EIGHT(INSERT_MEM));
     CASE("eight vunpcklps", EIGHT(UNPCK));
     CASE("eight vblendps", EIGHT(BLEND));
     CASE("LBS sums, four lanes (a broadcast, two FMAs from memory)", LANE(0, 8, 4) LANE(1, 9, 5) LANE(2, 10, 6) LANE(3, 11, 7));

@@ -1,7 +1,9 @@
 /* How fast this CPU runs the instructions the AVX2 kernels are made of: each case a loop of
- * eight independent instructions (or a kernel's pattern), timed for 10^8 iterations; cycles are
- * at the clock given (measure it with the first case: eight dependent integer adds take eight
- * cycles). docs/performance.md compares CPUs with it. Build and run (x86-64, gcc or clang):
+ * eight instructions independent within an iteration (or a kernel's pattern), timed for 10^8
+ * iterations. Each register is written once an iteration, so an instruction's latency bounds its
+ * loop too (a multiply-add's four cycles on the Zen 3 equal eight at two a cycle). Cycles are at
+ * the clock the first case measures (eight dependent integer adds take eight cycles).
+ * docs/performance.md ("On an AMD Zen 3") reads them. Build and run (x86-64, gcc or clang):
  *
  *     gcc -O1 bench/instruction_rates.c -o target/instruction_rates && target/instruction_rates
  */
@@ -83,8 +85,10 @@ int main(void) {
     CASE("eight vinsertf128 from memory", EIGHT(INSERT_MEM));
     CASE("eight vunpcklps", EIGHT(UNPCK));
     CASE("eight vblendps", EIGHT(BLEND));
-    CASE("LBS sums, four lanes (a broadcast, two FMAs from memory)", LANE(0, 8, 4) LANE(1, 9, 5) LANE(2, 10, 6) LANE(3, 11, 7));
-    CASE("the same without the broadcasts", LANE_NO_WEIGHT(0, 8, 4) LANE_NO_WEIGHT(1, 9, 5) LANE_NO_WEIGHT(2, 10, 6) LANE_NO_WEIGHT(3, 11, 7));
+    CASE("LBS sums, four lanes (a broadcast, two FMAs from memory)",
+         LANE(0, 8, 4) LANE(1, 9, 5) LANE(2, 10, 6) LANE(3, 11, 7));
+    CASE("the same without the broadcasts",
+         LANE_NO_WEIGHT(0, 8, 4) LANE_NO_WEIGHT(1, 9, 5) LANE_NO_WEIGHT(2, 10, 6) LANE_NO_WEIGHT(3, 11, 7));
     CASE("the same, the weights shuffled from one 128-bit broadcast",
          "vbroadcastf128 (%1),%%ymm12\n" LANE_SHUFFLED(0, 8, 4, 0x00) LANE_SHUFFLED(1, 9, 5, 0x55)
              LANE_SHUFFLED(2, 10, 6, 0xaa) LANE_SHUFFLED(3, 11, 7, 0xff));

@@ -5,12 +5,17 @@
 //! cheaper than gathering each component); each row pairs lanes `l` and `l + 4`, assembled from
 //! two 128-bit loads by `vinsertf128`, so that the transpose needs only in-lane shuffles. The
 //! linear sums accumulate each lane's record rows with its weight broadcast (a load), four lanes
-//! at a time, and are transposed once per vertex.
+//! at a time, and are transposed once per vertex. LBS has a hand-written kernel instead
+//! ([`kept`]), which transposes nothing.
 
 use core::arch::x86_64::*;
 
 use super::batch::{assert_row_pairs, VectorOps};
 use super::influences::{lane_record, BoneIndex, Slot, LANES};
+
+mod kept;
+
+pub(super) use kept::linear_batch;
 
 /// Proof that the CPU has AVX2 and FMA.
 #[derive(Clone, Copy)]

@@ -150,6 +150,9 @@ pub(super) struct BatchJob<'a> {
     /// The same moves by component (the AVX-512 copy's LBS, `avx512/bone_window.rs`).
     #[cfg(target_arch = "x86_64")]
     pub linear_columns: Option<&'a super::avx512::MoveColumns>,
+    /// The moves by column (the AVX2 copy's LBS, `avx2/kept.rs`).
+    #[cfg(target_arch = "x86_64")]
+    pub column_moves: Option<&'a [super::pose::ColumnMove]>,
     pub premat: Option<&'a Affine3A>,
     pub postmat: Option<&'a Affine3A>,
     pub blend_factor: f32,

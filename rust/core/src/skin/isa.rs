@@ -37,24 +37,28 @@ impl InstructionSet {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Simd {
     set: InstructionSet,
+    /// Whether the copy's hand-written kernels run where they are kept (`*/kept.rs`): only the
+    /// tests that hold them to the one body's bits turn them off ([`Simd::one_body`]).
+    #[cfg(test)]
+    kept: bool,
 }
 
 impl Simd {
     /// The copies this CPU can run, widest last.
     pub(crate) fn available() -> Vec<Simd> {
-        let mut all = vec![Simd { set: InstructionSet::Baseline }];
+        let mut all = vec![Simd::of(InstructionSet::Baseline)];
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::is_x86_feature_detected as has;
             if has!("avx2") && has!("fma") {
-                all.push(Simd { set: InstructionSet::Avx2Fma });
+                all.push(Simd::of(InstructionSet::Avx2Fma));
                 if has!("avx512f") {
-                    all.push(Simd { set: InstructionSet::Avx512 });
+                    all.push(Simd::of(InstructionSet::Avx512));
                 }
             }
         }
         #[cfg(target_arch = "aarch64")]
-        all.push(Simd { set: InstructionSet::Neon });
+        all.push(Simd::of(InstructionSet::Neon));
         all
     }
 
@@ -84,5 +88,34 @@ impl Simd {
     /// The instruction set of this copy (a value of it proves the CPU has it).
     pub(crate) fn instruction_set(self) -> InstructionSet {
         self.set
+    }
+
+    /// A copy of the instruction set `set`, which the CPU must have.
+    fn of(set: InstructionSet) -> Self {
+        Simd {
+            set,
+            #[cfg(test)]
+            kept: true,
+        }
+    }
+
+    /// Whether the copy's hand-written kernels run where they are kept: always outside the
+    /// tests, a constant the compiler folds.
+    #[cfg(not(test))]
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code, reason = "read where x86-64's kernels are chosen"))]
+    pub(crate) fn runs_kept(self) -> bool {
+        true
+    }
+
+    #[cfg(test)]
+    pub(crate) fn runs_kept(self) -> bool {
+        self.kept
+    }
+
+    /// The same copy running the one body of `batch.rs` for every method, its hand-written
+    /// kernels left out: what the tests hold those to.
+    #[cfg(test)]
+    pub(crate) fn one_body(self) -> Self {
+        Simd { kept: false, ..self }
     }
 }

@@ -6,7 +6,8 @@
 //! is an independent vertex, so the serial chain of DQS's running-sum sign choice runs in all
 //! lanes at once. Every copy (the baseline, AVX2+FMA and AVX-512 on x86-64, NEON on aarch64)
 //! runs the one arithmetic body of `batch.rs` on every batch, the last partial one padded,
-//! except where a hand-written kernel measured faster (`baseline/kept.rs`, `avx512/kept.rs`).
+//! except where a hand-written kernel measured faster (`baseline/kept.rs`, `avx2/kept.rs`,
+//! `avx512/kept.rs`).
 //! Which copy runs by default is measured (`calibration.rs`); what the CPU has is detected in
 //! `isa.rs`.
 
@@ -16,6 +17,8 @@ use super::batch::{skin_batch, BatchJob, FullBatch, Scratch};
 use super::influences::{bone_window, BoneIndex, LaneSlots, Slot, LANES, WINDOW};
 use super::isa::{InstructionSet, Simd};
 use super::job::{Job, Kind, BLEND, CENTERS, DUAL_QUATERNION, LINEAR};
+#[cfg(target_arch = "x86_64")]
+use super::pose::ColumnMove;
 use super::pose::{CorRigidBone, DqBone, LinearBone};
 use super::spaces::{fold_rigid_centers, fold_rigid_spaces, fold_spaces, Fold};
 
@@ -53,9 +56,19 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
     #[cfg(target_arch = "x86_64")]
     let linear_columns = match (&linear, simd.instruction_set()) {
         (Some(moves), InstructionSet::Avx512)
-            if job.kind() == Kind::Linear && job.positions.len() >= VERTICES_A_BONE_FOR_COLUMNS * moves.len() =>
+            if simd.runs_kept()
+                && job.kind() == Kind::Linear
+                && job.positions.len() >= VERTICES_A_BONE_FOR_COLUMNS * moves.len() =>
         {
             super::avx512::MoveColumns::new(moves)
+        }
+        _ => None,
+    };
+    // The moves by column for the AVX2 LBS.
+    #[cfg(target_arch = "x86_64")]
+    let column_moves: Option<Vec<ColumnMove>> = match (&linear, simd.instruction_set()) {
+        (Some(moves), InstructionSet::Avx2Fma) if simd.runs_kept() && job.kind() == Kind::Linear => {
+            Some(moves.iter().map(ColumnMove::new).collect())
         }
         _ => None,
     };
@@ -63,8 +76,12 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
         linear: linear.as_deref(),
         #[cfg(target_arch = "x86_64")]
         linear_columns: linear_columns.as_ref(),
+        #[cfg(target_arch = "x86_64")]
+        column_moves: column_moves.as_deref(),
         dq: dq.as_deref(),
         cor_rigid: cor_rigid.as_deref(),
+        #[cfg(test)]
+        kept: simd.runs_kept(),
     };
     let task = |i: usize, chunk: &mut [[f32; 3]]| run_chunk(simd, job, folded, i * CHUNK, chunk);
     if out.len() <= CHUNK {
@@ -92,10 +109,30 @@ struct Folded<'a> {
     /// LBS's moves by component, for the AVX-512 copy's (`avx512/bone_window.rs`).
     #[cfg(target_arch = "x86_64")]
     linear_columns: Option<&'a super::avx512::MoveColumns>,
+    /// LBS's moves by column, for the AVX2 copy's (`avx2/kept.rs`).
+    #[cfg(target_arch = "x86_64")]
+    column_moves: Option<&'a [ColumnMove]>,
     /// DQS's and Blend's dual quaternions, for poses without scale.
     dq: Option<&'a [DqBone]>,
     /// The centers' records, for poses without scale.
     cor_rigid: Option<&'a [CorRigidBone]>,
+    /// Whether the copy's hand-written kernels run where kept ([`Simd::runs_kept`]; a field in
+    /// the tests only, so that elsewhere the answer is a constant and the one body's paths the
+    /// hand-written kernels replace are not compiled in).
+    #[cfg(test)]
+    kept: bool,
+}
+
+impl Folded<'_> {
+    #[cfg(not(test))]
+    fn runs_kept(&self) -> bool {
+        true
+    }
+
+    #[cfg(test)]
+    fn runs_kept(&self) -> bool {
+        self.kept
+    }
 }
 
 /// The folded records the copy `simd`'s LBS reads: each bone's move, as the copies with fused
@@ -196,7 +233,16 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
         CENTERS => !SCALED && folded.cor_rigid.is_some(),
         _ => false,
     };
-    let folded = if all_folded { folded } else { Folded::default() };
+    let kept = folded.runs_kept();
+    let folded = if all_folded {
+        folded
+    } else {
+        Folded {
+            #[cfg(test)]
+            kept,
+            ..Folded::default()
+        }
+    };
     let spaces = |m: Option<glam::Mat4>| if all_folded { None } else { m.map(Affine3A::from_mat4) };
     let (premat, postmat) = (spaces(job.premat), spaces(job.postmat));
     let pose = job.pose();
@@ -217,6 +263,8 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
         linear_moves: moves,
         #[cfg(target_arch = "x86_64")]
         linear_columns: folded.linear_columns.filter(|_| reads_moves),
+        #[cfg(target_arch = "x86_64")]
+        column_moves: folded.column_moves.filter(|_| reads_moves),
         premat: premat.as_ref(),
         postmat: postmat.as_ref(),
         blend_factor: job.blend_factor,
@@ -230,6 +278,7 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
         simd_job: &simd_job,
         all_slots,
         bone_windows,
+        kept,
         scratch: Scratch::new(job.influences().max_per_vertex()),
     };
     let Some(lane_positions) = job.influences().lane_positions() else {
@@ -310,6 +359,8 @@ struct BatchRun<'a, 'j, I: BoneIndex> {
     all_slots: &'a [Slot<I>],
     /// The batches' bone windows, where the job's kernel reads them (the AVX-512 LBS).
     bone_windows: Option<&'a [u16]>,
+    /// Whether the copy's hand-written kernels run where kept ([`Simd::runs_kept`]).
+    kept: bool,
     scratch: Scratch,
 }
 
@@ -331,7 +382,7 @@ impl<I: BoneIndex> BatchRun<'_, '_, I> {
             let slots = job.influences().batch(self.all_slots, batch);
             let bone_window = self.bone_windows.and_then(|w| bone_window(w, batch));
             prefetch_ahead(streams, first, slots);
-            if ISA == ISA_BASELINE && KIND == LINEAR {
+            if ISA == ISA_BASELINE && KIND == LINEAR && self.kept {
                 // The baseline's hand-written LBS, where it measures faster than the one body.
                 let (positions, mask) =
                     (&streams.positions[first..first + n], streams.mask.map(|a| &a[first..first + n]));
@@ -369,6 +420,7 @@ impl<I: BoneIndex> BatchRun<'_, '_, I> {
                 unsafe {
                     full_batch::<ISA, I, KIND, SCALED>(
                         simd_job,
+                        self.kept,
                         inputs,
                         out.try_into().expect("a full batch"),
                         &mut self.scratch,
@@ -405,7 +457,9 @@ impl<I: BoneIndex> BatchRun<'_, '_, I> {
                 let mut padded = [[0.0f32; 3]; LANES];
                 // SAFETY: as for a full batch; the padding lanes' bone indices are 0, which
                 // indexes every table (a pose has at least one bone).
-                unsafe { full_batch::<ISA, I, KIND, SCALED>(simd_job, inputs, &mut padded, &mut self.scratch) };
+                unsafe {
+                    full_batch::<ISA, I, KIND, SCALED>(simd_job, self.kept, inputs, &mut padded, &mut self.scratch)
+                };
                 out.copy_from_slice(&padded[..n]);
             }
         }
@@ -472,24 +526,31 @@ struct BatchInputs<'a, I: BoneIndex> {
 #[inline(always)]
 unsafe fn full_batch<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
     simd_job: &BatchJob<'_>,
+    kept: bool,
     inputs: BatchInputs<'_, I>,
     out: &mut [[f32; 3]; LANES],
     scratch: &mut Scratch,
 ) {
     let BatchInputs { positions, strength, blend_amount, centers, slots, bone_window } = inputs;
-    // The hand-written AVX-512 kernels where they measure faster than the one body
-    // (docs/performance.md); every other method runs the one body of `batch.rs`.
+    // The hand-written kernels where they measure faster than the one body (docs/performance.md):
+    // AVX-512's LBS and rigid centers, AVX2's LBS; every other method runs the one body of
+    // `batch.rs`.
     #[cfg(target_arch = "x86_64")]
-    if let (ISA_AVX512, LINEAR, Some(moves)) = (ISA, KIND, simd_job.linear_moves) {
+    if let (ISA_AVX512, LINEAR, true, Some(moves)) = (ISA, KIND, kept, simd_job.linear_moves) {
         let window = simd_job.linear_columns.zip(bone_window);
         // SAFETY: the caller's contract (the moves are one per bone of the pose); the columns
         // are these moves by component (`run`), the window the batch's (`bone_windows.rs`).
         return unsafe { super::avx512::linear_batch(moves, window, positions, out, slots, strength) };
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = bone_window; // Only the AVX-512 LBS sums by bone window.
     #[cfg(target_arch = "x86_64")]
-    if let (ISA_AVX512, CENTERS, false, Some(centers)) = (ISA, KIND, SCALED, centers) {
+    if let (ISA_AVX2, LINEAR, true, Some(moves)) = (ISA, KIND, kept, simd_job.column_moves) {
+        // SAFETY: the caller's contract (the moves are one per bone of the pose).
+        return unsafe { super::avx2::linear_batch(moves, positions, out, slots, strength) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (bone_window, kept); // Only x86-64's copies have hand-written SIMD kernels.
+    #[cfg(target_arch = "x86_64")]
+    if let (ISA_AVX512, CENTERS, false, true, Some(centers)) = (ISA, KIND, SCALED, kept, centers) {
         // SAFETY: the caller's contract.
         return unsafe { super::avx512::centers_rigid_batch(simd_job, positions, centers, out, slots, strength) };
     }

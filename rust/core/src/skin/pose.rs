@@ -45,6 +45,24 @@ pub(crate) struct LinearBone {
     pub padding: [f32; 4],
 }
 
+/// A bone's move (`spaces.rs`) by column for the AVX2 LBS (`avx2/kept.rs`): the columns of its
+/// 3×4 matrix, each padded with a zero, so that a lane's sum is two vectors `[c₀ | c₁]`,
+/// `[c₂ | c₃]` that multiply its point without a transpose.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct ColumnMove {
+    pub columns: [[f32; 4]; 4],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl ColumnMove {
+    pub(crate) fn new(record: &LinearBone) -> Self {
+        let rows = record.matrix.rows.map(|r| r.to_array());
+        ColumnMove { columns: core::array::from_fn(|c| [rows[0][c], rows[1][c], rows[2][c], 0.0]) }
+    }
+}
+
 /// A bone as Blender's Preserve Volume sees it: the unit rotation quaternion `real` (x, y, z, w)
 /// of its rigid part and the dual part `½·(0, t)·real` of its rigid translation.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -318,8 +318,10 @@ fn run(
 /// Skins with every compiled copy of the kernels; returns the last one's result. The copies with
 /// fused multiply-adds (all but the baseline) must give the same bits: which of them runs is
 /// chosen by timing (`calibration.rs`), and a result must not depend on it (a farm's chunks
-/// baked in different processes, or on different CPUs, join byte for byte). The baseline, whose
-/// products are rounded before they are added, must agree to round-off.
+/// baked in different processes, or on different CPUs, join byte for byte). So must each copy's
+/// hand-written kernels and its one body ([`isa::Simd::one_body`]): on a CPU with only one copy
+/// with fused multiply-adds, that is what holds its hand-written kernels to the others'. The
+/// baseline, whose products are rounded before they are added, must agree to round-off.
 pub(in crate::skin) fn skin_all(
     method: Method<'_>,
     positions: &[[f32; 3]],
@@ -329,7 +331,8 @@ pub(in crate::skin) fn skin_all(
 ) -> Vec<[f32; 3]> {
     let mut results = Vec::new();
     let mut fused: Option<(isa::Simd, Vec<[f32; 3]>)> = None;
-    for simd in isa::Simd::available() {
+    let copies = isa::Simd::available().into_iter().flat_map(|simd| [simd.one_body(), simd]);
+    for simd in copies {
         let mut out = vec![[f32::NAN; 3]; positions.len()];
         skin_with(Some(simd), method, positions, influences, pose, options, &mut out).unwrap();
         if simd.instruction_set() != isa::InstructionSet::Baseline {
@@ -648,6 +651,23 @@ fn vertices_with_too_little_weight_stay_put_but_go_through_the_spaces() {
     let lists = vec![vec![(0, 0.00011)]; 3];
     let out = run(Method::Linear, &positions, &lists, &rig, &SkinOptions::default());
     assert!(out.iter().all(|p| (p[0] - 2.0).abs() < 1e-5));
+}
+
+/// A vertex LBS leaves still (mask weight 0, too little weight) keeps its point's bits, negative
+/// zeros too, on every copy: no `co + 0·offset` (which turns −0 into +0) stands in for keeping
+/// it. (DQS keeps a weightless vertex's place but not a −0's sign: `p + 0`.)
+#[test]
+fn still_vertices_keep_their_bits_in_lbs() {
+    let rig = Rig { rest: vec![Mat4::IDENTITY], deform: vec![Mat4::from_translation(Vec3::new(1.0, -1.0, 2.0))] };
+    let positions: Vec<[f32; 3]> = (0..37).map(|v| [-0.0, if v % 2 == 0 { -0.0 } else { 0.0 }, v as f32]).collect();
+    let lists: Vec<_> = (0..37).map(|v| if v % 3 == 0 { vec![(0, 0.00005)] } else { vec![(0, 1.0)] }).collect();
+    let mask: Vec<f32> = (0..37).map(|v| if v % 3 == 1 { 0.0 } else { 1.0 }).collect();
+    let options = SkinOptions { mask: Some(&mask), ..SkinOptions::default() };
+    let out = run(Method::Linear, &positions, &lists, &rig, &options);
+    for (v, (o, p)) in out.iter().zip(&positions).enumerate() {
+        let still = v % 3 != 2;
+        assert_eq!(still, o.map(f32::to_bits) == p.map(f32::to_bits), "vertex {v} is {o:?}");
+    }
 }
 
 /// The AVX-512 LBS sums a batch whose weighted bones lie within sixteen consecutive indices by

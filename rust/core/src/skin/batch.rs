@@ -390,7 +390,7 @@ unsafe fn sign_pass<V: VectorOps, T, I: BoneIndex>(
 
 /// The total weight of one part's lanes (from `lane0`), summed in slot order.
 #[inline(always)]
-fn total_weight<V: VectorOps, I: BoneIndex>(v: V, slots: &[Slot<I>], lane0: usize) -> V::F {
+pub(super) fn total_weight<V: VectorOps, I: BoneIndex>(v: V, slots: &[Slot<I>], lane0: usize) -> V::F {
     slots.iter().fold(v.splat(0.0), |sum, slot| v.add(sum, v.load(&slot.weights[lane0..])))
 }
 

@@ -8,9 +8,11 @@
 
 use core::arch::x86_64::*;
 
+use super::super::batch::total_weight;
 use super::super::influences::{lane_record, BoneIndex, Slot, LANES};
 use super::super::pose::ColumnMove;
 use super::super::MIN_TOTAL_WEIGHT;
+use super::Avx2;
 
 /// Lanes summed at a time: two accumulators a lane, eight of AVX2's sixteen registers.
 const GROUP: usize = 4;
@@ -88,14 +90,12 @@ pub(in crate::skin) unsafe fn linear_batch<I: BoneIndex>(
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 fn factors<I: BoneIndex>(slots: &[Slot<I>], strength: Option<&[f32; LANES]>) -> ([f32; LANES], u32) {
+    // SAFETY: this function runs only where AVX2 and FMA are (its `target_feature`).
+    let v = unsafe { Avx2::new() };
     let (mut factor, mut still) = ([0.0f32; LANES], 0u32);
     for half in 0..2 {
         let lanes = 8 * half..8 * half + 8;
-        let mut contrib = _mm256_setzero_ps();
-        for slot in slots {
-            // SAFETY: eight of a slot's 16 weights.
-            contrib = _mm256_add_ps(contrib, unsafe { _mm256_loadu_ps(slot.weights[lanes.clone()].as_ptr()) });
-        }
+        let contrib = total_weight(v, slots, lanes.start);
         let a = match strength {
             // SAFETY: eight of the mask's 16 lanes.
             Some(s) => unsafe { _mm256_loadu_ps(s[lanes.clone()].as_ptr()) },

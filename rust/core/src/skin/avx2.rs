@@ -6,7 +6,8 @@
 //! two 128-bit loads by `vinsertf128`, so that the transpose needs only in-lane shuffles. The
 //! linear sums accumulate each lane's record rows with its weight broadcast (a load), four lanes
 //! at a time, and are transposed once per vertex. LBS has a hand-written kernel instead
-//! ([`kept`]), which transposes nothing.
+//! ([`kept`]), which transposes nothing, and so has DQS with rigid bones ([`rigid_dqs`]), which
+//! runs the sign chains of a batch's two parts side by side.
 
 use core::arch::x86_64::*;
 
@@ -14,8 +15,10 @@ use super::batch::{assert_row_pairs, VectorOps};
 use super::influences::{lane_record, BoneIndex, Slot, LANES};
 
 mod kept;
+mod rigid_dqs;
 
 pub(super) use kept::linear_batch;
+pub(super) use rigid_dqs::dual_quaternion_batch;
 
 /// Proof that the CPU has AVX2 and FMA.
 #[derive(Clone, Copy)]

@@ -21,7 +21,7 @@
 //!    lanes, store.
 //!
 //! Every copy with fused multiply-adds computes each method in the same operations in the same
-//! order (the hand-written kernels of `avx512/kept.rs` too), so they give the same bits.
+//! order (the hand-written kernels of `avx2/` and `avx512/` too), so they give the same bits.
 
 use core::mem::offset_of;
 
@@ -169,6 +169,12 @@ impl Scratch {
     pub(super) fn new(slots: usize) -> Self {
         Scratch { signed: vec![[0.0; LANES]; slots] }
     }
+
+    /// Room for the signed weights of a batch of `slots` slots (for AVX2's rigid DQS).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    pub(super) fn signed(&mut self, slots: usize) -> &mut [[f32; LANES]] {
+        &mut self.signed[..slots]
+    }
 }
 
 /// One full batch: its points and slots and, where the method has them, its mask weights,
@@ -183,8 +189,8 @@ pub(super) struct FullBatch<'a, I: BoneIndex> {
 }
 
 /// Float offsets of what the batch kernels read in the pose tables' records.
-const DQ_REAL: usize = offset_of!(DqBone, real) / 4;
-const DQ_DUAL: usize = offset_of!(DqBone, dual) / 4;
+pub(super) const DQ_REAL: usize = offset_of!(DqBone, real) / 4;
+pub(super) const DQ_DUAL: usize = offset_of!(DqBone, dual) / 4;
 const PIVOT_REAL: usize = offset_of!(PivotBone, real) / 4;
 const COR_REAL: usize = offset_of!(CorBone, real) / 4;
 /// The rows of a `CorBone` the centers with scale sum: the matrix rows, then the scale/shear part
@@ -350,7 +356,7 @@ fn armature_points<V: VectorOps>(v: V, job: &BatchJob<'_>, points: &[[f32; 3]]) 
 /// `±wᵢ` for the quaternion `q` of an influence with weight `w`, against the running sum
 /// `real` (Blender's `add_weighted_dq_dq`: negated where `q·sum < 0`).
 #[inline(always)]
-fn signed_weight<V: VectorOps>(v: V, q: &[V::F; 4], real: &[V::F; 4], w: V::F) -> V::F {
+pub(super) fn signed_weight<V: VectorOps>(v: V, q: &[V::F; 4], real: &[V::F; 4], w: V::F) -> V::F {
     v.neg_where(v.lt(dot4(v, q, real), v.splat(0.0)), w)
 }
 
@@ -506,7 +512,7 @@ unsafe fn rigid_sums<V: VectorOps, I: BoneIndex>(
 /// than `array::from_fn` or `array::map`, whose generic machinery the compiler may leave out of
 /// line, compiled without the instruction set of the kernel that uses it.
 #[inline(always)]
-fn each3<T>(f: impl Fn(usize) -> T) -> [T; 3] {
+pub(super) fn each3<T>(f: impl Fn(usize) -> T) -> [T; 3] {
     [f(0), f(1), f(2)]
 }
 
@@ -606,7 +612,7 @@ pub(super) fn rotation_terms<V: VectorOps>(v: V, q: &[V::F; 4], d: [V::F; 3]) ->
 /// `u = w·b + v × b − t₀·v`, `b = v × p + t⃗` (since `M·p = |q|²·p + 2·(w·(v × p) + v × (v × p))`):
 /// 17 operations per lane instead of the matrix's 40, and `p`'s own term exact.
 #[inline(always)]
-fn dual_quaternion<V: VectorOps>(
+pub(super) fn dual_quaternion<V: VectorOps>(
     v: V,
     real: [V::F; 4],
     dual: [V::F; 4],

@@ -7,7 +7,7 @@
 //! lanes at once. Every copy (the baseline, AVX2+FMA and AVX-512 on x86-64, NEON on aarch64)
 //! runs the one arithmetic body of `batch.rs` on every batch, the last partial one padded,
 //! except where a hand-written kernel measured faster (`baseline/kept.rs`, `avx2/kept.rs`,
-//! `avx512/kept.rs`).
+//! `avx2/rigid_dqs.rs`, `avx512/kept.rs`).
 //! Which copy runs by default is measured (`calibration.rs`); what the CPU has is detected in
 //! `isa.rs`.
 
@@ -533,8 +533,8 @@ unsafe fn full_batch<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: 
 ) {
     let BatchInputs { positions, strength, blend_amount, centers, slots, bone_window } = inputs;
     // The hand-written kernels where they measure faster than the one body (docs/performance.md):
-    // AVX-512's LBS and rigid centers, AVX2's LBS; every other method runs the one body of
-    // `batch.rs`.
+    // AVX-512's LBS and rigid centers, AVX2's LBS and rigid DQS (in mesh space: the spaces
+    // folded into its records, or none); every other method runs the one body of `batch.rs`.
     #[cfg(target_arch = "x86_64")]
     if let (ISA_AVX512, LINEAR, true, Some(moves)) = (ISA, KIND, kept, simd_job.linear_moves) {
         let window = simd_job.linear_columns.zip(bone_window);
@@ -546,6 +546,14 @@ unsafe fn full_batch<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: 
     if let (ISA_AVX2, LINEAR, true, Some(moves)) = (ISA, KIND, kept, simd_job.column_moves) {
         // SAFETY: the caller's contract (the moves are one per bone of the pose).
         return unsafe { super::avx2::linear_batch(moves, positions, out, slots, strength) };
+    }
+    #[cfg(target_arch = "x86_64")]
+    if let (ISA_AVX2, DUAL_QUATERNION, false, true, None, None) =
+        (ISA, KIND, SCALED, kept, simd_job.premat, simd_job.postmat)
+    {
+        let signed = scratch.signed(slots.len());
+        // SAFETY: the caller's contract.
+        return unsafe { super::avx2::dual_quaternion_batch(simd_job.dq, positions, out, slots, strength, signed) };
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = (bone_window, kept); // Only x86-64's copies have hand-written SIMD kernels.

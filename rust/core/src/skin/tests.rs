@@ -670,6 +670,37 @@ fn still_vertices_keep_their_bits_in_lbs() {
     }
 }
 
+/// A vertex whose mask weight is 0 keeps its point's bits, negative zeros too, with every
+/// method, rigid bones and bones with scale, on every copy (Blender's modifier skips it): the
+/// kernels keep the point rather than add `0·offset` to it.
+#[test]
+fn masked_vertices_keep_their_bits_with_every_method() {
+    let turn = Mat4::from_rotation_translation(Quat::from_rotation_z(0.7), Vec3::new(1.0, -1.0, 2.0));
+    let rigid = vec![Mat4::IDENTITY, turn];
+    let scaled = vec![Mat4::IDENTITY, turn * Mat4::from_scale(Vec3::new(1.5, 1.0, 0.5))];
+    let positions: Vec<[f32; 3]> = (0..37).map(|v| [-0.0, if v % 2 == 0 { -0.0 } else { 0.0 }, v as f32]).collect();
+    let lists: Vec<_> = (0..37).map(|v| vec![(0, 0.5), ((v % 2) as u32 ^ 1, 0.25 + 0.01 * v as f32)]).collect();
+    let mask: Vec<f32> = (0..37).map(|v| if v % 3 == 1 { 0.0 } else { 1.0 }).collect();
+    let centers: Vec<[f32; 3]> = (0..37).map(|v| [0.5, 0.0, v as f32]).collect();
+    let amount: Vec<f32> = (0..37).map(|v| v as f32 / 36.0).collect();
+    let options = SkinOptions { mask: Some(&mask), ..SkinOptions::default() };
+    for deform in [rigid, scaled] {
+        let rig = Rig { rest: vec![Mat4::IDENTITY; 2], deform };
+        for method in [
+            Method::Linear,
+            Method::DualQuaternion,
+            Method::Blend { amount: Some(&amount), factor: 0.7 },
+            Method::CentersOfRotation { centers: &centers },
+        ] {
+            let out = run(method, &positions, &lists, &rig, &options);
+            for (v, (o, p)) in out.iter().zip(&positions).enumerate() {
+                let still = v % 3 == 1;
+                assert_eq!(still, o.map(f32::to_bits) == p.map(f32::to_bits), "{method:?}: vertex {v} is {o:?}");
+            }
+        }
+    }
+}
+
 /// The AVX-512 LBS sums a batch whose weighted bones lie within sixteen consecutive indices by
 /// picking each component from those sixteen records (`avx512/bone_window.rs`), and a wider one
 /// per lane; both must give every copy's bits. Batches of every kind, in both index widths: the

@@ -331,16 +331,18 @@ unsafe fn skin_part<V: VectorOps, I: BoneIndex, const KIND: u8, const SCALED: bo
         Some(m) => apply(v, m, moved),
         None => moved,
     };
-    // A mask weight of 0 leaves the vertex bit-identical (no space round trip). The original
-    // points are loaded again for it rather than kept in registers through the sums.
-    let r = if batch.strength.is_some() {
-        let o = v.load_points(&batch.positions[lanes.clone()]);
-        let untouched = v.eq(a, v.splat(0.0));
-        each3(|k| v.select(untouched, o[k], r[k]))
-    } else {
-        r
-    };
+    let r = if batch.strength.is_some() { keep_masked(v, a, &batch.positions[lanes.clone()], r) } else { r };
     v.store_points(r, &mut batch.out[lanes]);
+}
+
+/// `r`, but the original points `points` where the mask weight `a` is 0: a masked vertex is left
+/// bit-identical (no space round trip). The points are loaded again for it rather than kept in
+/// registers through the sums.
+#[inline(always)]
+pub(super) fn keep_masked<V: VectorOps>(v: V, a: V::F, points: &[[f32; 3]], r: [V::F; 3]) -> [V::F; 3] {
+    let o = v.load_points(points);
+    let untouched = v.eq(a, v.splat(0.0));
+    each3(|k| v.select(untouched, o[k], r[k]))
 }
 
 /// A part's points in armature space (`premat` applied).
@@ -356,8 +358,20 @@ fn armature_points<V: VectorOps>(v: V, job: &BatchJob<'_>, points: &[[f32; 3]]) 
 /// `±wᵢ` for the quaternion `q` of an influence with weight `w`, against the running sum
 /// `real` (Blender's `add_weighted_dq_dq`: negated where `q·sum < 0`).
 #[inline(always)]
-pub(super) fn signed_weight<V: VectorOps>(v: V, q: &[V::F; 4], real: &[V::F; 4], w: V::F) -> V::F {
+fn signed_weight<V: VectorOps>(v: V, q: &[V::F; 4], real: &[V::F; 4], w: V::F) -> V::F {
     v.neg_where(v.lt(dot4(v, q, real), v.splat(0.0)), w)
+}
+
+/// Adds one slot's rotations `q`, weighted `w`, to the running quaternion sum `real` with their
+/// signs ([`signed_weight`]), and returns the signed weights. The first slot keeps its weights:
+/// the sum is still zero there, and Blender keeps them.
+#[inline(always)]
+pub(super) fn add_signed<V: VectorOps>(v: V, first: bool, q: &[V::F; 4], w: V::F, real: &mut [V::F; 4]) -> V::F {
+    let ws = if first { w } else { signed_weight(v, q, real, w) };
+    for c in 0..4 {
+        real[c] = v.mul_add(q[c], ws, real[c]);
+    }
+    ws
 }
 
 /// The sign-aligned quaternion sum of one part's lanes (from `lane0`) over the slots, and the
@@ -382,10 +396,7 @@ unsafe fn sign_pass<V: VectorOps, T, I: BoneIndex>(
         // SAFETY: the caller's contract.
         let q = unsafe { v.load_columns4(table, &slot.bones[lane0..], offset) };
         let w = v.load(&slot.weights[lane0..]);
-        let ws = if k == 0 { w } else { signed_weight(v, &q, &real, w) };
-        for c in 0..4 {
-            real[c] = v.mul_add(q[c], ws, real[c]);
-        }
+        let ws = add_signed(v, k == 0, &q, w, &mut real);
         contrib = v.add(contrib, w);
         if let Some(signed) = signed.as_deref_mut() {
             v.store(ws, &mut signed[k][lane0..]);
@@ -453,10 +464,7 @@ impl<V: VectorOps> RigidCenterSums<V> {
         for i in 0..3 {
             self.anchor[i] = v.mul_add(w2, moved[i], self.anchor[i]);
         }
-        let ws = if first { w } else { signed_weight(v, q, &self.real, w) };
-        for i in 0..4 {
-            self.real[i] = v.mul_add(q[i], ws, self.real[i]);
-        }
+        add_signed(v, first, q, w, &mut self.real);
         self.contrib = v.add(self.contrib, w);
     }
 }
@@ -498,6 +506,8 @@ unsafe fn rigid_sums<V: VectorOps, I: BoneIndex>(
         // SAFETY: the caller's contract; the rotation and the dual part are four floats each.
         let (q, d) = unsafe { (v.load_columns4(dq, bones, DQ_REAL), v.load_columns4(dq, bones, DQ_DUAL)) };
         let w = v.load(&slot.weights[lane0..]);
+        // (`add_signed`'s steps, each dual part's sum beside its rotation's: Blend measured
+        // faster in this order than after them, docs/performance.md.)
         let ws = if k == 0 { w } else { signed_weight(v, &q, &real, w) };
         for c in 0..4 {
             real[c] = v.mul_add(q[c], ws, real[c]);
@@ -512,7 +522,7 @@ unsafe fn rigid_sums<V: VectorOps, I: BoneIndex>(
 /// than `array::from_fn` or `array::map`, whose generic machinery the compiler may leave out of
 /// line, compiled without the instruction set of the kernel that uses it.
 #[inline(always)]
-pub(super) fn each3<T>(f: impl Fn(usize) -> T) -> [T; 3] {
+fn each3<T>(f: impl Fn(usize) -> T) -> [T; 3] {
     [f(0), f(1), f(2)]
 }
 

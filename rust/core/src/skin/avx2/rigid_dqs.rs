@@ -12,7 +12,7 @@
 
 use core::arch::x86_64::*;
 
-use super::super::batch::{dual_quaternion, each3, signed_weight, total_weight, VectorOps, DQ_DUAL, DQ_REAL};
+use super::super::batch::{add_signed, dual_quaternion, keep_masked, total_weight, VectorOps, DQ_DUAL, DQ_REAL};
 use super::super::influences::{lane_record, BoneIndex, Slot, LANES};
 use super::super::pose::DqBone;
 use super::{transpose_halves, Avx2};
@@ -47,11 +47,7 @@ pub(in crate::skin) unsafe fn dual_quaternion_batch<I: BoneIndex>(
             let lane0 = PART * part;
             // SAFETY: the caller's contract; the rotation is four floats of a DqBone.
             let q = unsafe { v.load_columns4(dq, &slot.bones[lane0..], DQ_REAL) };
-            let w = v.load(&slot.weights[lane0..]);
-            let ws = if k == 0 { w } else { signed_weight(v, &q, sum, w) };
-            for c in 0..4 {
-                sum[c] = v.mul_add(q[c], ws, sum[c]);
-            }
+            let ws = add_signed(v, k == 0, &q, v.load(&slot.weights[lane0..]), sum);
             v.store(ws, &mut signed[k][lane0..]);
         }
     }
@@ -67,14 +63,7 @@ pub(in crate::skin) unsafe fn dual_quaternion_batch<I: BoneIndex>(
         let lanes = lane0..lane0 + PART;
         let p = v.load_points(&positions[lanes.clone()]);
         let r = dual_quaternion(v, real, dual, contrib, p, a);
-        // A mask weight of 0 leaves the vertex bit-identical (the one body's).
-        let r = if strength.is_some() {
-            let untouched = v.eq(a, v.splat(0.0));
-            let o = v.load_points(&positions[lanes.clone()]);
-            each3(|c| v.select(untouched, o[c], r[c]))
-        } else {
-            r
-        };
+        let r = if strength.is_some() { keep_masked(v, a, &positions[lanes.clone()], r) } else { r };
         v.store_points(r, &mut out[lanes]);
     }
 }

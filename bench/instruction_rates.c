@@ -54,6 +54,16 @@ static double ghz_of(const char *name, double ns, double ghz) {
 #define PERMILPS(k) "vpermilps %%ymm14,%%ymm15,%%ymm" #k "\n"
 #define PERM2F128(k) "vperm2f128 $0x31,%%ymm14,%%ymm15,%%ymm" #k "\n"
 #define INSERT_MEM(k) "vinsertf128 $1," #k "*16(%1),%%ymm15,%%ymm" #k "\n"
+#define BCAST128(k) "vbroadcastf128 " #k "*16(%1),%%ymm" #k "\n"
+#define LOAD128(k) "vmovups " #k "*16(%1),%%xmm" #k "\n"
+/* One lane pair's two records (lanes l and l + 4) in one register, as the AVX2 kernels gather
+ * rotations: a 128-bit load and an insert from memory, or a load, a broadcast and a blend. */
+#define PAIR_INSERT(k) "vmovups " #k "*32(%1),%%xmm" #k "\n" \
+                       "vinsertf128 $1,16+" #k "*32(%1),%%ymm" #k ",%%ymm" #k "\n"
+#define PAIR_BLEND(k) "vmovups " #k "*32(%1),%%xmm" #k "\n"       \
+                      "vbroadcastf128 16+" #k "*32(%1),%%ymm1" #k "\n" \
+                      "vblendps $0xf0,%%ymm1" #k ",%%ymm" #k ",%%ymm" #k "\n"
+#define DPPS(k) "vdpps $0xff,%%ymm14,%%ymm15,%%ymm" #k "\n"
 #define UNPCK(k) "vunpcklps %%ymm14,%%ymm15,%%ymm" #k "\n"
 #define BLEND(k) "vblendps $0xf0,%%ymm14,%%ymm15,%%ymm" #k "\n"
 /* The LBS sums' pattern for one lane (`avx2.rs`, `window_sums`): its weight broadcast, then the
@@ -83,6 +93,12 @@ int main(void) {
     CASE("eight vpermilps", EIGHT(PERMILPS));
     CASE("eight vperm2f128", EIGHT(PERM2F128));
     CASE("eight vinsertf128 from memory", EIGHT(INSERT_MEM));
+    CASE("eight vbroadcastf128 from memory", EIGHT(BCAST128));
+    CASE("eight 128-bit loads", EIGHT(LOAD128));
+    CASE("eight lane pairs: a load and vinsertf128 from memory", EIGHT(PAIR_INSERT));
+    CASE("six lane pairs: a load, vbroadcastf128 and vblendps",
+         PAIR_BLEND(0) PAIR_BLEND(1) PAIR_BLEND(2) PAIR_BLEND(3) PAIR_BLEND(4) PAIR_BLEND(5));
+    CASE("eight vdpps (a dot product in each half)", EIGHT(DPPS));
     CASE("eight vunpcklps", EIGHT(UNPCK));
     CASE("eight vblendps", EIGHT(BLEND));
     CASE("LBS sums, four lanes (a broadcast, two FMAs from memory)",

@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import bpy
+from bpy.types import Armature, Collection, Key, Mesh, Object, Scene  # (each `bpy.types.X` is a lookup by name)
 
 from ..blender import compat, nodes
 from ..model.keys import ModKey
@@ -223,7 +224,7 @@ class Tracker:
             if orig is None:
                 continue
             uid = orig.session_uid
-            if isinstance(orig, bpy.types.Object):
+            if isinstance(orig, Object):
                 rec = self.records.get(uid)
                 if rec is not None:
                     self.refresh(rec)
@@ -236,16 +237,16 @@ class Tracker:
                     cache_route.remove_orphans(orig)
                 if uid in self.watch:
                     dirty |= self.watch[uid]
-            elif isinstance(orig, (bpy.types.Collection, bpy.types.Scene)):
+            elif isinstance(orig, (Collection, Scene)):
                 structure = True
             elif uid in self.watch:
-                if isinstance(orig, bpy.types.Mesh) and update.is_updated_geometry:
+                if isinstance(orig, Mesh) and update.is_updated_geometry:
                     meshes.mark_stale(uid)
-                elif isinstance(orig, bpy.types.Key):
+                elif isinstance(orig, Key):
                     user = getattr(orig, "user", None)
                     if user is not None:
                         meshes.mark_stale(user.session_uid)
-                elif isinstance(orig, bpy.types.Armature):
+                elif isinstance(orig, Armature):
                     self._armature_changed(uid)
                 dirty |= self.watch[uid]
         if structure:
@@ -290,9 +291,6 @@ class Tracker:
         meshes = self.session.meshes
         feeds = self.session.routes.feeds
         updated, moved = set(), set()
-        # (Each `bpy.types` attribute is a lookup by name: once per call, not once per update.)
-        types = bpy.types
-        Object, Mesh, Armature, Collection = types.Object, types.Mesh, types.Armature, types.Collection
         for update in depsgraph.updates:
             id_ = update.id
             orig = getattr(id_, "original", id_)

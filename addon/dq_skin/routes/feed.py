@@ -99,6 +99,7 @@ class Feeds:
         # frame handler right after it reads the same pose (`kept`).
         self._kept: tuple = ((), None)
         self._visibility_stale = True  # visibility may have changed: `commit` reads it again
+        self._scenes: dict[int, object] = {}  # session uid -> the scene (`_scene`)
         self._next_uid = 1
         # A render's graph may run its driver on its own thread while the viewport's runs one:
         # one batch skins at a time (the kernel releases the GIL).
@@ -187,30 +188,47 @@ class Feeds:
         member: a crowd joins at once)."""
         stale, self._visibility_stale = self._visibility_stale, False
         moved = []
-        for scene_uid in {b.scene for b in self._batches.values()}:
-            batches = [b for b in self._batches.values() if b.scene == scene_uid and _alive(b.carrier)]
-            scene = next((sc for sc in bpy.data.scenes if sc.session_uid == scene_uid), None)
+        # (Called on every frame: a frame where nothing changed costs one layout read a scene,
+        # however many batches its hidden characters have.)
+        by_scene: dict[int, list] = {}
+        for b in self._batches.values():
+            by_scene.setdefault(b.scene, []).append(b)
+        for scene_uid, batches in by_scene.items():
+            scene = self._scene(scene_uid)
             layout = visibility.layout(scene) if scene is not None else ()
             if stale or any(b.dirty or b.layout != layout for b in batches):
-                for b in batches:
-                    b.layout = layout
-                moved += self._read_visibility(batches, scene)
-        for batch in list(self._batches.values()):
-            if not batch.dirty or not _alive(batch.carrier):
-                continue
-            driver = batch.carrier.animation_data.drivers[0].driver
-            while driver.variables:
-                driver.variables.remove(driver.variables[0])
-            order_after_inputs(driver, list(batch.members.values()))
-            for m in batch.members.values():
-                m.ordered = True
-            batch.dirty = False
+                batches = [b for b in batches if _alive(b.carrier)]  # (`prune` forgets the others)
+                if stale or any(b.dirty or b.layout != layout for b in batches):
+                    for b in batches:
+                        b.layout = layout
+                    moved += self._read_visibility(batches, scene)
         for key, batch in list(self._batches.items()):
+            if not batch.dirty:
+                continue  # (whatever adds or removes a member marks its batch dirty)
+            if _alive(batch.carrier):
+                driver = batch.carrier.animation_data.drivers[0].driver
+                while driver.variables:
+                    driver.variables.remove(driver.variables[0])
+                order_after_inputs(driver, list(batch.members.values()))
+                for m in batch.members.values():
+                    m.ordered = True
+                batch.dirty = False
             if not batch.members:
                 self._drop(key)
         if self.retarget is not None:
             for m in moved:
                 self.retarget(m)
+
+    def _scene(self, uid: int):
+        """The scene of session uid `uid` (None where it is gone), kept between calls."""
+        scene = self._scenes.get(uid)
+        try:
+            if scene is not None and scene.session_uid == uid:
+                return scene
+        except ReferenceError:
+            pass
+        scene = self._scenes[uid] = next((sc for sc in bpy.data.scenes if sc.session_uid == uid), None)
+        return scene
 
     def _read_visibility(self, batches: list, scene) -> list:
         """Marks the members of `scene`'s `batches` hidden or not and moves those that changed

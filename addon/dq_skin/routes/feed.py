@@ -188,8 +188,8 @@ class Feeds:
         member: a crowd joins at once)."""
         stale, self._visibility_stale = self._visibility_stale, False
         moved = []
-        # (Called on every frame: a frame where nothing changed costs one layout read a scene,
-        # however many batches its hidden characters have.)
+        # (Called on every frame: where nothing changed, a scene's layout is read once and no
+        # carrier is looked up.)
         by_scene: dict[int, list] = {}
         for b in self._batches.values():
             by_scene.setdefault(b.scene, []).append(b)
@@ -280,6 +280,7 @@ class Feeds:
         for key in list(self._batches):
             self._drop(key)
         self._of.clear()
+        self._scenes.clear()
 
     # -- frames ----------------------------------------------------------------------------
     def new_frame(self) -> None:

@@ -196,9 +196,9 @@ class Feeds:
         for scene_uid, batches in by_scene.items():
             scene = self._scene(scene_uid)
             layout = visibility.layout(scene) if scene is not None else ()
-            if stale or any(b.dirty or b.layout != layout for b in batches):
+            if stale or _changed(batches, layout):
                 batches = [b for b in batches if _alive(b.carrier)]  # (`prune` forgets the others)
-                if stale or any(b.dirty or b.layout != layout for b in batches):
+                if stale or _changed(batches, layout):
                     for b in batches:
                         b.layout = layout
                     moved += self._read_visibility(batches, scene)
@@ -374,6 +374,11 @@ class _Driver:
 
     def __getitem__(self, uid: int) -> float:
         return self.feeds.run(uid)
+
+
+def _changed(batches, layout: tuple) -> bool:
+    """Whether any of `batches` has members to order again or saw another layout of its scene."""
+    return any(b.dirty or b.layout != layout for b in batches)
 
 
 def _shape_keys(obj):

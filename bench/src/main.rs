@@ -208,7 +208,8 @@ fn main() {
     // named to set_kernel_copy in turn; else the one the process runs ("chosen", or DQSKIN_SIMD's).
     let copies_asked = args.iter().any(|a| a == "--copies");
     let fused: Vec<&'static str> = if copies_asked {
-        let here = ["avx2", "avx512", "neon"].into_iter().filter(|c| set_kernel_copy(Some(c)).is_ok()).collect();
+        let named = ["avx2-noprefetch", "avx2", "avx512-noprefetch", "avx512", "neon"];
+        let here = named.into_iter().filter(|c| set_kernel_copy(Some(c)).is_ok()).collect();
         set_kernel_copy(None).expect("back to the measured copies");
         here
     } else {

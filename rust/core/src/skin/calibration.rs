@@ -166,8 +166,8 @@ pub(crate) fn chosen_copies() -> Vec<(Variant, Size, Option<Simd>)> {
 static TRIALS: [[Trial; Size::ALL.len()]; Variant::ALL.len()] =
     [const { [Trial::new(Size::Cached), Trial::new(Size::Streamed)] }; Variant::ALL.len()];
 
-/// The most candidate copies (the baseline, AVX2, AVX-512 on x86-64).
-const MAX_COPIES: usize = 3;
+/// The most candidate copies (AVX2 and AVX-512 on x86-64, each with and without prefetching).
+const MAX_COPIES: usize = 4;
 
 /// One variant and size's measurement: which copy was chosen (its index among [`candidates`]
 /// plus one, 0 while the trial runs), read without a lock on every call, and the trial's
@@ -235,24 +235,25 @@ fn candidate_list() -> &'static [Simd] {
     LIST.get_or_init(|| {
         let mut list = candidates();
         debug_assert!(list.len() <= MAX_COPIES);
-        list.truncate(MAX_COPIES); // (cannot happen: at most the baseline and two copies)
+        list.truncate(MAX_COPIES); // (cannot happen: at most two instruction sets, two copies each)
         list
     })
 }
 
-/// The copies calibration chooses between: those with fused multiply-adds where there are any.
-/// They give the same bits (every copy's arithmetic in the same order), so the choice, which
+/// The copies calibration chooses between: those with fused multiply-adds where there are any,
+/// each without and with prefetching where it has the hint (x86-64). They give the same bits
+/// (every copy's arithmetic in the same order; a prefetch reads nothing), so the choice, which
 /// timing noise can flip between processes, never changes a result; the baseline rounds each
 /// product and differs from them in the last bits, so it runs only where it is the one copy (or
-/// when asked for).
+/// when asked for). Within an instruction set the copy that prefetches comes second, so that a
+/// tie keeps it (as the wider copy keeps a tie).
 pub(crate) fn candidates() -> Vec<Simd> {
     let all = Simd::available();
     let fused: Vec<Simd> = all.iter().copied().filter(|s| s.instruction_set() != InstructionSet::Baseline).collect();
     if fused.is_empty() {
-        all
-    } else {
-        fused
+        return all;
     }
+    fused.into_iter().flat_map(|s| s.without_prefetch().into_iter().chain([s])).collect()
 }
 
 /// Copies within this share of the fastest time count as tied, and a tie goes to the wider copy
@@ -361,8 +362,31 @@ mod tests {
     fn the_baseline_is_chosen_only_where_it_is_the_one_copy() {
         let (all, chosen) = (Simd::available(), candidates());
         assert_eq!(all.len() == 1, chosen.contains(&all[0]), "{all:?} gives {chosen:?}");
-        assert!(chosen.iter().all(|s| all.contains(s)));
-        assert_eq!(chosen.len(), all.len().max(2) - 1);
+        let sets: Vec<InstructionSet> = chosen.iter().map(|s| s.instruction_set()).collect();
+        assert!(sets.iter().all(|set| all.iter().any(|a| a.instruction_set() == *set)));
+        // Each instruction set with fused multiply-adds twice on x86-64 (without prefetching,
+        // then with it, which keeps a tie), once elsewhere.
+        let fused = all.len().max(2) - 1;
+        let per_set = if cfg!(target_arch = "x86_64") && all.len() > 1 { 2 } else { 1 };
+        assert_eq!(chosen.len(), fused * per_set, "{chosen:?}");
+        for pair in chosen.chunks(per_set) {
+            assert!(pair.iter().all(|s| s.instruction_set() == pair[0].instruction_set()), "{sets:?}");
+            assert!(pair.last().unwrap().prefetches(), "{pair:?}");
+            assert!(pair.len() == 1 || !pair[0].prefetches(), "{pair:?}");
+        }
+    }
+
+    #[test]
+    fn every_candidate_is_found_by_its_name() {
+        for simd in candidates() {
+            assert_eq!(Simd::named(simd.name()), Some(simd), "{simd:?}");
+            assert_eq!(simd.name().ends_with("-noprefetch"), !simd.prefetches(), "{simd:?}");
+        }
+        // The instruction set's own name keeps its batches asking ahead (as before the choice).
+        for simd in Simd::available() {
+            assert!(simd.prefetches() && Simd::named(simd.instruction_set().name()) == Some(simd));
+        }
+        assert_eq!(Simd::named("baseline-noprefetch"), None, "the baseline has one copy");
     }
 
     #[test]

@@ -37,6 +37,11 @@ impl InstructionSet {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Simd {
     set: InstructionSet,
+    /// Whether each batch asks the memory for the inputs of a batch ahead (`kernels.rs`,
+    /// `prefetch_ahead`): a hint that gives the same bits either way, worth a fifth on an Intel
+    /// Xeon's large meshes and a few per cent less on a Zen 3's (docs/performance.md), so both
+    /// are measured ([`Simd::without_prefetch`]).
+    prefetch: bool,
     /// Whether the copy's hand-written kernels run where they are kept (`*/kept.rs`): only the
     /// tests that hold them to the one body's bits turn them off ([`Simd::one_body`]).
     #[cfg(test)]
@@ -67,9 +72,43 @@ impl Simd {
         *Self::available().last().expect("the baseline is always available")
     }
 
-    /// The available copy named `name` (`baseline`, `avx2`, `avx512`, `neon`), if the CPU has it.
+    /// The available copy named `name` (`baseline`, `avx2`, `avx512`, `neon`, or one of those
+    /// with `-noprefetch`: [`Simd::name`]), if the CPU has it.
     pub(crate) fn named(name: &str) -> Option<Self> {
-        Self::available().into_iter().find(|s| s.set.name() == name.trim())
+        let name = name.trim();
+        let all = Self::available();
+        let mut copies = all.iter().copied().chain(all.iter().filter_map(|s| s.without_prefetch()));
+        copies.find(|s| s.name() == name)
+    }
+
+    /// The copy's name: its instruction set's (`avx2`), with `-noprefetch` where its batches do
+    /// not ask for their inputs ahead.
+    pub(crate) fn name(self) -> &'static str {
+        if self.prefetch {
+            return self.set.name();
+        }
+        match self.set {
+            #[cfg(target_arch = "x86_64")]
+            InstructionSet::Avx2Fma => "avx2-noprefetch",
+            #[cfg(target_arch = "x86_64")]
+            InstructionSet::Avx512 => "avx512-noprefetch",
+            set => set.name(),
+        }
+    }
+
+    /// The same instruction set with its batches not asking for their inputs ahead: for the
+    /// copies with fused multiply-adds on x86-64, where the hint exists (None elsewhere).
+    pub(crate) fn without_prefetch(self) -> Option<Self> {
+        #[cfg(target_arch = "x86_64")]
+        if self.prefetch && matches!(self.set, InstructionSet::Avx2Fma | InstructionSet::Avx512) {
+            return Some(Simd { prefetch: false, ..self });
+        }
+        None
+    }
+
+    /// Whether the copy's batches ask for their inputs ahead.
+    pub(crate) fn prefetches(self) -> bool {
+        self.prefetch
     }
 
     /// The copy `DQSKIN_SIMD` asks for, if it names one the CPU has (for debugging and
@@ -94,6 +133,7 @@ impl Simd {
     fn of(set: InstructionSet) -> Self {
         Simd {
             set,
+            prefetch: true,
             #[cfg(test)]
             kept: true,
         }

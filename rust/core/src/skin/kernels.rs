@@ -80,6 +80,7 @@ pub(crate) fn run(job: &Job<'_>, out: &mut [[f32; 3]], simd: Simd) {
         column_moves: column_moves.as_deref(),
         dq: dq.as_deref(),
         cor_rigid: cor_rigid.as_deref(),
+        prefetch: simd.prefetches(),
         #[cfg(test)]
         kept: simd.runs_kept(),
     };
@@ -116,6 +117,8 @@ struct Folded<'a> {
     dq: Option<&'a [DqBone]>,
     /// The centers' records, for poses without scale.
     cor_rigid: Option<&'a [CorRigidBone]>,
+    /// Whether the batches ask for their inputs ahead (the copy's: [`Simd::prefetches`]).
+    prefetch: bool,
     /// Whether the copy's hand-written kernels run where kept ([`Simd::runs_kept`]; a field in
     /// the tests only, so that elsewhere the answer is a constant and the one body's paths the
     /// hand-written kernels replace are not compiled in).
@@ -238,6 +241,7 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
         folded
     } else {
         Folded {
+            prefetch: folded.prefetch,
             #[cfg(test)]
             kept,
             ..Folded::default()
@@ -279,6 +283,7 @@ fn batches<const ISA: u8, I: BoneIndex, const KIND: u8, const SCALED: bool>(
         all_slots,
         bone_windows,
         kept,
+        prefetch: folded.prefetch,
         scratch: Scratch::new(job.influences().max_per_vertex()),
     };
     let Some(lane_positions) = job.influences().lane_positions() else {
@@ -361,6 +366,8 @@ struct BatchRun<'a, 'j, I: BoneIndex> {
     bone_windows: Option<&'a [u16]>,
     /// Whether the copy's hand-written kernels run where kept ([`Simd::runs_kept`]).
     kept: bool,
+    /// Whether each batch asks for the inputs of a batch ahead ([`prefetch_ahead`]).
+    prefetch: bool,
     scratch: Scratch,
 }
 
@@ -381,7 +388,9 @@ impl<I: BoneIndex> BatchRun<'_, '_, I> {
             let batch = (at + first) / LANES;
             let slots = job.influences().batch(self.all_slots, batch);
             let bone_window = self.bone_windows.and_then(|w| bone_window(w, batch));
-            prefetch_ahead(streams, first, slots);
+            if self.prefetch {
+                prefetch_ahead(streams, first, slots);
+            }
             if ISA == ISA_BASELINE && KIND == LINEAR && self.kept {
                 // The baseline's hand-written LBS, where it measures faster than the one body.
                 let (positions, mask) =
@@ -477,7 +486,8 @@ const PREFETCH_AHEAD: usize = 8;
 /// this batch's moved by the same distance (batches mostly have as many slots as their
 /// neighbours; each batch asks from its own start, so together they cover every line): no
 /// lookup, no bounds check. A hint: nothing is read, and an address past an array's end asks
-/// for nothing harmful.
+/// for nothing harmful. It was chosen on an Intel Xeon and costs a few per cent on a Zen 3, so
+/// each copy runs with and without it and the trial of copies chooses (`isa.rs`, `calibration.rs`).
 #[inline(always)]
 fn prefetch_ahead<I: BoneIndex>(streams: Streams<'_>, first: usize, slots: &[Slot<I>]) {
     let lines = |p: *const u8, bytes: usize| {

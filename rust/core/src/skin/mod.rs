@@ -157,7 +157,9 @@ impl core::fmt::Display for SkinError {
             SkinError::InvalidSigma(s) => write!(f, "sigma = {s} must be a finite number greater than 0"),
             SkinError::Cancelled => write!(f, "cancelled"),
             SkinError::UnavailableKernelCopy(name) => {
-                let available: Vec<&str> = isa::Simd::available().iter().map(|s| s.instruction_set().name()).collect();
+                let all = isa::Simd::available();
+                let copies = all.iter().copied().chain(all.iter().filter_map(|s| s.without_prefetch()));
+                let available: Vec<&str> = copies.map(isa::Simd::name).collect();
                 write!(f, "no kernel copy '{name}' on this CPU (it has: {})", available.join(", "))
             }
         }
@@ -186,13 +188,14 @@ pub fn skin(
 /// The compiled copy of the kernels that [`skin`] and [`skin_many`] run here for each kernel
 /// variant (`linear`, `dual_quaternion`, `dual_quaternion_scaled`, `blend`, `blend_scaled`,
 /// `centers`, `centers_scaled`) and size of job (`cached`: fewer vertices than
-/// [`STREAMED_FROM`], else `streamed`): `baseline`, `avx2`, `avx512` or `neon`, the one measured
+/// [`STREAMED_FROM`], else `streamed`): `baseline`, `avx2`, `avx512` or `neon` (on x86-64 with
+/// `-noprefetch` where its batches do not ask for their inputs ahead), the one measured
 /// fastest on this process's own calls unless [`set_kernel_copy`] or `DQSKIN_SIMD` asks for
 /// another; None while it is being measured (the first calls of that variant and size).
 pub fn kernel_copies() -> Vec<(&'static str, &'static str, Option<&'static str>)> {
     calibration::chosen_copies()
         .into_iter()
-        .map(|(variant, size, simd)| (variant.name(), size.name(), simd.map(|s| s.instruction_set().name())))
+        .map(|(variant, size, simd)| (variant.name(), size.name(), simd.map(isa::Simd::name)))
         .collect()
 }
 

@@ -331,7 +331,11 @@ pub(in crate::skin) fn skin_all(
 ) -> Vec<[f32; 3]> {
     let mut results = Vec::new();
     let mut fused: Option<(isa::Simd, Vec<[f32; 3]>)> = None;
-    let copies = isa::Simd::available().into_iter().flat_map(|simd| [simd.one_body(), simd]);
+    // (Each copy also without prefetching where it has the hint: a hint changes no bit.)
+    let copies = isa::Simd::available()
+        .into_iter()
+        .flat_map(|simd| [Some(simd.one_body()), simd.without_prefetch(), Some(simd)])
+        .flatten();
     for simd in copies {
         let mut out = vec![[f32::NAN; 3]; positions.len()];
         skin_with(Some(simd), method, positions, influences, pose, options, &mut out).unwrap();
@@ -1011,7 +1015,7 @@ fn the_trial_of_copies_changes_no_result_and_ends_in_a_choice() {
             assert!(same, "call {call} of {vertices} vertices differs from the first");
         }
         let chosen = kernel_copies().into_iter().find(|&(v, s, _)| v == "blend_scaled" && s == size.name()).unwrap().2;
-        let names: Vec<&str> = calibration::candidates().iter().map(|s| s.instruction_set().name()).collect();
+        let names: Vec<&str> = calibration::candidates().iter().map(|s| s.name()).collect();
         let requested = std::env::var("DQSKIN_SIMD").ok();
         match chosen {
             Some(name) => {

@@ -25,9 +25,10 @@ def get_num_threads() -> int:
 def kernel_copies() -> list[tuple[str, str, str | None]]:
     """Which compiled copy of the kernels (``"avx2"``, ``"avx512"``, ``"neon"``, ``"baseline"``,
     or on x86-64 ``"avx2-noprefetch"`` or ``"avx512-noprefetch"``, whose batches do not ask the
-    memory for their inputs ahead) runs each kernel variant in this process, per size of job (``"cached"``: fewer than 65,536
-    vertices, else ``"streamed"``): ``(variant, size, copy)``, ``copy`` None while the variant's
-    first calls of that size still measure the copies. ``DQSKIN_SIMD`` forces one copy."""
+    memory for their inputs ahead) runs each kernel variant in this process, per size of job
+    (``"cached"``: fewer than 65,536 vertices, else ``"streamed"``): ``(variant, size, copy)``,
+    ``copy`` None while the variant's first calls of that size still measure the copies.
+    ``DQSKIN_SIMD`` forces one copy."""
 
 @final
 class Screw:

@@ -248,12 +248,13 @@ fn candidate_list() -> &'static [Simd] {
 /// when asked for). Within an instruction set the copy that prefetches comes second, so that a
 /// tie keeps it (as the wider copy keeps a tie).
 pub(crate) fn candidates() -> Vec<Simd> {
-    let all = Simd::available();
+    let all = Simd::copies();
     let fused: Vec<Simd> = all.iter().copied().filter(|s| s.instruction_set() != InstructionSet::Baseline).collect();
     if fused.is_empty() {
-        return all;
+        all
+    } else {
+        fused
     }
-    fused.into_iter().flat_map(|s| s.without_prefetch().into_iter().chain([s])).collect()
 }
 
 /// Copies within this share of the fastest time count as tied, and a tie goes to the wider copy

@@ -75,10 +75,13 @@ impl Simd {
     /// The available copy named `name` (`baseline`, `avx2`, `avx512`, `neon`, or one of those
     /// with `-noprefetch`: [`Simd::name`]), if the CPU has it.
     pub(crate) fn named(name: &str) -> Option<Self> {
-        let name = name.trim();
-        let all = Self::available();
-        let mut copies = all.iter().copied().chain(all.iter().filter_map(|s| s.without_prefetch()));
-        copies.find(|s| s.name() == name)
+        Self::copies().into_iter().find(|s| s.name() == name.trim())
+    }
+
+    /// Every copy this CPU can run: each available instruction set without prefetching where it
+    /// has the hint, then with it (widest last).
+    pub(crate) fn copies() -> Vec<Simd> {
+        Self::available().into_iter().flat_map(|s| s.without_prefetch().into_iter().chain([s])).collect()
     }
 
     /// The copy's name: its instruction set's (`avx2`), with `-noprefetch` where its batches do

@@ -157,9 +157,7 @@ impl core::fmt::Display for SkinError {
             SkinError::InvalidSigma(s) => write!(f, "sigma = {s} must be a finite number greater than 0"),
             SkinError::Cancelled => write!(f, "cancelled"),
             SkinError::UnavailableKernelCopy(name) => {
-                let all = isa::Simd::available();
-                let copies = all.iter().copied().chain(all.iter().filter_map(|s| s.without_prefetch()));
-                let available: Vec<&str> = copies.map(isa::Simd::name).collect();
+                let available: Vec<&str> = isa::Simd::copies().into_iter().map(isa::Simd::name).collect();
                 write!(f, "no kernel copy '{name}' on this CPU (it has: {})", available.join(", "))
             }
         }

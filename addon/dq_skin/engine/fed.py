@@ -146,7 +146,7 @@ class FedFrame:
             if data is None or data.version != old.source.version:
                 return None, None
             try:
-                positions, input_key = inputs.mesh_input(target.obj, obj_eval, st, data, self.depsgraph)
+                positions, input_key = inputs.mesh_input(target.obj, obj_eval, st, data, self.depsgraph, old.source)
             except inputs.CaptureNeeded:
                 return None, None
             # (Influences from B-Bones and envelopes depend on where the vertices are: an array.)

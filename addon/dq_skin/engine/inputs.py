@@ -33,11 +33,14 @@ class CaptureNeeded(SkinError):
     """Shape keys DQ Skin cannot mix itself: it reads what reaches it from the evaluation."""
 
 
-def mesh_input(obj, obj_eval, st: ModifierState, data: MeshData, depsgraph) -> tuple[object, InputKey]:
+def mesh_input(obj, obj_eval, st: ModifierState, data: MeshData, depsgraph, known: InputKey | None = None) -> tuple[object, InputKey]:
     """The mesh's coordinates with its shape keys mixed (without shape keys, what the kernel
-    reads of the mesh: `MeshData.source`, see `as_array`), and a key that changes with them."""
+    reads of the mesh: `MeshData.source`, see `as_array`), and a key that changes with them
+    (`known` itself where it is that key: the feed passes the last frame's)."""
     keys = data.keys
     if keys is None:
+        if known is not None and known.source is Source.MESH and known.version == data.version and not known.detail:
+            return data.source, known
         return data.source, InputKey(Source.MESH, data.version)
     if not keys.relative:
         raise CaptureNeeded("absolute shape keys")

@@ -59,6 +59,18 @@ def fed_frame_stands(rec, ctx: Context, bones_changed: bool = False) -> bool:
     return True
 
 
+def fed_frame_stands_as_checked(rec, ctx: Context) -> bool:
+    """Whether the fed frame stands for what the last check that stood saw (`rec.fed_check`),
+    without the rest of `fed_frame_stands`: False where there is no such check, or anything it
+    saw changed (the whole check decides then). An object gone since is not there (False)."""
+    if rec.fed_check is None or ctx.render or ctx.session.exports.active():
+        return False
+    try:
+        return _stands_as_checked(rec, ctx)
+    except ReferenceError:
+        return False
+
+
 def _stands_as_checked(rec, ctx: Context) -> bool:
     """Whether the fed frame stands for what `rec.fed_check` saw: Blender's side unchanged (one
     read of the object's state), the add-on's side compared as `_fed_frame_stands` does."""

@@ -304,12 +304,14 @@ class Tracker:
                     moved.add(uid)
                 rec = self.records.get(uid)
                 if rec is None:
+                    if uid in self.watch:
+                        continue  # an armature a character follows (posed on every frame)
                     # New since the last update (a script duplicated or linked it).
                     if orig.type == "MESH" and any(nodes.is_dq_skin(m) for m in orig.modifiers):
                         self.add(orig)
                         moved.add(uid)
-                    elif update.is_updated_geometry and uid not in self.watch:
-                        self._other_object_changed(orig)  # (not the armatures, posed every frame)
+                    elif update.is_updated_geometry:
+                        self._other_object_changed(orig)
                         cache_route.remove_orphans(orig)
                 elif len(orig.modifiers) != rec.modifier_count:
                     self.refresh(rec)
@@ -337,7 +339,13 @@ class Tracker:
         ctx.unchanged = {uid for uid in self.records if uid not in updated and uid not in deferred}
         ctx.unmoved = (set(self.records) | set(self.watch)) - (moved | deferred)
         for uid, rec in list(self.records.items()):
-            if uid not in self.records or not _in(rec.obj, depsgraph):
+            if uid not in self.records:
+                continue
+            if not rec.pending and not rec.bones_changed and playback.fed_frame_stands_as_checked(rec, ctx):
+                # The feed made this frame and nothing its last check saw changed (the feed
+                # skinned it in this graph: no need to ask whether the object is in it).
+                continue
+            if not _in(rec.obj, depsgraph):
                 continue
             forced, rec.pending = rec.pending, False
             bones, rec.bones_changed = rec.bones_changed, False

@@ -26,18 +26,18 @@ class Source(enum.Enum):
     CAPTURE = "capture"  # other modifiers before it: what the node group stored on its way
 
 
-@dataclass(frozen=True)
-class InputKey:
+class InputKey(NamedTuple):
     """What reached the modifier: its source and what that was computed from (the mesh's
-    version; the shape keys' values; the captured coordinates; the previous DQ Skin's output)."""
+    version; the shape keys' values; the captured coordinates; the previous DQ Skin's output).
+    A named tuple, as `PoseKey` and `FrameKey`: the feed makes them for every character on every
+    frame, where a frozen dataclass took three times as long to make and compare."""
 
     source: Source
     version: int = 0
     detail: bytes | tuple = ()
 
 
-@dataclass(frozen=True)
-class PoseKey:
+class PoseKey(NamedTuple):
     """The bones of one frame: a digest of their matrices (read through Blender's Python API), or
     the signatures of a pose read from Blender's memory (pose and binding)."""
 
@@ -51,7 +51,7 @@ class PoseKey:
         (SipHash, Python's own hash of bytes, as wide as the memory reader's signatures). Each
         character keeps its last frame's key for the whole session, where the matrices are 64
         bytes a bone (about 10 KB on a Rigify character)."""
-        return cls(matrices_digest=hash(matrices.tobytes()))
+        return cls(hash(matrices.tobytes()))
 
     @property
     def from_memory(self) -> bool:
@@ -72,8 +72,7 @@ class BindingKey:
     use_vertex_groups: bool
 
 
-@dataclass(frozen=True)
-class FrameKey:
+class FrameKey(NamedTuple):
     """What one written result was computed from."""
 
     settings: tuple

@@ -124,7 +124,7 @@ class CacheRoute:
         out = target.st.output
         cache = out.pointcache
         cache.write(positions)
-        if out.buffer is positions and pointcache.is_mapped(positions) and not cache.is_buffer(positions):
+        if out.buffer is positions and not cache.is_buffer(positions) and pointcache.is_mapped(positions):
             # The file was made again (something deleted it): the kernel writes the new one's.
             out.buffer = cache.buffer(len(positions))
 
@@ -176,7 +176,8 @@ class CacheRoute:
 
     def fed_done(self, target: Target, positions: np.ndarray) -> None:
         """The feed skinned `positions` inside the evaluation: the carrier reads them next."""
-        if target.st.output.pointcache is not None:
+        cache = target.st.output.pointcache
+        if cache is not None and not cache.holds(positions):
             self._write_file(target, positions)
 
     def pass_through(self, target: Target) -> None:

@@ -73,6 +73,11 @@ class PointCache:
             self._positions = np.empty((n, 3), np.float32)
         return self._positions
 
+    def holds(self, positions: np.ndarray) -> bool:
+        """Whether `positions` are in the file already: the kernel wrote them into its mapping,
+        and the file is still at its path (one `fstat`, as `write` checks)."""
+        return positions is self._positions and self._map is not None and os.fstat(self.file.fileno()).st_nlink != 0
+
     def is_buffer(self, positions: np.ndarray) -> bool:
         """Whether `positions` is the current file's own array."""
         return positions is self._positions and self._positions is not None

@@ -87,16 +87,17 @@ def alternate(variants: dict, frames, rounds: int, per_round: int, hooks: dict |
 class Parts:
     """Where DQ Skin's time of a frame goes, per frame: the feed's skinning inside Blender's
     evaluation (`fed`: all of it; `fed_prepare`: reading pose, spaces and inputs; `kernel`;
-    `file`: writing the Mesh Cache carrier's file) and the frame handler after it (`handler`;
-    `handler_checks`: whether each fed frame stands)."""
+    `file`: checking or writing the Mesh Cache carrier's file) and the frame handler after it
+    (`handler`; `handler_checks`: whether each fed frame stands, by the kept check or the whole
+    one). Each part times the functions it names (none calls another of the same part)."""
 
     PARTS = {
-        "fed": ("SESSION.routes.feeds", "skin"),
-        "fed_prepare": ("engine.fed.FedFrame", "_prepare"),
-        "kernel": ("dqskin", "skin_many"),
-        "file": ("routes.pointcache.PointCache", "write"),
-        "handler": ("engine.tracker.Tracker", "frame"),
-        "handler_checks": ("engine.playback", "fed_frame_stands"),
+        "fed": (("SESSION.routes.feeds", "skin"),),
+        "fed_prepare": (("engine.fed.FedFrame", "_prepare"),),
+        "kernel": (("dqskin", "skin_many"),),
+        "file": (("routes.cache_route.CacheRoute", "fed_done"),),
+        "handler": (("engine.tracker.Tracker", "frame"),),
+        "handler_checks": (("engine.playback", "fed_frame_stands_as_checked"), ("engine.playback", "fed_frame_stands")),
     }
 
     def __init__(self):
@@ -105,7 +106,7 @@ class Parts:
         self.frames = 0
 
     def __enter__(self):
-        for key, (path, name) in self.PARTS.items():
+        for key, path, name in ((k, p, n) for k, functions in self.PARTS.items() for p, n in functions):
             owner = addon()
             for part in path.split("."):
                 owner = getattr(owner, part)

@@ -62,13 +62,17 @@ def fed_frame_stands(rec, ctx: Context, bones_changed: bool = False) -> bool:
 def fed_frame_stands_as_checked(rec, ctx: Context) -> bool:
     """Whether the fed frame stands for what the last check that stood saw (`rec.fed_check`),
     without the rest of `fed_frame_stands`: False where there is no such check, or anything it
-    saw changed (the whole check decides then). An object gone since is not there (False)."""
+    saw changed (the whole check decides then, without that check: it is dropped here, as
+    `fed_frame_stands` drops it). An object gone since is not there (False)."""
     if rec.fed_check is None or ctx.render or ctx.session.exports.active():
         return False
     try:
-        return _stands_as_checked(rec, ctx)
+        if _stands_as_checked(rec, ctx):
+            return True
     except ReferenceError:
-        return False
+        pass
+    rec.fed_check = None
+    return False
 
 
 def _stands_as_checked(rec, ctx: Context) -> bool:

@@ -4,24 +4,12 @@ alike is kept once, never altered, and forgetting it only costs memory."""
 from __future__ import annotations
 
 import gc
-import importlib.util
-from pathlib import Path
 
+import addon_modules
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _interned_module():
-    # (The model imports nothing of Blender's: loaded on its own, outside the add-on package.)
-    spec = importlib.util.spec_from_file_location("dq_skin_model_interned", ROOT / "addon" / "dq_skin" / "model" / "interned.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-Interned = _interned_module().Interned
+Interned = addon_modules.load("model", "interned").Interned
 
 
 def test_equal_contents_give_the_first_object_and_different_ones_their_own():

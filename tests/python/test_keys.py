@@ -3,25 +3,10 @@ input another key, and what a character keeps for the whole session stays small.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
+import addon_modules
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _keys_module():
-    # (The model imports nothing of Blender's: loaded on its own, outside the add-on package.)
-    spec = importlib.util.spec_from_file_location("dq_skin_model_keys", ROOT / "addon" / "dq_skin" / "model" / "keys.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # (its dataclasses look their module up)
-    spec.loader.exec_module(module)
-    return module
-
-
-PoseKey = _keys_module().PoseKey
+PoseKey = addon_modules.load("model", "keys").PoseKey
 
 
 def _pose(bones: int, seed: int = 7) -> np.ndarray:

@@ -4,25 +4,14 @@ memory while the file is at its path; a deleted file is made again by `write`.""
 
 from __future__ import annotations
 
-import importlib.util
 import os
 from pathlib import Path
 
+import addon_modules
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _pointcache_module():
-    # (It imports nothing of Blender's: loaded on its own, outside the add-on package.)
-    spec = importlib.util.spec_from_file_location("dq_skin_routes_pointcache", ROOT / "addon" / "dq_skin" / "routes" / "pointcache.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-pointcache = _pointcache_module()
+pointcache = addon_modules.load("routes", "pointcache")
 
 
 def _positions_in(path: Path) -> np.ndarray:
